@@ -1,0 +1,44 @@
+//! The commands of the `tortwin` binary (../shared/spec/interfaces.md).
+//! Each command is a function of its arguments over the library; `main.rs`
+//! only parses and maps errors to exit codes.
+
+pub mod replay;
+pub mod summary;
+
+use std::path::PathBuf;
+
+use anyhow::Result;
+use clap::{Parser, Subcommand};
+
+/// The recording the main job replays when none is given.
+pub const DEFAULT_RECORDING: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/recordings/curve_2day.mcap");
+
+#[derive(Debug, Parser)]
+#[command(name = "tortwin", version, about = "Digital twin of a track section for top-of-rail friction management")]
+pub struct Cli {
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+pub enum Command {
+    /// Replay a recording of a track section and publish the friction field.
+    Replay(replay::ReplayArgs),
+}
+
+pub fn run(cli: Cli) -> Result<()> {
+    match cli.command {
+        Command::Replay(args) => replay::main(args),
+    }
+}
+
+/// Writes a file under a temporary name beside it and renames it into place,
+/// so that a failed run never leaves a file that looks complete.
+pub fn write_atomically(path: &std::path::Path, bytes: &[u8]) -> Result<()> {
+    use anyhow::Context;
+    let dir = path.parent().filter(|p| !p.as_os_str().is_empty()).map_or_else(|| PathBuf::from("."), PathBuf::from);
+    let name = path.file_name().map_or_else(|| "out".into(), |n| n.to_string_lossy().into_owned());
+    let tmp = dir.join(format!(".{name}.partial-{}", std::process::id()));
+    std::fs::write(&tmp, bytes).with_context(|| format!("cannot write {}", tmp.display()))?;
+    std::fs::rename(&tmp, path).with_context(|| format!("cannot move {} to {}", tmp.display(), path.display()))
+}

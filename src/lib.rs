@@ -1,0 +1,25 @@
+//! tortwin: a digital twin of a railway track section for top-of-rail (TOR)
+//! friction management.
+//!
+//! Data flows one way (see ARCHITECTURE.md):
+//!
+//! ```text
+//! recording (MCAP in) -> typed events -> engine (section state + model) -> sinks
+//! ```
+//!
+//! - [`model`]: the pure physics: product transport (Trummer et al. 2021,
+//!   eq. 1–6) and contact mechanics (Hertz, Kalker, Polach).
+//! - [`config`]: the model configuration (the paper's Table 2 and the
+//!   contact parameters), overlaid from TOML.
+//! - [`recording`]: turns an MCAP recording into typed, validated events.
+//! - [`engine`]: owns time and state; steps the product wheel pass by wheel pass.
+//! - [`sink`]: listeners that publish what the engine produces.
+
+pub mod app;
+pub mod config;
+pub mod engine;
+pub mod error;
+pub mod model;
+pub mod paper;
+pub mod recording;
+pub mod sink;

@@ -1,0 +1,1 @@
+//! Contact mechanics (being written).

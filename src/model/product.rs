@@ -1,0 +1,325 @@
+//! Product transport on the wheel and rail surfaces: consumption, friction
+//! and transfer, after Trummer, Lee, Lewis and Six, "Modelling of Frictional
+//! Conditions in the Wheel–Rail Interface Due to Application of Top-of-Rail
+//! Products", Lubricants 2021, 9, 100. Equation numbers are the paper's; the
+//! choices the paper leaves open are fixed by ../shared/spec/model.md.
+//!
+//! Masses are in kg. Everything here is a pure function of its arguments:
+//! the engine decides which contact happens when, this module says what a
+//! contact does.
+
+use serde::{Deserialize, Serialize};
+
+/// The reference mean contact pressure of eq. (2): 1178 MPa.
+pub const PM_REF_PA: f64 = 1178e6;
+/// The reference creepage of eq. (3): 1 %.
+pub const CREEPAGE_REF: f64 = 0.01;
+/// The largest transfer fraction: equal shares (model.md).
+pub const TRANSFER_FRACTION_MAX: f64 = 0.5;
+
+/// The product model's parameters: Table 2 of the paper plus the cap.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ProductParams {
+    /// k0, eq. (1): consumption per contact that does not depend on the mass.
+    pub k0_kg: f64,
+    /// km1, eq. (1): consumption per contact when product is abundant.
+    pub km1_kg: f64,
+    /// km2, eq. (1): the mass (in units of m0) below which consumption slows.
+    pub km2: f64,
+    /// kp, eq. (2).
+    pub kp: f64,
+    /// kc, eq. (3).
+    pub kc: f64,
+    /// muD, eq. (4): dry and clean.
+    pub mu_d: f64,
+    /// muC, eq. (4): surplus product.
+    pub mu_c: f64,
+    /// km, eq. (4).
+    pub km_kg: f64,
+    /// kt, eq. (6): pick-up efficiency.
+    pub kt: f64,
+    /// cm, eq. (6).
+    pub cm_kg: f64,
+    /// cN, eq. (6).
+    pub cn: f64,
+    /// m_max: what one surface holds at one grid point; the excess is
+    /// squeezed out (model.md).
+    pub m_max_kg: f64,
+}
+
+/// Eq. (2): the influence of the mean Hertz pressure on consumption,
+/// `fp = max(0, 1 + kp (pm / 1178 MPa - 1))`. The clamp at 0 is fixed by
+/// model.md: below about 537 MPa the paper's linear law would turn negative
+/// and make consumption create product.
+pub fn pressure_factor(params: &ProductParams, pm_pa: f64) -> f64 {
+    (1.0 + params.kp * (pm_pa / PM_REF_PA - 1.0)).max(0.0)
+}
+
+/// Eq. (3): the influence of the creepage on consumption,
+/// `fc = max(0, 1 + kc (sqrt(cx² + cy²) / 0.01 - 1))`. Spin does not enter.
+pub fn creepage_factor(params: &ProductParams, cx: f64, cy: f64) -> f64 {
+    (1.0 + params.kc * ((cx * cx + cy * cy).sqrt() / CREEPAGE_REF - 1.0)).max(0.0)
+}
+
+/// Eq. (1): the mass consumed by one contact,
+/// `c = k0 + km1 (1 - exp(-m / (m0 km2))) fp fc`, never more than `m`.
+///
+/// - `m_kg`: the total mass in the contact, wheel plus rail (model.md).
+/// - `m0_kg`: the applied pulse mass the wheel's applicator last delivered;
+///   with `m0 = 0` the saturation term is 1.
+/// - `fp_fc`: eq. (2) times eq. (3) for this wheel on this rail.
+/// - `factor`: an effect's multiplier of the whole `c` (1 without one),
+///   applied before the limit `c <= m` (effects.md, temperature_consumption).
+pub fn consumption(params: &ProductParams, m_kg: f64, m0_kg: f64, fp_fc: f64, factor: f64) -> f64 {
+    let saturation = if m0_kg > 0.0 {
+        1.0 - (-m_kg / (m0_kg * params.km2)).exp()
+    } else {
+        1.0
+    };
+    ((params.k0_kg + params.km1_kg * saturation * fp_fc) * factor).min(m_kg)
+}
+
+/// Eq. (4): the friction coefficient of a contact holding `m_kg` of product,
+/// `mu = muC + (muD - muC) exp(-m / km)`.
+pub fn friction(params: &ProductParams, m_kg: f64) -> f64 {
+    params.mu_c + (params.mu_d - params.mu_c) * (-m_kg / params.km_kg).exp()
+}
+
+/// The part of eq. (6) that depends only on the wheel's distance from its
+/// applicator: `exp(-(N - 1) / cN)`, with `N = |i - i_app| + 1` (model.md).
+/// The engine tabulates it once per grid distance.
+pub fn revolution_factor(params: &ProductParams, n: u32) -> f64 {
+    (-(f64::from(n) - 1.0) / params.cn).exp()
+}
+
+/// Eq. (6): the transfer fraction for a donor holding `m1_kg`,
+/// `t = kt (1 - exp(-m1 / cm)) exp(-(N - 1) / cN)`, times an effect's
+/// `factor` (1 without one), clamped to at most 0.5 (equal shares; model.md).
+/// `revolution` is [`revolution_factor`] for this N.
+pub fn transfer_fraction(params: &ProductParams, m1_kg: f64, revolution: f64, factor: f64) -> f64 {
+    let t = params.kt * (1.0 - (-m1_kg / params.cm_kg).exp()) * revolution;
+    (t * factor).min(TRANSFER_FRACTION_MAX)
+}
+
+/// Eq. (5): the surface with more product (the donor, `m1`) gives
+/// `t (m1 - m2)` to the other; equal masses exchange nothing. Returns the
+/// new `(wheel, rail)` masses. `fraction_of` gives `t` for the donor's mass.
+pub fn transfer(wheel_kg: f64, rail_kg: f64, fraction_of: impl Fn(f64) -> f64) -> (f64, f64) {
+    if wheel_kg > rail_kg {
+        let moved = fraction_of(wheel_kg) * (wheel_kg - rail_kg);
+        (wheel_kg - moved, rail_kg + moved)
+    } else if rail_kg > wheel_kg {
+        let moved = fraction_of(rail_kg) * (rail_kg - wheel_kg);
+        (wheel_kg + moved, rail_kg - moved)
+    } else {
+        (wheel_kg, rail_kg)
+    }
+}
+
+/// What one contact needs to know besides the two masses: everything here
+/// depends on the wheel, its applicator and the grid point, not on the masses.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ContactConditions {
+    /// m0 of eq. (1) in kg.
+    pub m0_kg: f64,
+    /// fp · fc of eq. (2) and (3).
+    pub fp_fc: f64,
+    /// `exp(-(N - 1) / cN)` times any effect factor of the transfer, or
+    /// `None` before the wheel has passed an applicator (no transfer).
+    pub transfer_revolution: Option<f64>,
+    /// Multiplier of the consumption (temperature_consumption), else 1.
+    pub consumption_factor: f64,
+}
+
+/// Where the mass of one contact went, in kg (for the mass balance).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct ContactLosses {
+    pub consumed_kg: f64,
+    pub capped_kg: f64,
+}
+
+/// Steps 3 to 5 of "one contact" (model.md) on the wheel and rail masses:
+/// transfer (eq. 5, 6), consumption (eq. 1) with the total mass `m` from
+/// before the transfer, both surfaces scaled by `(m - c) / m`, then the cap
+/// at `m_max` on each surface. Steps 1, 2 and 6 belong to the engine (time
+/// and wheel effects, and what is observed).
+#[inline]
+pub fn roll(
+    params: &ProductParams,
+    wheel_kg: &mut f64,
+    rail_kg: &mut f64,
+    conditions: &ContactConditions,
+) -> ContactLosses {
+    let m = *wheel_kg + *rail_kg;
+    let mut losses = ContactLosses::default();
+    if m > 0.0 {
+        if let Some(revolution) = conditions.transfer_revolution {
+            (*wheel_kg, *rail_kg) = transfer(*wheel_kg, *rail_kg, |m1| {
+                transfer_fraction(params, m1, revolution, 1.0)
+            });
+        }
+        let c = consumption(
+            params,
+            m,
+            conditions.m0_kg,
+            conditions.fp_fc,
+            conditions.consumption_factor,
+        );
+        let f = (m - c) / m;
+        let before = *wheel_kg + *rail_kg;
+        *wheel_kg *= f;
+        *rail_kg *= f;
+        // The consumed mass is what the scaling removed, so that the mass
+        // balance closes to rounding.
+        losses.consumed_kg = before - (*wheel_kg + *rail_kg);
+    }
+    losses.capped_kg = cap(params, wheel_kg) + cap(params, rail_kg);
+    losses
+}
+
+/// Caps one surface at `m_max`; returns the mass squeezed out.
+#[inline]
+pub fn cap(params: &ProductParams, mass_kg: &mut f64) -> f64 {
+    if *mass_kg > params.m_max_kg {
+        let excess = *mass_kg - params.m_max_kg;
+        *mass_kg = params.m_max_kg;
+        excess
+    } else {
+        0.0
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::config::ModelConfig;
+    use proptest::prelude::*;
+
+    fn table2() -> ProductParams {
+        ModelConfig::default().product
+    }
+
+    #[test]
+    fn factors_are_one_at_the_reference_condition() {
+        let p = table2();
+        assert_eq!(pressure_factor(&p, 1178e6), 1.0);
+        assert!((creepage_factor(&p, 0.01, 0.0) - 1.0).abs() < 1e-15);
+        // The clamps at zero (model.md).
+        assert_eq!(pressure_factor(&p, 100e6), 0.0);
+        assert_eq!(creepage_factor(&p, 0.0, 0.0), 1.0 - 0.57);
+        // pm = 825.04 MPa of model.md's check: fp = 1 + 1.84 (825.04/1178 - 1).
+        let fp = pressure_factor(&p, 825.04e6);
+        assert!((fp - (1.0 + 1.84 * (825.04 / 1178.0 - 1.0))).abs() < 1e-12);
+    }
+
+    #[test]
+    fn consumption_by_hand() {
+        let p = table2();
+        // Abundant product: k0 + km1 (eq. 1 with m >> m0 km2).
+        let c = consumption(&p, 1.0, 1e-4, 1.0, 1.0);
+        assert!((c - (1.0449e-9 + 1.1617e-6)).abs() < 1e-21);
+        // m = m0 km2: the saturation term is 1 - 1/e.
+        let c = consumption(&p, 0.53e-4, 1e-4, 1.0, 1.0);
+        let expect = 1.0449e-9 + 1.1617e-6 * (1.0 - (-1.0f64).exp());
+        assert!((c - expect).abs() < 1e-21);
+        // Never more than there is.
+        assert_eq!(consumption(&p, 1e-12, 1e-4, 1.0, 1.0), 1e-12);
+        // m0 = 0: the saturation term is 1.
+        assert_eq!(
+            consumption(&p, 1e-5, 0.0, 2.0, 1.0),
+            1.0449e-9 + 1.1617e-6 * 2.0
+        );
+    }
+
+    #[test]
+    fn friction_limits() {
+        let p = table2();
+        assert_eq!(friction(&p, 0.0), 0.58);
+        assert!((friction(&p, 1.0) - 0.15).abs() < 1e-15);
+        // m = km: muC + (muD - muC)/e.
+        let mu = friction(&p, 1.6290e-4);
+        assert!((mu - (0.15 + 0.43 * (-1.0f64).exp())).abs() < 1e-15);
+    }
+
+    #[test]
+    fn transfer_by_hand() {
+        let p = table2();
+        // Donor 0.1 g on the rail, clean wheel, N = 1: t = 0.5 (1 - exp(-0.1/0.035)).
+        let t = transfer_fraction(&p, 1e-4, revolution_factor(&p, 1), 1.0);
+        assert!((t - 0.5 * (1.0 - (-1e-4f64 / 3.5e-5).exp())).abs() < 1e-15);
+        let (w, r) = transfer(0.0, 1e-4, |m1| transfer_fraction(&p, m1, 1.0, 1.0));
+        assert!((w - t * 1e-4).abs() < 1e-20 && (r - (1.0 - t) * 1e-4).abs() < 1e-20);
+        // The clamp at equal shares.
+        assert_eq!(transfer_fraction(&p, 1.0, 1.0, 10.0), 0.5);
+        // N = 13: exp(-12/12.1).
+        assert!((revolution_factor(&p, 13) - (-12.0f64 / 12.1).exp()).abs() < 1e-16);
+    }
+
+    #[test]
+    fn roll_without_product_only_caps() {
+        let p = table2();
+        let (mut w, mut r) = (0.0, 0.0);
+        let cond = ContactConditions {
+            m0_kg: 1e-4,
+            fp_fc: 1.0,
+            transfer_revolution: Some(1.0),
+            consumption_factor: 1.0,
+        };
+        assert_eq!(roll(&p, &mut w, &mut r, &cond), ContactLosses::default());
+        assert_eq!((w, r), (0.0, 0.0));
+        let (mut w, mut r) = (0.0, 3e-4);
+        let l = roll(
+            &p,
+            &mut w,
+            &mut r,
+            &ContactConditions {
+                transfer_revolution: None,
+                ..cond
+            },
+        );
+        assert!(r <= p.m_max_kg && w == 0.0);
+        assert!((l.consumed_kg + l.capped_kg + r - 3e-4).abs() < 1e-18);
+    }
+
+    fn mass() -> impl Strategy<Value = f64> {
+        prop_oneof![Just(0.0), 0.0..3e-4f64, 1e-12..1e-6f64]
+    }
+
+    proptest! {
+        #[test]
+        fn transfer_conserves_and_levels(w in mass(), r in mass(), rev in 0.0..1.0f64, factor in 0.0..50.0f64) {
+            let p = table2();
+            let (w2, r2) = transfer(w, r, |m1| transfer_fraction(&p, m1, rev, factor));
+            prop_assert!(w2 >= 0.0 && r2 >= 0.0);
+            prop_assert!(((w2 + r2) - (w + r)).abs() <= 4.0 * f64::EPSILON * (w + r));
+            // The donor never ends up with less than the receiver.
+            prop_assert!((w >= r) == (w2 >= r2) || (w2 - r2).abs() <= 4.0 * f64::EPSILON * (w + r));
+        }
+
+        #[test]
+        fn a_contact_keeps_masses_and_mu_in_range(
+            w in mass(), r in mass(), m0 in prop_oneof![Just(0.0), 1e-6..5e-4f64],
+            fp_fc in 0.0..5.0f64, rev in prop_oneof![Just(None), (0.0..1.0f64).prop_map(Some)],
+            tf in 0.1..10.0f64,
+        ) {
+            let p = table2();
+            let (mut w2, mut r2) = (w, r);
+            let cond = ContactConditions { m0_kg: m0, fp_fc, transfer_revolution: rev, consumption_factor: tf };
+            let losses = roll(&p, &mut w2, &mut r2, &cond);
+            prop_assert!(w2 >= 0.0 && r2 >= 0.0);
+            prop_assert!(w2 <= p.m_max_kg && r2 <= p.m_max_kg);
+            prop_assert!(losses.consumed_kg >= 0.0 && losses.capped_kg >= 0.0);
+            // Consumption never takes more than there is.
+            prop_assert!(losses.consumed_kg <= (w + r) * (1.0 + 1e-15));
+            // Mass balance of one contact.
+            let before = w + r;
+            let after = w2 + r2 + losses.consumed_kg + losses.capped_kg;
+            prop_assert!((before - after).abs() <= 1e-15 * before.max(1e-30), "{before} vs {after}");
+            for m in [w2, r2, w2 + r2] {
+                let mu = friction(&p, m);
+                prop_assert!((p.mu_c..=p.mu_d).contains(&mu));
+            }
+        }
+    }
+}
