@@ -1,0 +1,225 @@
+//! State out and in (interfaces.md): a recording cut in two at a moment when
+//! no train is in the section, the second part replayed from the first
+//! part's state, gives the same outputs as the whole, bit for bit; and a
+//! state from another section or format version is refused clearly.
+
+use std::borrow::Cow;
+use std::collections::BTreeMap;
+use std::io::BufWriter;
+use std::path::{Path, PathBuf};
+
+use tortwin::app::replay::{replay, ReplayArgs};
+use tortwin::sink::{FieldSnapshot, MeasurementOutput, Sink, TrainEvent};
+
+fn reference(name: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/reference/recordings").join(name)
+}
+
+fn args(recording: &Path) -> ReplayArgs {
+    ReplayArgs {
+        recording: recording.to_path_buf(),
+        config: None,
+        out_mcap: None,
+        out_rrd: None,
+        state_in: None,
+        state_out: None,
+        every_wheel: false,
+        quiet: true,
+    }
+}
+
+/// Everything a replay publishes, as bits.
+#[derive(Default, Debug, PartialEq)]
+struct Outputs {
+    measurements: Vec<(u64, String, String, String, u64, u64)>,
+    fields: Vec<(u64, String, String, u64, Vec<u64>, Vec<u64>, Vec<u64>, Vec<u64>)>,
+    trains: Vec<(u64, u64)>,
+}
+
+fn bits(v: &[f64]) -> Vec<u64> {
+    v.iter().map(|x| x.to_bits()).collect()
+}
+
+impl Sink for Outputs {
+    fn train(&mut self, t: &TrainEvent<'_>) -> anyhow::Result<()> {
+        self.trains.push((t.log_time_ns, t.end_ns));
+        Ok(())
+    }
+    fn measurement(&mut self, m: &MeasurementOutput<'_>) -> anyhow::Result<()> {
+        self.measurements.push((
+            m.log_time_ns,
+            m.site_id.into(),
+            m.rail_name.into(),
+            m.quantity.as_str().into(),
+            m.measured.to_bits(),
+            m.simulated.to_bits(),
+        ));
+        Ok(())
+    }
+    fn field(&mut self, f: &FieldSnapshot<'_>) -> anyhow::Result<()> {
+        self.fields.push((
+            f.log_time_ns,
+            f.train_id.into(),
+            format!("{}/{}", f.rail_name, f.band),
+            f.wheel_pass,
+            bits(f.mu),
+            bits(f.adhesion),
+            bits(f.rail_mass_kg),
+            bits(f.wheel_mass_kg),
+        ));
+        Ok(())
+    }
+}
+
+/// Copies the messages of `src` for which `keep(topic, log_time)` holds into
+/// a new MCAP at `dst`, in file order; `/section` is always kept, at
+/// `section_log_time` if given.
+fn rewrite(src: &Path, dst: &Path, section_log_time: Option<u64>, keep: impl Fn(&str, u64) -> bool) {
+    let bytes = std::fs::read(src).unwrap();
+    let mut writer = mcap::Writer::new(BufWriter::new(std::fs::File::create(dst).unwrap())).unwrap();
+    let mut channels: BTreeMap<u16, u16> = BTreeMap::new();
+    for message in mcap::MessageStream::new(&bytes).unwrap() {
+        let message = message.unwrap();
+        let topic = message.channel.topic.as_str();
+        let is_section = topic == "/section";
+        if !is_section && !keep(topic, message.log_time) {
+            continue;
+        }
+        let channel_id = *channels.entry(message.channel.id).or_insert_with(|| {
+            let schema_id = match &message.channel.schema {
+                Some(s) => writer.add_schema(&s.name, &s.encoding, &s.data).unwrap(),
+                None => 0,
+            };
+            writer
+                .add_channel(schema_id, topic, &message.channel.message_encoding, &BTreeMap::new())
+                .unwrap()
+        });
+        let log_time = if is_section { section_log_time.unwrap_or(message.log_time) } else { message.log_time };
+        let header = mcap::records::MessageHeader {
+            channel_id,
+            sequence: message.sequence,
+            log_time,
+            publish_time: log_time,
+        };
+        writer.write_to_known_channel(&header, &message.data).unwrap();
+        let _: Cow<[u8]> = message.data;
+    }
+    writer.finish().unwrap();
+}
+
+#[test]
+fn replaying_in_two_parts_gives_the_same_bits() {
+    split_and_compare(None);
+}
+
+#[test]
+fn replaying_in_two_parts_gives_the_same_bits_with_every_effect_on() {
+    split_and_compare(Some(
+        "[effects.rail_ageing]\ntau_s = 7200\n[effects.rain_washoff]\nk_per_mm = 0.8\n\
+         [effects.temperature_consumption]\nbeta_per_k = 0.03\n[effects.speed_transfer]\nn = 1.5\n\
+         [effects.wheel_edge_reservoir]\nalpha = 0.2\nr = 0.1\n[effects.bogie_bands]\n",
+    ));
+}
+
+fn split_and_compare(config: Option<&str>) {
+    let whole_path = reference("curve_2day.mcap");
+    let mut whole = Outputs::default();
+    let dir = tempfile::tempdir().unwrap();
+    let config_path = config.map(|text| {
+        let p = dir.path().join("effects.toml");
+        std::fs::write(&p, text).unwrap();
+        p
+    });
+    let args = |path: &Path| ReplayArgs { config: config_path.clone(), ..args(path) };
+    let mut a = args(&whole_path);
+    a.state_out = Some(dir.path().join("whole.state.json"));
+    replay(&a, &mut [&mut whole]).unwrap();
+
+    // Cut in the longest gap between two trains (no train in the section),
+    // and in the gap nearest to the middle of the recording's rain event,
+    // where the weather in effect and the rain so far must carry over.
+    let gaps: Vec<(u64, u64)> = whole.trains.windows(2).map(|w| ((w[0].1 + w[1].0) / 2, w[1].0 - w[0].1)).collect();
+    let longest = gaps.iter().max_by_key(|g| g.1).unwrap().0;
+    let key: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(reference("curve_2day.key.json")).unwrap()).unwrap();
+    let rain = &key["rain_events_h_from_start"][0];
+    let rain_mid_h = (rain["start_h"].as_f64().unwrap() + rain["end_h"].as_f64().unwrap()) / 2.0;
+    let rain_mid_ns = key["start_ns"].as_u64().unwrap() + (rain_mid_h * 3600e9) as u64;
+    let in_rain = gaps.iter().min_by_key(|g| g.0.abs_diff(rain_mid_ns)).unwrap().0;
+    assert_ne!(longest, in_rain);
+    for (k, cut) in [longest, in_rain].into_iter().enumerate() {
+        let part1 = dir.path().join(format!("part1-{k}.mcap"));
+        let part2 = dir.path().join(format!("part2-{k}.mcap"));
+        rewrite(&whole_path, &part1, None, |_, t| t < cut);
+        rewrite(&whole_path, &part2, Some(cut), |_, t| t >= cut);
+
+        let state = dir.path().join("part1.state.json");
+        let mut first = Outputs::default();
+        let mut a1 = args(&part1);
+        a1.state_out = Some(state.clone());
+        replay(&a1, &mut [&mut first]).unwrap();
+        let mut second = Outputs::default();
+        let mut a2 = args(&part2);
+        a2.state_in = Some(state);
+        a2.state_out = Some(dir.path().join("part2.state.json"));
+        replay(&a2, &mut [&mut second]).unwrap();
+
+        assert!(!first.measurements.is_empty() && !second.measurements.is_empty());
+        let mut joined = first;
+        joined.measurements.extend(second.measurements);
+        joined.fields.extend(second.fields);
+        joined.trains.extend(second.trains);
+        assert_eq!(joined.trains, whole.trains);
+        assert_eq!(joined.measurements.len(), whole.measurements.len());
+        assert!(joined.measurements == whole.measurements, "cut {k}: measurement outputs differ");
+        assert!(joined.fields == whole.fields, "cut {k}: field outputs differ");
+        // And the final states are the same document.
+        let s_whole = std::fs::read_to_string(dir.path().join("whole.state.json")).unwrap();
+        let s_parts = std::fs::read_to_string(dir.path().join("part2.state.json")).unwrap();
+        assert_eq!(s_whole, s_parts, "cut {k}: end states differ");
+    }
+}
+
+fn replay_err(a: &ReplayArgs) -> String {
+    let err = replay(a, &mut []).unwrap_err();
+    assert!(tortwin::error::is_input_error(&err), "not an input error: {err:#}");
+    format!("{err:#}")
+}
+
+#[test]
+fn a_state_from_another_section_or_version_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let state = dir.path().join("tangent.state.json");
+    let mut a = args(&reference("tangent_day.mcap"));
+    a.state_out = Some(state.clone());
+    replay(&a, &mut []).unwrap();
+
+    // Another section.
+    let mut b = args(&reference("curve_2day.mcap"));
+    b.state_in = Some(state.clone());
+    let msg = replay_err(&b);
+    assert!(msg.contains("another section") && msg.contains("tangent.state.json"), "{msg}");
+
+    // Another format version.
+    let text = std::fs::read_to_string(&state).unwrap();
+    let bumped = dir.path().join("v99.state.json");
+    std::fs::write(&bumped, text.replace("\"version\":1", "\"version\":99")).unwrap();
+    let mut c = args(&reference("tangent_day.mcap"));
+    c.state_in = Some(bumped);
+    let msg = replay_err(&c);
+    assert!(msg.contains("version 99"), "{msg}");
+
+    // Not a state at all.
+    let junk = dir.path().join("junk.json");
+    std::fs::write(&junk, "{\"hello\": 1}").unwrap();
+    c.state_in = Some(junk);
+    let msg = replay_err(&c);
+    assert!(msg.contains("junk.json") && msg.contains("not a tortwin state"), "{msg}");
+
+    // The same day again from its own end state: its trains would overlap
+    // in time with the state's last train.
+    let mut d = args(&reference("tangent_day.mcap"));
+    d.state_in = Some(state);
+    let msg = replay_err(&d);
+    assert!(msg.contains("/train/passage"), "{msg}");
+}
