@@ -133,7 +133,7 @@ pub fn replay(args: &ReplayArgs, extra: &mut [&mut dyn Sink]) -> Result<RunSumma
     for event in reader.by_ref() {
         let event = event?;
         events += 1;
-        if events % 4096 == 0 {
+        if events.is_multiple_of(4096) {
             progress.set_message(format!("{events} events, {}", crate::app::summary::utc(event.log_time_ns)));
             progress.tick();
         }

@@ -8,7 +8,7 @@
 
 pub mod reader;
 
-pub use reader::RecordingReader;
+pub use reader::{ReaderContext, RecordingReader};
 
 /// The `/section` message: the track section the recording describes.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
