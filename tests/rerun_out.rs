@@ -1,0 +1,329 @@
+//! The rerun sink writes an `.rrd` that rerun itself reads back with the
+//! values it was given: `tests/python/check_rrd.py` runs `rerun rrd verify`
+//! and reads the file with `rerun.experimental.RrdReader`.
+//!
+//! Needs `python3` (or `$TORTWIN_PYTHON`) with `rerun-sdk[datafusion]==0.36.3`;
+//! without them the test fails and says so. Set `TORTWIN_KEEP_RRD=FILE` to
+//! keep a copy of the recording for a look in the viewer (`rerun FILE`).
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use serde_json::json;
+use tortwin::recording::{Applicator, Direction, Quantity, Section, Site};
+use tortwin::sink::rerun_out::{RerunOptions, RerunSink};
+use tortwin::sink::{
+    FieldSnapshot, MeasurementOutput, PulseEvent, RunSummary, SectionInfo, Sink, SnapshotKind,
+    TrackInfo, TrainEvent,
+};
+
+const GRID_POINTS: usize = 201;
+const SPACING_M: f64 = 0.5;
+const AXLES: u64 = 8;
+const TRAINS: u64 = 3;
+const ORIGIN_NS: u64 = 1_700_000_000_000_000_000;
+const TRAIN_INTERVAL_NS: u64 = 600_000_000_000;
+
+fn section() -> Section {
+    Section {
+        section_id: "test-curve".to_owned(),
+        length_m: (GRID_POINTS - 1) as f64 * SPACING_M,
+        rails: vec!["high".to_owned(), "low".to_owned()],
+        curve_radius_m: Some(300.0),
+        rail_head_radius_m: 0.3,
+        nominal_wheel_diameter_m: 0.92,
+        applicators: vec![Applicator {
+            id: "A1".to_owned(),
+            position_m: 10.0,
+            rails: vec![0, 1],
+            nominal_pulse_kg: 0.002,
+        }],
+        sites: vec![Site {
+            id: "S1".to_owned(),
+            position_m: 60.0,
+        }],
+    }
+}
+
+fn tracks() -> Vec<TrackInfo> {
+    [
+        (0, "high", "gauge_corner"),
+        (0, "high", "top"),
+        (1, "low", "top"),
+    ]
+    .into_iter()
+    .map(|(rail, rail_name, band)| TrackInfo {
+        rail,
+        rail_name: rail_name.to_owned(),
+        band: band.to_owned(),
+    })
+    .collect()
+}
+
+/// A made-up but distinct profile for every (track, wheel pass).
+fn profile(track: usize, wheel_pass: u64, scale: f64) -> Vec<f64> {
+    (0..GRID_POINTS)
+        .map(|i| {
+            let x = i as f64 * 0.037 + track as f64 * 1.3 + wheel_pass as f64 * 0.21;
+            scale * (0.3 + 0.1 * x.sin())
+        })
+        .collect()
+}
+
+/// The friction field after `wheel_pass` wheels on `track`.
+struct Field {
+    mu: Vec<f64>,
+    adhesion: Vec<f64>,
+    rail_mass_kg: Vec<f64>,
+    wheel_mass_kg: Vec<f64>,
+}
+
+fn field(track: usize, wheel_pass: u64) -> Field {
+    Field {
+        mu: profile(track, wheel_pass, 1.0),
+        adhesion: profile(track, wheel_pass, 0.6),
+        rail_mass_kg: profile(track, wheel_pass + 100, 1e-4),
+        wheel_mass_kg: profile(track, wheel_pass + 200, 2e-5),
+    }
+}
+
+/// A synthetic run: three trains of eight axles over three tracks, a pulse
+/// before each, a measurement after each, and wheel snapshots for the
+/// second train.
+fn feed(sink: &mut dyn Sink, trains: u64) -> anyhow::Result<()> {
+    let section = section();
+    let tracks = tracks();
+    let grid_d_m: Vec<f64> = (0..GRID_POINTS).map(|i| i as f64 * SPACING_M).collect();
+    sink.begin(&SectionInfo {
+        section: &section,
+        grid_d_m: &grid_d_m,
+        tracks: &tracks,
+        applicator_points: &[20],
+        site_points: &[120],
+        origin_ns: ORIGIN_NS as i64,
+    })?;
+
+    for train in 1..=trains {
+        let start_ns = ORIGIN_NS + train * TRAIN_INTERVAL_NS;
+        let end_ns = start_ns + 20_000_000_000;
+        let train_id = format!("T{train}");
+        for rail in 0..2 {
+            sink.pulse(&PulseEvent {
+                log_time_ns: start_ns - 60_000_000_000,
+                applicator_id: "A1",
+                rail,
+                rail_name: &section.rails[rail],
+                mass_kg: 0.0019 + 0.0001 * train as f64,
+            })?;
+        }
+        sink.train(&TrainEvent {
+            log_time_ns: start_ns,
+            end_ns,
+            train_id: &train_id,
+            direction: if train % 2 == 0 {
+                Direction::Down
+            } else {
+                Direction::Up
+            },
+            speed_mps: 20.0,
+            axles: AXLES as usize,
+        })?;
+        let first_wheel = (train - 1) * AXLES + 1;
+        let last_wheel = train * AXLES;
+        let snapshots = if train == 2 {
+            (first_wheel..=last_wheel)
+                .map(|w| (SnapshotKind::Wheel, w))
+                .collect()
+        } else {
+            Vec::new()
+        };
+        for (kind, wheel_pass) in snapshots
+            .into_iter()
+            .chain([(SnapshotKind::Train, last_wheel)])
+        {
+            for (index, track) in tracks.iter().enumerate() {
+                let f = field(index, wheel_pass);
+                sink.field(&FieldSnapshot {
+                    kind,
+                    log_time_ns: start_ns + (wheel_pass - first_wheel + 1) * 1_000_000_000,
+                    train_id: &train_id,
+                    track: index,
+                    rail_name: &track.rail_name,
+                    band: &track.band,
+                    wheel_pass,
+                    d_m: &grid_d_m,
+                    mu: &f.mu,
+                    adhesion: &f.adhesion,
+                    rail_mass_kg: &f.rail_mass_kg,
+                    wheel_mass_kg: &f.wheel_mass_kg,
+                })?;
+            }
+        }
+        for (rail, quantity) in [(0, Quantity::Mu), (1, Quantity::RailMu)] {
+            sink.measurement(&MeasurementOutput {
+                log_time_ns: end_ns + 5_000_000_000,
+                index_in_file: train * 10 + rail as u64,
+                site_id: "S1",
+                site: 0,
+                rail_name: &section.rails[rail],
+                rail,
+                quantity,
+                train_id: (quantity == Quantity::Mu).then_some(train_id.as_str()),
+                axle_index: (quantity == Quantity::Mu).then_some(3),
+                measured: 0.25 + 0.01 * train as f64,
+                simulated: 0.24 + 0.012 * train as f64,
+            })?;
+        }
+    }
+    Ok(())
+}
+
+fn python() -> String {
+    std::env::var("TORTWIN_PYTHON").unwrap_or_else(|_| "python3".to_owned())
+}
+
+/// Runs the checker on `rrd` with `expected`; panics with its output on failure.
+fn check_rrd(rrd: &Path, expected: serde_json::Value, dir: &Path, name: &str) {
+    let expected_path = dir.join(format!("{name}.json"));
+    std::fs::write(&expected_path, expected.to_string()).expect("writing expected values");
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/python/check_rrd.py");
+    let python = python();
+    let output = Command::new(&python)
+        .arg(&script)
+        .arg(rrd)
+        .arg(&expected_path)
+        .output()
+        .unwrap_or_else(|err| {
+            panic!(
+                "cannot run `{python}` ({err}): the rerun sink test needs Python 3 with \
+                 `pip install \"rerun-sdk[datafusion]==0.36.3\"` (or set TORTWIN_PYTHON)"
+            )
+        });
+    let stdout = String::from_utf8_lossy(&output.stdout);
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(
+        output.status.success(),
+        "check_rrd.py ({name}) failed with {}:\n{stdout}{stderr}\n\
+         (it needs `pip install \"rerun-sdk[datafusion]==0.36.3\"`)",
+        output.status
+    );
+    println!("{stdout}");
+}
+
+fn files_in(dir: &Path) -> Vec<PathBuf> {
+    let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
+        .expect("listing the test directory")
+        .map(|entry| entry.expect("reading a directory entry").path())
+        .collect();
+    files.sort();
+    files
+}
+
+#[test]
+fn rerun_reads_back_the_fields_the_sink_was_given() {
+    let dir = tempfile::tempdir().expect("creating a temporary directory");
+    let rrd = dir.path().join("run.rrd");
+    let mut sink = RerunSink::create(
+        &rrd,
+        RerunOptions {
+            history_rows: 2,
+            ..RerunOptions::default()
+        },
+    )
+    .expect("creating the rerun sink");
+    feed(&mut sink, TRAINS).expect("feeding the sink");
+    assert!(!rrd.exists(), "the target must not exist before finish");
+    sink.finish(&RunSummary::default())
+        .expect("finishing the sink");
+    drop(sink);
+    assert_eq!(
+        files_in(dir.path()),
+        vec![rrd.clone()],
+        "finish leaves exactly the target file"
+    );
+
+    if let Ok(keep) = std::env::var("TORTWIN_KEEP_RRD") {
+        std::fs::copy(&rrd, &keep).expect("copying the recording to $TORTWIN_KEEP_RRD");
+    }
+
+    let grid_d_m: Vec<f64> = (0..GRID_POINTS).map(|i| i as f64 * SPACING_M).collect();
+    // high/top (track 1) after the last train: the heatmap holds K = 2 of 3 trains.
+    check_rrd(
+        &rrd,
+        json!({
+            "rail": "high",
+            "band": "top",
+            "wheel_pass": TRAINS * AXLES,
+            "mu": field(1, TRAINS * AXLES).mu,
+            "d_m": grid_d_m,
+            "check_history": true,
+            "history_rows": 2,
+            "blueprint": true,
+        }),
+        dir.path(),
+        "last_train_high_top",
+    );
+    // low/top (track 2) mid-train: a wheel snapshot of the second train.
+    check_rrd(
+        &rrd,
+        json!({
+            "rail": "low",
+            "band": "top",
+            "wheel_pass": AXLES + 3,
+            "mu": field(2, AXLES + 3).mu,
+        }),
+        dir.path(),
+        "wheel_low_top",
+    );
+}
+
+#[test]
+fn dropped_without_finish_leaves_no_file() {
+    let dir = tempfile::tempdir().expect("creating a temporary directory");
+    let rrd = dir.path().join("failed.rrd");
+    let mut sink =
+        RerunSink::create(&rrd, RerunOptions::default()).expect("creating the rerun sink");
+    feed(&mut sink, 1).expect("feeding the sink");
+    assert_eq!(
+        files_in(dir.path()).len(),
+        1,
+        "the temporary file exists while running"
+    );
+    drop(sink);
+    assert!(
+        !rrd.exists(),
+        "no file at the target after a drop without finish"
+    );
+    assert_eq!(
+        files_in(dir.path()),
+        Vec::<PathBuf>::new(),
+        "the temporary file is gone"
+    );
+}
+
+#[test]
+fn a_snapshot_off_the_grid_is_an_error() {
+    let dir = tempfile::tempdir().expect("creating a temporary directory");
+    let rrd = dir.path().join("bad.rrd");
+    let mut sink =
+        RerunSink::create(&rrd, RerunOptions::default()).expect("creating the rerun sink");
+    feed(&mut sink, 1).expect("feeding the sink");
+    let short = vec![0.3; GRID_POINTS - 1];
+    let err = sink
+        .field(&FieldSnapshot {
+            kind: SnapshotKind::Train,
+            log_time_ns: ORIGIN_NS,
+            train_id: "T9",
+            track: 0,
+            rail_name: "high",
+            band: "gauge_corner",
+            wheel_pass: 100,
+            d_m: &short,
+            mu: &short,
+            adhesion: &short,
+            rail_mass_kg: &short,
+            wheel_mass_kg: &short,
+        })
+        .expect_err("a snapshot with fewer points than the grid");
+    assert!(err.to_string().contains("T9"), "{err:#}");
+}
