@@ -14,6 +14,7 @@
 //! - [`recording`]: turns an MCAP recording into typed, validated events.
 //! - [`engine`]: owns time and state; steps the product wheel pass by wheel pass.
 //! - [`sink`]: listeners that publish what the engine produces.
+//! - [`plot`]: line plots (SVG) and CSV tables for figures and reports.
 
 pub mod app;
 pub mod config;
@@ -21,5 +22,6 @@ pub mod engine;
 pub mod error;
 pub mod model;
 pub mod paper;
+pub mod plot;
 pub mod recording;
 pub mod sink;

@@ -2,6 +2,7 @@
 //! Each command is a function of its arguments over the library; `main.rs`
 //! only parses and maps errors to exit codes.
 
+pub mod paper;
 pub mod replay;
 pub mod summary;
 
@@ -24,11 +25,14 @@ pub struct Cli {
 pub enum Command {
     /// Replay a recording of a track section and publish the friction field.
     Replay(replay::ReplayArgs),
+    /// Recompute the paper's Figures 7 and 13–17 as CSV and SVG.
+    Paper(paper::PaperArgs),
 }
 
 pub fn run(cli: Cli) -> Result<()> {
     match cli.command {
         Command::Replay(args) => replay::main(args),
+        Command::Paper(args) => paper::main(args),
     }
 }
 

@@ -1,0 +1,213 @@
+//! `tortwin replay` end to end, as a user runs it: the outputs are read back
+//! by independent readers (the Python `mcap` + `jsonschema` packages and
+//! `rerun-sdk` 0.36.3, installed by .ci/run), the field ties back to the
+//! reference values, and bad input gives exit status 2, a message that says
+//! where, and no output file.
+
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+fn tortwin() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_tortwin"))
+}
+
+fn reference(name: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/reference/recordings").join(name)
+}
+
+fn python(script: &str, args: &[&std::ffi::OsStr]) -> std::process::Output {
+    let script = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/python").join(script);
+    Command::new("python3").arg(script).args(args).output().unwrap_or_else(|e| {
+        panic!("cannot run python3 ({e}); install the readers: pip install -r tests/python/requirements.txt")
+    })
+}
+
+/// The `/twin/field` and `/twin/section` messages of an output MCAP.
+fn read_mcap(path: &Path) -> (serde_json::Value, Vec<serde_json::Value>) {
+    let bytes = std::fs::read(path).unwrap();
+    let mut section = serde_json::Value::Null;
+    let mut fields = Vec::new();
+    for m in mcap::MessageStream::new(&bytes).unwrap() {
+        let m = m.unwrap();
+        let v: serde_json::Value = serde_json::from_slice(&m.data).unwrap();
+        match m.channel.topic.as_str() {
+            "/twin/section" => section = v,
+            "/twin/field" => fields.push(v),
+            _ => {}
+        }
+    }
+    (section, fields)
+}
+
+#[test]
+fn replay_outputs_read_back_with_independent_readers() {
+    let dir = tempfile::tempdir().unwrap();
+    let (mcap_out, rrd_out) = (dir.path().join("day.mcap"), dir.path().join("day.rrd"));
+    let out = tortwin()
+        .arg("replay")
+        .arg(reference("tangent_day.mcap"))
+        .arg("--out-mcap")
+        .arg(&mcap_out)
+        .arg("--out-rrd")
+        .arg(&rrd_out)
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success(), "{stdout}\n{}", String::from_utf8_lossy(&out.stderr));
+    assert!(stdout.contains("trains 32") && stdout.contains("measurements 7198"), "{stdout}");
+    assert!(stdout.contains("mass balance") && stdout.contains("rerun out") || stdout.contains("rerun "), "{stdout}");
+
+    // Every message decodes and validates against its channel's schema;
+    // one /twin/measurement per input measurement, one field per train and rail.
+    let check = python(
+        "check_mcap.py",
+        &[
+            mcap_out.as_os_str(),
+            "--expect-count".as_ref(),
+            "/twin/measurement=7198".as_ref(),
+            "--expect-count".as_ref(),
+            "/twin/field=64".as_ref(),
+        ],
+    );
+    assert!(check.status.success(), "{}{}", String::from_utf8_lossy(&check.stdout), String::from_utf8_lossy(&check.stderr));
+
+    // Pick a measured train: the mu its last axle saw at a site, in the
+    // reference's expected.csv, is the field's mu at that site's grid point.
+    let (section, fields) = read_mcap(&mcap_out);
+    let site_point: HashMap<String, usize> = section["sites"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|s| (s["id"].as_str().unwrap().to_string(), s["grid_index"].as_u64().unwrap() as usize))
+        .collect();
+    let expected = std::fs::read_to_string(reference("tangent_day.expected.csv")).unwrap();
+    let mut checked = 0;
+    let mut chosen = None;
+    for field in &fields {
+        let train = field["train_id"].as_str().unwrap();
+        let rail = field["rail"].as_str().unwrap();
+        let last_axle = expected
+            .lines()
+            .filter(|l| l.contains(&format!(",{train},")))
+            .filter_map(|l| l.split(',').nth(6).and_then(|a| a.parse::<usize>().ok()))
+            .max();
+        let Some(last_axle) = last_axle else { continue };
+        for line in expected.lines().skip(1) {
+            let f: Vec<&str> = line.split(',').collect();
+            if f[5] == train && f[3] == rail && f[4] == "mu" && f[6] == last_axle.to_string() {
+                let want: f64 = f[8].parse().unwrap();
+                let got = field["mu"][site_point[f[2]]].as_f64().unwrap();
+                assert!((got - want).abs() <= 1e-9 * want, "{train} {rail} {}: field {got} vs reference {want}", f[2]);
+                checked += 1;
+                chosen.get_or_insert(field.clone());
+            }
+        }
+    }
+    assert!(checked > 0, "no measured last axle to tie the field to");
+
+    // The rerun recording verifies, and its mu field for that pass is the same.
+    let field = chosen.unwrap();
+    let expect = serde_json::json!({
+        "rail": field["rail"], "band": field["band"], "wheel_pass": field["wheel_pass"],
+        "mu": field["mu"], "d_m": field["d_m"], "blueprint": true,
+    });
+    let expect_path = dir.path().join("expected.json");
+    std::fs::write(&expect_path, expect.to_string()).unwrap();
+    let check = python("check_rrd.py", &[rrd_out.as_os_str(), expect_path.as_os_str()]);
+    assert!(check.status.success(), "{}{}", String::from_utf8_lossy(&check.stdout), String::from_utf8_lossy(&check.stderr));
+}
+
+/// Runs a replay that must fail with status 2; returns stderr.
+fn replay_fails(recording: &Path, extra: &[&str], dir: &Path) -> String {
+    let (mcap_out, rrd_out, state_out) = (dir.join("o.mcap"), dir.join("o.rrd"), dir.join("o.state"));
+    let out = tortwin()
+        .arg("replay")
+        .arg(recording)
+        .args(["--out-mcap".as_ref(), mcap_out.as_os_str(), "--out-rrd".as_ref(), rrd_out.as_os_str()])
+        .args(["--state-out".as_ref(), state_out.as_os_str()])
+        .args(extra)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+    assert_eq!(out.status.code(), Some(2), "{stderr}");
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    let left: Vec<_> = std::fs::read_dir(dir).unwrap().map(|e| e.unwrap().file_name()).collect();
+    for f in &left {
+        let name = f.to_string_lossy();
+        assert!(!name.starts_with("o.") && !name.contains("partial"), "left behind: {name} ({stderr})");
+    }
+    stderr
+}
+
+#[test]
+fn bad_input_exits_2_and_leaves_no_output() {
+    let dir = tempfile::tempdir().unwrap();
+    let work = dir.path().join("out");
+    std::fs::create_dir(&work).unwrap();
+
+    // A truncated recording.
+    let bytes = std::fs::read(reference("tangent_day.mcap")).unwrap();
+    let cut = dir.path().join("cut.mcap");
+    std::fs::write(&cut, &bytes[..bytes.len() * 2 / 3]).unwrap();
+    let msg = replay_fails(&cut, &[], &work);
+    assert!(msg.contains("cut.mcap"), "{msg}");
+
+    // A missing recording.
+    let msg = replay_fails(&dir.path().join("nope.mcap"), &[], &work);
+    assert!(msg.contains("nope.mcap"), "{msg}");
+
+    // A configuration with an unknown key and one with a value out of range.
+    let cfg = dir.path().join("bad.toml");
+    std::fs::write(&cfg, "[product]\nkm3 = 1.0\n").unwrap();
+    let msg = replay_fails(&reference("tangent_day.mcap"), &["--config", cfg.to_str().unwrap()], &work);
+    assert!(msg.contains("km3") && msg.contains("bad.toml"), "{msg}");
+    std::fs::write(&cfg, "[effects.rail_ageing]\ntau_s = -1\n").unwrap();
+    let msg = replay_fails(&reference("tangent_day.mcap"), &["--config", cfg.to_str().unwrap()], &work);
+    assert!(msg.contains("effects.rail_ageing.tau_s"), "{msg}");
+
+    // A usage error.
+    let out = tortwin().args(["replay", "--no-such-flag"]).output().unwrap();
+    assert_eq!(out.status.code(), Some(2));
+}
+
+#[test]
+fn a_message_error_mid_recording_names_topic_time_and_index() {
+    // Rewrite tangent_day with one pulse's mass made negative, half way through.
+    let dir = tempfile::tempdir().unwrap();
+    let src = std::fs::read(reference("tangent_day.mcap")).unwrap();
+    let bad = dir.path().join("bad.mcap");
+    let mut writer = mcap::Writer::new(std::io::BufWriter::new(std::fs::File::create(&bad).unwrap())).unwrap();
+    let mut channels = std::collections::BTreeMap::new();
+    let mut pulses = 0;
+    let mut spoiled = None;
+    for (index, m) in mcap::MessageStream::new(&src).unwrap().enumerate() {
+        let m = m.unwrap();
+        let id = *channels.entry(m.channel.id).or_insert_with(|| {
+            let schema = m.channel.schema.as_ref().unwrap();
+            let s = writer.add_schema(&schema.name, &schema.encoding, &schema.data).unwrap();
+            writer.add_channel(s, &m.channel.topic, &m.channel.message_encoding, &Default::default()).unwrap()
+        });
+        let mut data = m.data.to_vec();
+        if m.channel.topic == "/applicator/pulse" {
+            pulses += 1;
+            if pulses == 1000 {
+                let mut v: serde_json::Value = serde_json::from_slice(&data).unwrap();
+                v["mass_g"] = serde_json::json!(-0.1);
+                data = serde_json::to_vec(&v).unwrap();
+                spoiled = Some((index, m.log_time));
+            }
+        }
+        let header = mcap::records::MessageHeader { channel_id: id, sequence: m.sequence, log_time: m.log_time, publish_time: m.publish_time };
+        writer.write_to_known_channel(&header, &data).unwrap();
+    }
+    writer.finish().unwrap();
+    let (index, log_time) = spoiled.unwrap();
+    let work = dir.path().join("out");
+    std::fs::create_dir(&work).unwrap();
+    let msg = replay_fails(&bad, &[], &work);
+    assert!(msg.contains("/applicator/pulse"), "{msg}");
+    assert!(msg.contains(&log_time.to_string()), "{msg}");
+    assert!(msg.contains(&format!("message index {index}")), "{msg}");
+    assert!(msg.contains("mass_g"), "{msg}");
+}
