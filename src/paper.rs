@@ -110,7 +110,11 @@ impl WaysideScenario {
             let pulse = ((k - 1) % self.every.max(1) == 0).then(|| Event {
                 log_time_ns: t - PASS_INTERVAL_NS / 2,
                 index_in_file: 0,
-                kind: EventKind::Pulse(Pulse { applicator: 0, rail: 0, mass_kg: self.dose_kg }),
+                kind: EventKind::Pulse(Pulse {
+                    applicator: 0,
+                    rail: 0,
+                    mass_kg: self.dose_kg,
+                }),
             });
             let passage = Event {
                 log_time_ns: t,
@@ -125,7 +129,11 @@ impl WaysideScenario {
                         bogie_position: BogiePosition::Leading,
                         wheel_diameter_m: self.wheel_diameter_m,
                         wheel_load_n: vec![self.wheel_load_n],
-                        creepage: vec![Creepage { cx: self.cx, cy: self.cy, spin_per_m: 0.0 }],
+                        creepage: vec![Creepage {
+                            cx: self.cx,
+                            cy: self.cy,
+                            spin_per_m: 0.0,
+                        }],
                     }],
                 }),
             };
@@ -135,8 +143,17 @@ impl WaysideScenario {
 
     /// Runs the scenario and returns the field after each pass in `passes`.
     pub fn run(&self, cfg: &ModelConfig, passes: &[usize]) -> Result<Vec<PassField>> {
-        let mut engine = Engine::new(self.section(), *cfg, EngineOptions::default(), ORIGIN_NS as i64);
-        let mut sink = PassCapture { passes, pass: 0, fields: Vec::new() };
+        let mut engine = Engine::new(
+            self.section(),
+            *cfg,
+            EngineOptions::default(),
+            ORIGIN_NS as i64,
+        );
+        let mut sink = PassCapture {
+            passes,
+            pass: 0,
+            fields: Vec::new(),
+        };
         for event in self.events() {
             engine.push(event, &mut sink)?;
         }

@@ -13,11 +13,15 @@ fn tortwin() -> Command {
 }
 
 fn reference(name: &str) -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/reference/recordings").join(name)
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../shared/reference/recordings")
+        .join(name)
 }
 
 fn python(script: &str, args: &[&std::ffi::OsStr]) -> std::process::Output {
-    let script = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/python").join(script);
+    let script = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/python")
+        .join(script);
     Command::new("python3").arg(script).args(args).output().unwrap_or_else(|e| {
         panic!("cannot run python3 ({e}); install the readers: pip install -r tests/python/requirements.txt")
     })
@@ -54,9 +58,20 @@ fn replay_outputs_read_back_with_independent_readers() {
         .output()
         .unwrap();
     let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(out.status.success(), "{stdout}\n{}", String::from_utf8_lossy(&out.stderr));
-    assert!(stdout.contains("trains 32") && stdout.contains("measurements 7198"), "{stdout}");
-    assert!(stdout.contains("mass balance") && stdout.contains("rerun out") || stdout.contains("rerun "), "{stdout}");
+    assert!(
+        out.status.success(),
+        "{stdout}\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(
+        stdout.contains("trains 32") && stdout.contains("measurements 7198"),
+        "{stdout}"
+    );
+    assert!(
+        stdout.contains("mass balance") && stdout.contains("rerun out")
+            || stdout.contains("rerun "),
+        "{stdout}"
+    );
 
     // Every message decodes and validates against its channel's schema;
     // one /twin/measurement per input measurement, one field per train and rail.
@@ -70,7 +85,12 @@ fn replay_outputs_read_back_with_independent_readers() {
             "/twin/field=64".as_ref(),
         ],
     );
-    assert!(check.status.success(), "{}{}", String::from_utf8_lossy(&check.stdout), String::from_utf8_lossy(&check.stderr));
+    assert!(
+        check.status.success(),
+        "{}{}",
+        String::from_utf8_lossy(&check.stdout),
+        String::from_utf8_lossy(&check.stderr)
+    );
 
     // Pick a measured train: the mu its last axle saw at a site, in the
     // reference's expected.csv, is the field's mu at that site's grid point.
@@ -79,7 +99,12 @@ fn replay_outputs_read_back_with_independent_readers() {
         .as_array()
         .unwrap()
         .iter()
-        .map(|s| (s["id"].as_str().unwrap().to_string(), s["grid_index"].as_u64().unwrap() as usize))
+        .map(|s| {
+            (
+                s["id"].as_str().unwrap().to_string(),
+                s["grid_index"].as_u64().unwrap() as usize,
+            )
+        })
         .collect();
     let expected = std::fs::read_to_string(reference("tangent_day.expected.csv")).unwrap();
     let mut checked = 0;
@@ -98,7 +123,11 @@ fn replay_outputs_read_back_with_independent_readers() {
             if f[5] == train && f[3] == rail && f[4] == "mu" && f[6] == last_axle.to_string() {
                 let want: f64 = f[8].parse().unwrap();
                 let got = field["mu"][site_point[f[2]]].as_f64().unwrap();
-                assert!((got - want).abs() <= 1e-9 * want, "{train} {rail} {}: field {got} vs reference {want}", f[2]);
+                assert!(
+                    (got - want).abs() <= 1e-9 * want,
+                    "{train} {rail} {}: field {got} vs reference {want}",
+                    f[2]
+                );
                 checked += 1;
                 chosen.get_or_insert(field.clone());
             }
@@ -114,17 +143,31 @@ fn replay_outputs_read_back_with_independent_readers() {
     });
     let expect_path = dir.path().join("expected.json");
     std::fs::write(&expect_path, expect.to_string()).unwrap();
-    let check = python("check_rrd.py", &[rrd_out.as_os_str(), expect_path.as_os_str()]);
-    assert!(check.status.success(), "{}{}", String::from_utf8_lossy(&check.stdout), String::from_utf8_lossy(&check.stderr));
+    let check = python(
+        "check_rrd.py",
+        &[rrd_out.as_os_str(), expect_path.as_os_str()],
+    );
+    assert!(
+        check.status.success(),
+        "{}{}",
+        String::from_utf8_lossy(&check.stdout),
+        String::from_utf8_lossy(&check.stderr)
+    );
 }
 
 /// Runs a replay that must fail with status 2; returns stderr.
 fn replay_fails(recording: &Path, extra: &[&str], dir: &Path) -> String {
-    let (mcap_out, rrd_out, state_out) = (dir.join("o.mcap"), dir.join("o.rrd"), dir.join("o.state"));
+    let (mcap_out, rrd_out, state_out) =
+        (dir.join("o.mcap"), dir.join("o.rrd"), dir.join("o.state"));
     let out = tortwin()
         .arg("replay")
         .arg(recording)
-        .args(["--out-mcap".as_ref(), mcap_out.as_os_str(), "--out-rrd".as_ref(), rrd_out.as_os_str()])
+        .args([
+            "--out-mcap".as_ref(),
+            mcap_out.as_os_str(),
+            "--out-rrd".as_ref(),
+            rrd_out.as_os_str(),
+        ])
         .args(["--state-out".as_ref(), state_out.as_os_str()])
         .args(extra)
         .output()
@@ -132,10 +175,16 @@ fn replay_fails(recording: &Path, extra: &[&str], dir: &Path) -> String {
     let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
     assert_eq!(out.status.code(), Some(2), "{stderr}");
     assert!(!stderr.contains("panicked"), "{stderr}");
-    let left: Vec<_> = std::fs::read_dir(dir).unwrap().map(|e| e.unwrap().file_name()).collect();
+    let left: Vec<_> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name())
+        .collect();
     for f in &left {
         let name = f.to_string_lossy();
-        assert!(!name.starts_with("o.") && !name.contains("partial"), "left behind: {name} ({stderr})");
+        assert!(
+            !name.starts_with("o.") && !name.contains("partial"),
+            "left behind: {name} ({stderr})"
+        );
     }
     stderr
 }
@@ -160,14 +209,25 @@ fn bad_input_exits_2_and_leaves_no_output() {
     // A configuration with an unknown key and one with a value out of range.
     let cfg = dir.path().join("bad.toml");
     std::fs::write(&cfg, "[product]\nkm3 = 1.0\n").unwrap();
-    let msg = replay_fails(&reference("tangent_day.mcap"), &["--config", cfg.to_str().unwrap()], &work);
+    let msg = replay_fails(
+        &reference("tangent_day.mcap"),
+        &["--config", cfg.to_str().unwrap()],
+        &work,
+    );
     assert!(msg.contains("km3") && msg.contains("bad.toml"), "{msg}");
     std::fs::write(&cfg, "[effects.rail_ageing]\ntau_s = -1\n").unwrap();
-    let msg = replay_fails(&reference("tangent_day.mcap"), &["--config", cfg.to_str().unwrap()], &work);
+    let msg = replay_fails(
+        &reference("tangent_day.mcap"),
+        &["--config", cfg.to_str().unwrap()],
+        &work,
+    );
     assert!(msg.contains("effects.rail_ageing.tau_s"), "{msg}");
 
     // A usage error.
-    let out = tortwin().args(["replay", "--no-such-flag"]).output().unwrap();
+    let out = tortwin()
+        .args(["replay", "--no-such-flag"])
+        .output()
+        .unwrap();
     assert_eq!(out.status.code(), Some(2));
 }
 
@@ -177,7 +237,10 @@ fn a_message_error_mid_recording_names_topic_time_and_index() {
     let dir = tempfile::tempdir().unwrap();
     let src = std::fs::read(reference("tangent_day.mcap")).unwrap();
     let bad = dir.path().join("bad.mcap");
-    let mut writer = mcap::Writer::new(std::io::BufWriter::new(std::fs::File::create(&bad).unwrap())).unwrap();
+    let mut writer = mcap::Writer::new(std::io::BufWriter::new(
+        std::fs::File::create(&bad).unwrap(),
+    ))
+    .unwrap();
     let mut channels = std::collections::BTreeMap::new();
     let mut pulses = 0;
     let mut spoiled = None;
@@ -185,8 +248,17 @@ fn a_message_error_mid_recording_names_topic_time_and_index() {
         let m = m.unwrap();
         let id = *channels.entry(m.channel.id).or_insert_with(|| {
             let schema = m.channel.schema.as_ref().unwrap();
-            let s = writer.add_schema(&schema.name, &schema.encoding, &schema.data).unwrap();
-            writer.add_channel(s, &m.channel.topic, &m.channel.message_encoding, &Default::default()).unwrap()
+            let s = writer
+                .add_schema(&schema.name, &schema.encoding, &schema.data)
+                .unwrap();
+            writer
+                .add_channel(
+                    s,
+                    &m.channel.topic,
+                    &m.channel.message_encoding,
+                    &Default::default(),
+                )
+                .unwrap()
         });
         let mut data = m.data.to_vec();
         if m.channel.topic == "/applicator/pulse" {
@@ -198,7 +270,12 @@ fn a_message_error_mid_recording_names_topic_time_and_index() {
                 spoiled = Some((index, m.log_time));
             }
         }
-        let header = mcap::records::MessageHeader { channel_id: id, sequence: m.sequence, log_time: m.log_time, publish_time: m.publish_time };
+        let header = mcap::records::MessageHeader {
+            channel_id: id,
+            sequence: m.sequence,
+            log_time: m.log_time,
+            publish_time: m.publish_time,
+        };
         writer.write_to_known_channel(&header, &data).unwrap();
     }
     writer.finish().unwrap();

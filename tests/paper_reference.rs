@@ -9,12 +9,18 @@ use tortwin::config::ModelConfig;
 use tortwin::paper::{twin_disc, WaysideScenario};
 
 fn reference(name: &str) -> Vec<Vec<f64>> {
-    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/reference").join(name);
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../shared/reference")
+        .join(name);
     let text = std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
     text.lines()
         .skip(1)
         .filter(|l| !l.trim().is_empty())
-        .map(|l| l.split(',').map(|x| x.trim().parse::<f64>().unwrap()).collect())
+        .map(|l| {
+            l.split(',')
+                .map(|x| x.trim().parse::<f64>().unwrap())
+                .collect()
+        })
         .collect()
 }
 
@@ -35,7 +41,12 @@ fn figure_7_twin_disc_matches_the_reference() {
     for (col, m0_g) in [(1, 0.1), (2, 0.3), (3, 0.5)] {
         let mu = twin_disc(&cfg, m0_g * 1e-3, rows.len());
         for (row, got) in rows.iter().zip(&mu) {
-            assert_close(&format!("fig 7 m0 = {m0_g} g, N = {}", row[0]), *got, row[col], 1e-9);
+            assert_close(
+                &format!("fig 7 m0 = {m0_g} g, N = {}", row[0]),
+                *got,
+                row[col],
+                1e-9,
+            );
         }
     }
 }
@@ -50,8 +61,18 @@ fn figure_13_matches_the_reference() {
     for (i, row) in rows.iter().enumerate() {
         assert_close(&format!("d at {i}"), f.d_m[i], row[0], 1e-12);
         assert_close(&format!("mu at {} m", row[0]), f.mu[i], row[1], 1e-9);
-        assert_close(&format!("rail mass at {} m", row[0]), f.rail_mass_kg[i] * 1e6, row[2], 1e-9);
-        assert_close(&format!("wheel mass at {} m", row[0]), f.wheel_mass_kg[i] * 1e6, row[3], 1e-9);
+        assert_close(
+            &format!("rail mass at {} m", row[0]),
+            f.rail_mass_kg[i] * 1e6,
+            row[2],
+            1e-9,
+        );
+        assert_close(
+            &format!("wheel mass at {} m", row[0]),
+            f.wheel_mass_kg[i] * 1e6,
+            row[3],
+            1e-9,
+        );
     }
 }
 
@@ -67,6 +88,10 @@ fn figure_13_shows_what_the_paper_says() {
     assert!((f.mu[at(81.0)] - 0.31).abs() < 0.01, "{}", f.mu[at(81.0)]);
     assert!((f.mu[at(150.0)] - 0.41).abs() < 0.01, "{}", f.mu[at(150.0)]);
     let below_1mg = f.rail_mass_kg.iter().position(|&m| m < 1e-6).unwrap();
-    assert!((220.0..260.0).contains(&f.d_m[below_1mg]), "{}", f.d_m[below_1mg]);
+    assert!(
+        (220.0..260.0).contains(&f.d_m[below_1mg]),
+        "{}",
+        f.d_m[below_1mg]
+    );
     assert!((f.wheel_mass_kg[at(500.0)] * 1e6 - 27.0).abs() < 2.0);
 }

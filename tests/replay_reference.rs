@@ -8,9 +8,22 @@ use std::path::PathBuf;
 use tortwin::app::replay::{replay, ReplayArgs};
 use tortwin::sink::{MeasurementOutput, Sink};
 
+/// index_in_file, log_time, site, rail, quantity, train, axle, measured, simulated.
+type Row = (
+    u64,
+    u64,
+    String,
+    String,
+    String,
+    Option<String>,
+    Option<usize>,
+    f64,
+    f64,
+);
+
 #[derive(Default)]
 struct Collect {
-    rows: Vec<(u64, u64, String, String, String, Option<String>, Option<usize>, f64, f64)>,
+    rows: Vec<Row>,
 }
 
 impl Sink for Collect {
@@ -49,28 +62,59 @@ pub fn args(recording: PathBuf) -> ReplayArgs {
 
 fn check(name: &str) {
     let mut collect = Collect::default();
-    let summary = replay(&args(reference_dir().join(format!("{name}.mcap"))), &mut [&mut collect]).unwrap();
-    let expected = std::fs::read_to_string(reference_dir().join(format!("{name}.expected.csv"))).unwrap();
+    let summary = replay(
+        &args(reference_dir().join(format!("{name}.mcap"))),
+        &mut [&mut collect],
+    )
+    .unwrap();
+    let expected =
+        std::fs::read_to_string(reference_dir().join(format!("{name}.expected.csv"))).unwrap();
     let rows: Vec<&str> = expected.lines().skip(1).filter(|l| !l.is_empty()).collect();
-    assert_eq!(collect.rows.len(), rows.len(), "{name}: number of measurements");
+    assert_eq!(
+        collect.rows.len(),
+        rows.len(),
+        "{name}: number of measurements"
+    );
     let mut worst = 0.0f64;
     for (got, line) in collect.rows.iter().zip(&rows) {
         let f: Vec<&str> = line.split(',').collect();
         let (index, log_time): (u64, u64) = (f[0].parse().unwrap(), f[1].parse().unwrap());
         let want: f64 = f[8].parse().unwrap();
         let measured: f64 = f[7].parse().unwrap();
-        assert_eq!((got.0, got.1), (index, log_time), "{name}: replay order at {line}");
-        assert_eq!((got.2.as_str(), got.3.as_str(), got.4.as_str()), (f[2], f[3], f[4]), "{line}");
+        assert_eq!(
+            (got.0, got.1),
+            (index, log_time),
+            "{name}: replay order at {line}"
+        );
+        assert_eq!(
+            (got.2.as_str(), got.3.as_str(), got.4.as_str()),
+            (f[2], f[3], f[4]),
+            "{line}"
+        );
         assert_eq!(got.5.as_deref().unwrap_or(""), f[5], "{line}");
-        assert_eq!(got.6.map(|a| a.to_string()).unwrap_or_default(), f[6], "{line}");
+        assert_eq!(
+            got.6.map(|a| a.to_string()).unwrap_or_default(),
+            f[6],
+            "{line}"
+        );
         assert_eq!(got.7, measured, "{line}");
         let rel = (got.8 - want).abs() / want.abs();
         worst = worst.max(rel);
-        assert!(rel <= 1e-9, "{name}: simulated {} vs expected {want} (relative {rel:e}) at {line}", got.8);
+        assert!(
+            rel <= 1e-9,
+            "{name}: simulated {} vs expected {want} (relative {rel:e}) at {line}",
+            got.8
+        );
     }
-    eprintln!("{name}: {} measurements, worst relative difference {worst:e}", rows.len());
+    eprintln!(
+        "{name}: {} measurements, worst relative difference {worst:e}",
+        rows.len()
+    );
     let closing = summary.mass_balance.closing_error();
-    assert!(closing < 1e-12, "{name}: mass balance closes to {closing:e}");
+    assert!(
+        closing < 1e-12,
+        "{name}: mass balance closes to {closing:e}"
+    );
 }
 
 #[test]

@@ -12,7 +12,9 @@ use tortwin::app::replay::{replay, ReplayArgs};
 use tortwin::sink::{FieldSnapshot, MeasurementOutput, Sink, TrainEvent};
 
 fn reference(name: &str) -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/reference/recordings").join(name)
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../shared/reference/recordings")
+        .join(name)
 }
 
 fn args(recording: &Path) -> ReplayArgs {
@@ -28,11 +30,24 @@ fn args(recording: &Path) -> ReplayArgs {
     }
 }
 
+/// One field snapshot as bits: log_time, train, track, wheel_pass, mu,
+/// adhesion, rail mass, wheel mass.
+type FieldBits = (
+    u64,
+    String,
+    String,
+    u64,
+    Vec<u64>,
+    Vec<u64>,
+    Vec<u64>,
+    Vec<u64>,
+);
+
 /// Everything a replay publishes, as bits.
 #[derive(Default, Debug, PartialEq)]
 struct Outputs {
     measurements: Vec<(u64, String, String, String, u64, u64)>,
-    fields: Vec<(u64, String, String, u64, Vec<u64>, Vec<u64>, Vec<u64>, Vec<u64>)>,
+    fields: Vec<FieldBits>,
     trains: Vec<(u64, u64)>,
 }
 
@@ -74,9 +89,15 @@ impl Sink for Outputs {
 /// Copies the messages of `src` for which `keep(topic, log_time)` holds into
 /// a new MCAP at `dst`, in file order; `/section` is always kept, at
 /// `section_log_time` if given.
-fn rewrite(src: &Path, dst: &Path, section_log_time: Option<u64>, keep: impl Fn(&str, u64) -> bool) {
+fn rewrite(
+    src: &Path,
+    dst: &Path,
+    section_log_time: Option<u64>,
+    keep: impl Fn(&str, u64) -> bool,
+) {
     let bytes = std::fs::read(src).unwrap();
-    let mut writer = mcap::Writer::new(BufWriter::new(std::fs::File::create(dst).unwrap())).unwrap();
+    let mut writer =
+        mcap::Writer::new(BufWriter::new(std::fs::File::create(dst).unwrap())).unwrap();
     let mut channels: BTreeMap<u16, u16> = BTreeMap::new();
     for message in mcap::MessageStream::new(&bytes).unwrap() {
         let message = message.unwrap();
@@ -91,17 +112,28 @@ fn rewrite(src: &Path, dst: &Path, section_log_time: Option<u64>, keep: impl Fn(
                 None => 0,
             };
             writer
-                .add_channel(schema_id, topic, &message.channel.message_encoding, &BTreeMap::new())
+                .add_channel(
+                    schema_id,
+                    topic,
+                    &message.channel.message_encoding,
+                    &BTreeMap::new(),
+                )
                 .unwrap()
         });
-        let log_time = if is_section { section_log_time.unwrap_or(message.log_time) } else { message.log_time };
+        let log_time = if is_section {
+            section_log_time.unwrap_or(message.log_time)
+        } else {
+            message.log_time
+        };
         let header = mcap::records::MessageHeader {
             channel_id,
             sequence: message.sequence,
             log_time,
             publish_time: log_time,
         };
-        writer.write_to_known_channel(&header, &message.data).unwrap();
+        writer
+            .write_to_known_channel(&header, &message.data)
+            .unwrap();
         let _: Cow<[u8]> = message.data;
     }
     writer.finish().unwrap();
@@ -130,7 +162,10 @@ fn split_and_compare(config: Option<&str>) {
         std::fs::write(&p, text).unwrap();
         p
     });
-    let args = |path: &Path| ReplayArgs { config: config_path.clone(), ..args(path) };
+    let args = |path: &Path| ReplayArgs {
+        config: config_path.clone(),
+        ..args(path)
+    };
     let mut a = args(&whole_path);
     a.state_out = Some(dir.path().join("whole.state.json"));
     replay(&a, &mut [&mut whole]).unwrap();
@@ -138,14 +173,23 @@ fn split_and_compare(config: Option<&str>) {
     // Cut in the longest gap between two trains (no train in the section),
     // and in the gap nearest to the middle of the recording's rain event,
     // where the weather in effect and the rain so far must carry over.
-    let gaps: Vec<(u64, u64)> = whole.trains.windows(2).map(|w| ((w[0].1 + w[1].0) / 2, w[1].0 - w[0].1)).collect();
+    let gaps: Vec<(u64, u64)> = whole
+        .trains
+        .windows(2)
+        .map(|w| ((w[0].1 + w[1].0) / 2, w[1].0 - w[0].1))
+        .collect();
     let longest = gaps.iter().max_by_key(|g| g.1).unwrap().0;
     let key: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(reference("curve_2day.key.json")).unwrap()).unwrap();
+        serde_json::from_str(&std::fs::read_to_string(reference("curve_2day.key.json")).unwrap())
+            .unwrap();
     let rain = &key["rain_events_h_from_start"][0];
     let rain_mid_h = (rain["start_h"].as_f64().unwrap() + rain["end_h"].as_f64().unwrap()) / 2.0;
     let rain_mid_ns = key["start_ns"].as_u64().unwrap() + (rain_mid_h * 3600e9) as u64;
-    let in_rain = gaps.iter().min_by_key(|g| g.0.abs_diff(rain_mid_ns)).unwrap().0;
+    let in_rain = gaps
+        .iter()
+        .min_by_key(|g| g.0.abs_diff(rain_mid_ns))
+        .unwrap()
+        .0;
     assert_ne!(longest, in_rain);
     for (k, cut) in [longest, in_rain].into_iter().enumerate() {
         let part1 = dir.path().join(format!("part1-{k}.mcap"));
@@ -171,8 +215,14 @@ fn split_and_compare(config: Option<&str>) {
         joined.trains.extend(second.trains);
         assert_eq!(joined.trains, whole.trains);
         assert_eq!(joined.measurements.len(), whole.measurements.len());
-        assert!(joined.measurements == whole.measurements, "cut {k}: measurement outputs differ");
-        assert!(joined.fields == whole.fields, "cut {k}: field outputs differ");
+        assert!(
+            joined.measurements == whole.measurements,
+            "cut {k}: measurement outputs differ"
+        );
+        assert!(
+            joined.fields == whole.fields,
+            "cut {k}: field outputs differ"
+        );
         // And the final states are the same document.
         let s_whole = std::fs::read_to_string(dir.path().join("whole.state.json")).unwrap();
         let s_parts = std::fs::read_to_string(dir.path().join("part2.state.json")).unwrap();
@@ -182,7 +232,10 @@ fn split_and_compare(config: Option<&str>) {
 
 fn replay_err(a: &ReplayArgs) -> String {
     let err = replay(a, &mut []).unwrap_err();
-    assert!(tortwin::error::is_input_error(&err), "not an input error: {err:#}");
+    assert!(
+        tortwin::error::is_input_error(&err),
+        "not an input error: {err:#}"
+    );
     format!("{err:#}")
 }
 
@@ -198,7 +251,10 @@ fn a_state_from_another_section_or_version_is_refused() {
     let mut b = args(&reference("curve_2day.mcap"));
     b.state_in = Some(state.clone());
     let msg = replay_err(&b);
-    assert!(msg.contains("another section") && msg.contains("tangent.state.json"), "{msg}");
+    assert!(
+        msg.contains("another section") && msg.contains("tangent.state.json"),
+        "{msg}"
+    );
 
     // Another format version.
     let text = std::fs::read_to_string(&state).unwrap();
@@ -214,7 +270,10 @@ fn a_state_from_another_section_or_version_is_refused() {
     std::fs::write(&junk, "{\"hello\": 1}").unwrap();
     c.state_in = Some(junk);
     let msg = replay_err(&c);
-    assert!(msg.contains("junk.json") && msg.contains("not a tortwin state"), "{msg}");
+    assert!(
+        msg.contains("junk.json") && msg.contains("not a tortwin state"),
+        "{msg}"
+    );
 
     // The same day again from its own end state: its trains would overlap
     // in time with the state's last train.

@@ -12,10 +12,15 @@ use anyhow::Result;
 use clap::{Parser, Subcommand};
 
 /// The recording the main job replays when none is given.
-pub const DEFAULT_RECORDING: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/recordings/curve_2day.mcap");
+pub const DEFAULT_RECORDING: &str =
+    concat!(env!("CARGO_MANIFEST_DIR"), "/recordings/curve_2day.mcap");
 
 #[derive(Debug, Parser)]
-#[command(name = "tortwin", version, about = "Digital twin of a track section for top-of-rail friction management")]
+#[command(
+    name = "tortwin",
+    version,
+    about = "Digital twin of a track section for top-of-rail friction management"
+)]
 pub struct Cli {
     #[command(subcommand)]
     pub command: Command,
@@ -40,9 +45,15 @@ pub fn run(cli: Cli) -> Result<()> {
 /// so that a failed run never leaves a file that looks complete.
 pub fn write_atomically(path: &std::path::Path, bytes: &[u8]) -> Result<()> {
     use anyhow::Context;
-    let dir = path.parent().filter(|p| !p.as_os_str().is_empty()).map_or_else(|| PathBuf::from("."), PathBuf::from);
-    let name = path.file_name().map_or_else(|| "out".into(), |n| n.to_string_lossy().into_owned());
+    let dir = path
+        .parent()
+        .filter(|p| !p.as_os_str().is_empty())
+        .map_or_else(|| PathBuf::from("."), PathBuf::from);
+    let name = path
+        .file_name()
+        .map_or_else(|| "out".into(), |n| n.to_string_lossy().into_owned());
     let tmp = dir.join(format!(".{name}.partial-{}", std::process::id()));
     std::fs::write(&tmp, bytes).with_context(|| format!("cannot write {}", tmp.display()))?;
-    std::fs::rename(&tmp, path).with_context(|| format!("cannot move {} to {}", tmp.display(), path.display()))
+    std::fs::rename(&tmp, path)
+        .with_context(|| format!("cannot move {} to {}", tmp.display(), path.display()))
 }

@@ -47,16 +47,25 @@ pub fn main(args: ReplayArgs) -> Result<()> {
     let summary = replay(&args, &mut [])?;
     if !args.quiet {
         print!("{}", super::summary::render(&args.recording, &summary));
-        for (what, path) in [("rerun recording", &args.out_rrd), ("MCAP output", &args.out_mcap)] {
+        for (what, path) in [
+            ("rerun recording", &args.out_rrd),
+            ("MCAP output", &args.out_mcap),
+        ] {
             if let Some(path) = path {
                 println!("{what}: {}", path.display());
             }
         }
         if let Some(path) = &args.out_rrd {
-            println!("open it with: pip install rerun-sdk==0.36.3 && rerun {}", path.display());
+            println!(
+                "open it with: pip install rerun-sdk==0.36.3 && rerun {}",
+                path.display()
+            );
         }
         if let Some(path) = &args.out_mcap {
-            println!("or open {} in Foxglove (https://app.foxglove.dev, Open local file)", path.display());
+            println!(
+                "or open {} in Foxglove (https://app.foxglove.dev, Open local file)",
+                path.display()
+            );
         }
     }
     Ok(())
@@ -83,10 +92,16 @@ pub fn read_state(path: &Path) -> Result<EngineState> {
 /// arguments ask for, plus `extra` sinks. Returns the run's summary.
 pub fn replay(args: &ReplayArgs, extra: &mut [&mut dyn Sink]) -> Result<RunSummary> {
     let cfg = load_config(args.config.as_deref())?;
-    for (a, b) in [(&args.out_mcap, &args.out_rrd), (&args.state_out, &args.out_mcap), (&args.state_out, &args.out_rrd)] {
+    for (a, b) in [
+        (&args.out_mcap, &args.out_rrd),
+        (&args.state_out, &args.out_mcap),
+        (&args.state_out, &args.out_rrd),
+    ] {
         if let (Some(a), Some(b)) = (a, b) {
             if a == b {
-                return Err(UsageError(format!("two outputs would be written to {}", a.display())).into());
+                return Err(
+                    UsageError(format!("two outputs would be written to {}", a.display())).into(),
+                );
             }
         }
     }
@@ -104,7 +119,8 @@ pub fn replay(args: &ReplayArgs, extra: &mut [&mut dyn Sink]) -> Result<RunSumma
     };
     let section = reader.section().clone();
     let mut engine = match (&saved, &args.state_in) {
-        (Some(s), Some(path)) => Engine::from_state(section, cfg, opts, s).map_err(|e| InputError::file(path, e.to_string()))?,
+        (Some(s), Some(path)) => Engine::from_state(section, cfg, opts, s)
+            .map_err(|e| InputError::file(path, e.to_string()))?,
         _ => Engine::new(section, cfg, opts, reader.origin_ns()),
     };
 
@@ -127,17 +143,23 @@ pub fn replay(args: &ReplayArgs, extra: &mut [&mut dyn Sink]) -> Result<RunSumma
 
     let progress = ProgressBar::new_spinner();
     progress.set_style(
-        ProgressStyle::with_template("{spinner} {elapsed} {msg}").unwrap_or_else(|_| ProgressStyle::default_spinner()),
+        ProgressStyle::with_template("{spinner} {elapsed} {msg}")
+            .unwrap_or_else(|_| ProgressStyle::default_spinner()),
     );
     let mut events = 0u64;
     for event in reader.by_ref() {
         let event = event?;
         events += 1;
         if events.is_multiple_of(4096) {
-            progress.set_message(format!("{events} events, {}", crate::app::summary::utc(event.log_time_ns)));
+            progress.set_message(format!(
+                "{events} events, {}",
+                crate::app::summary::utc(event.log_time_ns)
+            ));
             progress.tick();
         }
-        engine.push(event, &mut fanout).with_context(|| format!("replaying {}", args.recording.display()))?;
+        engine
+            .push(event, &mut fanout)
+            .with_context(|| format!("replaying {}", args.recording.display()))?;
     }
     let summary = engine.finish(&mut fanout, reader.unknown_topic_messages())?;
     progress.finish_and_clear();

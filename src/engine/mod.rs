@@ -30,8 +30,8 @@ use crate::recording::{
     BogiePosition, Creepage, Direction, Event, EventKind, Measurement, Passage, Quantity, Section,
 };
 use crate::sink::{
-    MassBalance, MeasurementOutput, PulseEvent, RunSummary, SectionInfo, Sink,
-    SnapshotKind, TrackInfo, TrainEvent,
+    MassBalance, MeasurementOutput, PulseEvent, RunSummary, SectionInfo, Sink, SnapshotKind,
+    TrackInfo, TrainEvent,
 };
 
 pub use state::EngineState;
@@ -247,8 +247,9 @@ pub struct Engine {
     observed: Vec<Vec<roll::Observed>>,
     /// Per track: the axle that rolled over it last in the current train.
     last_axle: Vec<usize>,
-    /// Per track, per point: a measurement site or an applicator is there.
-    special: Vec<Vec<bool>>,
+    /// Per track: the points where an applicator or a measurement site is,
+    /// ascending. Pulses land and readings are taken only there.
+    special_points: Vec<Vec<usize>>,
     snapshot: roll::SnapshotBuffers,
 }
 
@@ -339,10 +340,12 @@ impl Engine {
             pending_at: vec![vec![0; points]; n_tracks],
             observed: vec![vec![roll::Observed::default(); points]; n_tracks],
             last_axle: vec![usize::MAX; n_tracks],
-            special: (0..n_tracks)
+            special_points: (0..n_tracks)
                 .map(|t| {
                     (0..points)
-                        .map(|i| applicator_at[t][i] != NO_APPLICATOR || !sites_at[i].is_empty())
+                        .filter(|&i| {
+                            applicator_at[t][i] != NO_APPLICATOR || !sites_at[i].is_empty()
+                        })
                         .collect()
                 })
                 .collect(),

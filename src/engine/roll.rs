@@ -4,8 +4,11 @@
 
 use anyhow::Result;
 
-use super::{enters_at_zero, Engine, SnapshotKind, TrainRecord, NO_APPLICATOR};
-use crate::model::product::{self, ContactConditions};
+use super::weather::WeatherTimeline;
+use super::{
+    enters_at_zero, Engine, SnapshotKind, TimeEffects, TrackState, TrainRecord, NO_APPLICATOR,
+};
+use crate::model::product::{self, ContactConditions, ProductParams};
 use crate::sink::{FieldSnapshot, Sink};
 
 /// What a wheel saw at one point (kept for the last wheel of each track).
@@ -15,6 +18,114 @@ pub(crate) struct Observed {
     pub mass_kg: f64,
     /// The wheel's mass after the contact (after step 6).
     pub wheel_mass_kg: f64,
+}
+
+/// The rolling wheel's own state.
+struct WheelRoll {
+    wheel_kg: f64,
+    /// The wheel_edge_reservoir effect's m_e.
+    edge_kg: f64,
+    m0_kg: f64,
+    /// Grid point of the applicator passed last (N = 1 there).
+    applicator_point: Option<usize>,
+    consumed_kg: f64,
+    capped_kg: f64,
+    lost_kg: f64,
+}
+
+/// What a contact needs that depends only on the wheel: computed once.
+struct Roller {
+    params: ProductParams,
+    time_effects: TimeEffects,
+    t_passage_s: f64,
+    offset_m: f64,
+    speed_mps: f64,
+    d_entry_m: f64,
+    fp_fc: f64,
+    /// speed_transfer's factor (1 when off).
+    transfer_factor: f64,
+    temperature_beta: Option<f64>,
+    /// wheel_edge_reservoir's (alpha, r).
+    reservoir: Option<(f64, f64)>,
+    observe: bool,
+}
+
+impl Roller {
+    /// The wheel's time at point i: `t_passage + (|d_i - d_entry| + offset) / v`
+    /// (model.md, computed in that form).
+    #[inline(always)]
+    fn time_at(&self, d_m: &[f64], i: usize) -> f64 {
+        self.t_passage_s + ((d_m[i] - self.d_entry_m).abs() + self.offset_m) / self.speed_mps
+    }
+
+    /// One contact at point i, steps 1 to 6 of model.md. Returns the total
+    /// mass of step 2 (what a measurement of this contact sees).
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
+    fn contact(
+        &self,
+        st: &mut WheelRoll,
+        track: &mut TrackState,
+        observed: &mut [Observed],
+        d_m: &[f64],
+        revolution: &[f64],
+        timeline: &WeatherTimeline,
+        i: usize,
+    ) -> f64 {
+        let t = self.time_at(d_m, i);
+        // Step 1: time effects since the last touch; touch.
+        let weather = timeline.at(t);
+        let precip_mm = weather.precip_mm_at(t);
+        let mut rail_kg = track.rail_mass_kg[i];
+        let last = track.last_touch_s[i];
+        if self.time_effects.any() && !last.is_nan() {
+            let aged =
+                self.time_effects
+                    .apply(rail_kg, t - last, precip_mm - track.precip_at_touch_mm[i]);
+            st.lost_kg += rail_kg - aged;
+            rail_kg = aged;
+        }
+        track.last_touch_s[i] = t;
+        track.precip_at_touch_mm[i] = precip_mm;
+
+        // Step 2: what a measurement of this contact sees.
+        let m_kg = st.wheel_kg + rail_kg;
+
+        // Steps 3 to 5: transfer, consumption, cap.
+        let conditions = ContactConditions {
+            m0_kg: st.m0_kg,
+            fp_fc: self.fp_fc,
+            transfer_revolution: st
+                .applicator_point
+                .map(|ia| revolution[i.abs_diff(ia)] * self.transfer_factor),
+            consumption_factor: self.temperature_beta.map_or(1.0, |b| {
+                (b * (weather.current.air_temperature_c - 20.0)).exp()
+            }),
+        };
+        let losses = product::roll(&self.params, &mut st.wheel_kg, &mut rail_kg, &conditions);
+        st.consumed_kg += losses.consumed_kg;
+        st.capped_kg += losses.capped_kg;
+
+        // Step 6: wheel-side effects: park alpha m_w at the band's edge, then
+        // r m_e comes back.
+        if let Some((alpha, r)) = self.reservoir {
+            let parked = alpha * st.wheel_kg;
+            st.wheel_kg -= parked;
+            st.edge_kg += parked;
+            let back = r * st.edge_kg;
+            st.edge_kg -= back;
+            st.wheel_kg += back;
+        }
+
+        track.rail_mass_kg[i] = rail_kg;
+        if self.observe {
+            observed[i] = Observed {
+                mass_kg: m_kg,
+                wheel_mass_kg: st.wheel_kg,
+            };
+        }
+        m_kg
+    }
 }
 
 /// Reused buffers for the field snapshots.
@@ -63,52 +174,104 @@ impl Engine {
     }
 
     /// One wheel (axle `a` on rail `r`) over every grid point of its track.
+    ///
+    /// The path runs in tight segments between the track's special points
+    /// (applicators and measurement sites, the only places where a pulse
+    /// lands, a reading is taken or a contact is recorded); at a special
+    /// point the events that come before this wheel run first.
     fn roll_wheel(&mut self, record: &mut TrainRecord, a: usize, r: usize, observe: bool) {
         let rails = self.section.rails.len();
         let sites = self.section.sites.len();
         let wheel = record.wheels[a * rails + r];
         let track = wheel.track;
         let n_tracks = self.tracks.len();
-        let params = self.cfg.product;
-        let time_effects = self.time_effects;
         let speed_mps = record.passage.speed_mps;
-        let offset_m = record.passage.axles[a].offset_m;
-        let t_passage = self.time_s(record.log_time_ns);
         let up = enters_at_zero(record.passage.direction);
-        let d_entry = if up { 0.0 } else { self.section.length_m };
         let points = self.grid.d_m.len();
-
-        // Effects that depend only on the wheel.
-        let transfer_factor = self
-            .cfg
-            .effects
-            .speed_transfer
-            .map_or(1.0, |e| (speed_mps / 20.0).powf(-e.n));
-        let temperature_beta = self
-            .cfg
-            .effects
-            .temperature_consumption
-            .map(|e| e.beta_per_k);
-        let reservoir = self.cfg.effects.wheel_edge_reservoir;
+        let point_of = |step: usize| if up { step } else { points - 1 - step };
 
         // Every wheel enters clean; before it passes an applicator, m0 is the
         // first listed applicator's nominal pulse and there is no transfer.
-        let mut wheel_kg = 0.0;
-        let mut edge_kg = 0.0;
-        let mut m0_kg = self
-            .section
-            .applicators
-            .first()
-            .map_or(0.0, |x| x.nominal_pulse_kg);
-        let mut applicator_point: Option<usize> = None;
-        let mut consumed_kg = 0.0;
-        let mut capped_kg = 0.0;
-        let mut lost_kg = 0.0;
+        let mut st = WheelRoll {
+            wheel_kg: 0.0,
+            edge_kg: 0.0,
+            m0_kg: self
+                .section
+                .applicators
+                .first()
+                .map_or(0.0, |x| x.nominal_pulse_kg),
+            applicator_point: None,
+            consumed_kg: 0.0,
+            capped_kg: 0.0,
+            lost_kg: 0.0,
+        };
+        let roller = Roller {
+            params: self.cfg.product,
+            time_effects: self.time_effects,
+            t_passage_s: self.time_s(record.log_time_ns),
+            offset_m: record.passage.axles[a].offset_m,
+            speed_mps,
+            d_entry_m: if up { 0.0 } else { self.section.length_m },
+            fp_fc: wheel.fp_fc,
+            transfer_factor: self
+                .cfg
+                .effects
+                .speed_transfer
+                .map_or(1.0, |e| (speed_mps / 20.0).powf(-e.n)),
+            temperature_beta: self
+                .cfg
+                .effects
+                .temperature_consumption
+                .map(|e| e.beta_per_k),
+            reservoir: self
+                .cfg
+                .effects
+                .wheel_edge_reservoir
+                .map(|e| (e.alpha, e.r)),
+            observe,
+        };
 
-        for step in 0..points {
-            let i = if up { step } else { points - 1 - step };
-            let t = t_passage + ((self.grid.d_m[i] - d_entry).abs() + offset_m) / speed_mps;
-
+        let mut next_special = if up {
+            0
+        } else {
+            self.special_points[track].len()
+        };
+        let mut step = 0;
+        while step < points {
+            // The next special point on the path, as a step.
+            let specials = &self.special_points[track];
+            let special_step = if up {
+                specials.get(next_special).copied()
+            } else {
+                next_special
+                    .checked_sub(1)
+                    .and_then(|k| specials.get(k))
+                    .map(|&i| points - 1 - i)
+            }
+            .unwrap_or(points);
+            {
+                let d_m = &self.grid.d_m;
+                let revolution = &self.revolution;
+                let timeline = &self.timeline;
+                let state = &mut self.tracks[track];
+                let observed = &mut self.observed[track];
+                for s in step..special_step {
+                    roller.contact(
+                        &mut st,
+                        state,
+                        observed,
+                        d_m,
+                        revolution,
+                        timeline,
+                        point_of(s),
+                    );
+                }
+            }
+            if special_step == points {
+                break;
+            }
+            let i = point_of(special_step);
+            let t = roller.time_at(&self.grid.d_m, i);
             // Pulses and readings at this point that come before this wheel.
             if self.pending_at[track][i] > 0 {
                 for k in 0..self.point_events[track].len() {
@@ -119,82 +282,45 @@ impl Engine {
                     }
                 }
             }
-
-            // Step 1: time effects since the last touch; touch.
-            let weather = self.timeline.at(t);
-            let precip_mm = weather.precip_mm_at(t);
-            let temperature_c = weather.current.air_temperature_c;
-            let state = &mut self.tracks[track];
-            let mut rail_kg = state.rail_mass_kg[i];
-            let last = state.last_touch_s[i];
-            if time_effects.any() && !last.is_nan() {
-                let aged =
-                    time_effects.apply(rail_kg, t - last, precip_mm - state.precip_at_touch_mm[i]);
-                lost_kg += rail_kg - aged;
-                rail_kg = aged;
-            }
-            state.last_touch_s[i] = t;
-            state.precip_at_touch_mm[i] = precip_mm;
-
-            // Step 2: what a measurement of this contact sees.
-            let m_kg = wheel_kg + rail_kg;
-            if self.special[track][i] {
-                for &s in &self.sites_at[i] {
-                    record.site_mass_kg[(a * rails + r) * sites + s] = m_kg;
-                }
-                let app = self.applicator_at[track][i];
-                if app != NO_APPLICATOR {
-                    // The wheel passes this applicator: N counts from here and
-                    // m0 is its latest pulse (that landed before this wheel).
-                    applicator_point = Some(i);
-                    let latest = self.latest_pulse_kg[app as usize * n_tracks + track];
-                    m0_kg = if latest.is_nan() {
-                        self.section.applicators[app as usize].nominal_pulse_kg
-                    } else {
-                        latest
-                    };
-                }
-            }
-
-            // Steps 3 to 5: transfer, consumption, cap.
-            let conditions = ContactConditions {
-                m0_kg,
-                fp_fc: wheel.fp_fc,
-                transfer_revolution: applicator_point
-                    .map(|ia| self.revolution[i.abs_diff(ia)] * transfer_factor),
-                consumption_factor: temperature_beta
-                    .map_or(1.0, |b| (b * (temperature_c - 20.0)).exp()),
-            };
-            let losses = product::roll(&params, &mut wheel_kg, &mut rail_kg, &conditions);
-            consumed_kg += losses.consumed_kg;
-            capped_kg += losses.capped_kg;
-
-            // Step 6: wheel-side effects.
-            if let Some(e) = reservoir {
-                let parked = e.alpha * wheel_kg;
-                wheel_kg -= parked;
-                edge_kg += parked;
-                let back = e.r * edge_kg;
-                edge_kg -= back;
-                wheel_kg += back;
-            }
-
-            self.tracks[track].rail_mass_kg[i] = rail_kg;
-            if observe {
-                self.observed[track][i] = Observed {
-                    mass_kg: m_kg,
-                    wheel_mass_kg: wheel_kg,
+            let app = self.applicator_at[track][i];
+            if app != NO_APPLICATOR {
+                // The wheel passes this applicator: N counts from here and m0
+                // is its latest pulse that landed before this wheel.
+                st.applicator_point = Some(i);
+                let latest = self.latest_pulse_kg[app as usize * n_tracks + track];
+                st.m0_kg = if latest.is_nan() {
+                    self.section.applicators[app as usize].nominal_pulse_kg
+                } else {
+                    latest
                 };
+            }
+            let m_kg = roller.contact(
+                &mut st,
+                &mut self.tracks[track],
+                &mut self.observed[track],
+                &self.grid.d_m,
+                &self.revolution,
+                &self.timeline,
+                i,
+            );
+            for &s in &self.sites_at[i] {
+                record.site_mass_kg[(a * rails + r) * sites + s] = m_kg;
+            }
+            step = special_step + 1;
+            if up {
+                next_special += 1;
+            } else {
+                next_special -= 1;
             }
         }
 
         let t = &mut self.totals;
         t.wheels += 1;
         t.contacts += points as u64;
-        t.consumed_kg += consumed_kg;
-        t.capped_kg += capped_kg;
-        t.effects_lost_kg += lost_kg;
-        t.carried_out_kg += wheel_kg + edge_kg;
+        t.consumed_kg += st.consumed_kg;
+        t.capped_kg += st.capped_kg;
+        t.effects_lost_kg += st.lost_kg;
+        t.carried_out_kg += st.wheel_kg + st.edge_kg;
         self.tracks[track].wheel_pass += 1;
     }
 
