@@ -51,10 +51,21 @@ fn events(rails: usize) -> Vec<Event> {
         let axles = (0..AXLES)
             .map(|a| Axle {
                 offset_m: a as f64 * AXLE_SPACING_M,
-                bogie_position: if a % 2 == 0 { BogiePosition::Leading } else { BogiePosition::Trailing },
+                bogie_position: if a % 2 == 0 {
+                    BogiePosition::Leading
+                } else {
+                    BogiePosition::Trailing
+                },
                 wheel_diameter_m: 0.92,
                 wheel_load_n: vec![100e3; rails],
-                creepage: vec![Creepage { cx: 0.01, cy: 0.0, spin_per_m: 0.0 }; rails],
+                creepage: vec![
+                    Creepage {
+                        cx: 0.01,
+                        cy: 0.0,
+                        spin_per_m: 0.0
+                    };
+                    rails
+                ],
             })
             .collect();
         let passage = Event {
@@ -79,7 +90,11 @@ fn events(rails: usize) -> Vec<Event> {
                 events.push(Event {
                     log_time_ns,
                     index_in_file: 0,
-                    kind: EventKind::Pulse(Pulse { applicator: 0, rail, mass_kg: 1e-4 }),
+                    kind: EventKind::Pulse(Pulse {
+                        applicator: 0,
+                        rail,
+                        mass_kg: 1e-4,
+                    }),
                 });
             }
         }
@@ -91,7 +106,9 @@ fn run(section: &Section, cfg: &ModelConfig, events: &[Event]) -> u64 {
     let mut engine = Engine::new(section.clone(), *cfg, EngineOptions::default(), 0);
     let mut sink = Discard;
     for e in events {
-        engine.push(e.clone(), &mut sink).expect("valid synthetic events");
+        engine
+            .push(e.clone(), &mut sink)
+            .expect("valid synthetic events");
     }
     engine.finish(&mut sink, 0).expect("finishes").contacts
 }
