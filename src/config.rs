@@ -226,7 +226,7 @@ impl ModelConfig {
     pub fn overlay_str(&mut self, text: &str, source_name: &str) -> Result<(), ConfigError> {
         let overlay: Overlay = toml::from_str(text).map_err(|e| ConfigError {
             source_name: source_name.into(),
-            key: overlay_error_key(&e),
+            key: overlay_error_key(&e, text),
             message: e.message().to_string(),
         })?;
         overlay.product.merge_into(&mut self.product);
@@ -425,11 +425,35 @@ impl ModelConfig {
     }
 }
 
-/// The dotted key a TOML error points at, where the text shows it.
-fn overlay_error_key(e: &toml::de::Error) -> String {
-    // toml reports unknown fields as "unknown field `x`"; other errors carry
-    // a span into the text. The message itself always names the field or the
-    // line, so the key is best effort.
+/// The dotted key a TOML error points at (e.g. `product.cn`): the key on the
+/// line of the error's span, under the last table header before it; else the
+/// name a message like "unknown field `x`" quotes.
+fn overlay_error_key(e: &toml::de::Error, text: &str) -> String {
+    if let Some(span) = e.span() {
+        let start = span.start.min(text.len());
+        let line_start = text[..start].rfind('\n').map_or(0, |p| p + 1);
+        let line_end = text[start..].find('\n').map_or(text.len(), |p| start + p);
+        let line = text[line_start..line_end].trim();
+        let table = text[..line_start]
+            .lines()
+            .rev()
+            .map(str::trim)
+            .find(|l| l.starts_with('[') && l.ends_with(']'))
+            .map(|l| l.trim_matches(|c| c == '[' || c == ']').trim().to_string());
+        if let Some((key, _)) = line.split_once('=') {
+            let key = key.trim().trim_matches('"');
+            return match table {
+                Some(t) => format!("{t}.{key}"),
+                None => key.to_string(),
+            };
+        }
+        if line.starts_with('[') {
+            return line
+                .trim_matches(|c| c == '[' || c == ']')
+                .trim()
+                .to_string();
+        }
+    }
     let msg = e.message();
     if let Some(start) = msg.find('`') {
         if let Some(len) = msg[start + 1..].find('`') {
@@ -486,11 +510,11 @@ mod tests {
     #[test]
     fn bad_overlays_name_the_key() {
         let e = err("[product]\nkm3 = 1.0\n");
-        assert_eq!(e.key, "km3", "{e}");
+        assert_eq!(e.key, "product.km3", "{e}");
         let e = err("[product]\ncn = \"twelve\"\n");
-        assert!(e.to_string().contains("cn"), "{e}");
-        let e = err("[product]\ncn = true\n");
-        assert!(e.to_string().contains("cn"), "{e}");
+        assert_eq!(e.key, "product.cn", "{e}");
+        let e = err("[polach]\nk_a = 1\n[product]\nkt = 0.5\ncn = true\n");
+        assert_eq!(e.key, "product.cn", "{e}");
         let e = err("[product]\ncn = nan\n");
         assert_eq!(e.key, "product.cn", "{e}");
         let e = err("[product]\ncm_kg = -1.0\n");
@@ -500,11 +524,11 @@ mod tests {
         let e = err("[effects.rail_ageing]\n");
         assert!(e.to_string().contains("tau_s"), "{e}");
         let e = err("[effects.moon_phase]\nx = 1\n");
-        assert_eq!(e.key, "moon_phase", "{e}");
+        assert!(e.key.contains("moon_phase"), "{e}");
         let e = err("[effects.speed_transfer]\nn = 11\n");
         assert_eq!(e.key, "effects.speed_transfer.n", "{e}");
         let e = err("[nonsense]\n");
-        assert_eq!(e.key, "nonsense", "{e}");
+        assert!(e.key.contains("nonsense"), "{e}");
         let e = err("[product\n");
         assert!(e.to_string().contains("bad.toml"), "{e}");
     }
