@@ -72,8 +72,11 @@ pub fn creepage_factor(params: &ProductParams, cx: f64, cy: f64) -> f64 {
 /// - `factor`: an effect's multiplier of the whole `c` (1 without one),
 ///   applied before the limit `c <= m` (effects.md, temperature_consumption).
 pub fn consumption(params: &ProductParams, m_kg: f64, m0_kg: f64, fp_fc: f64, factor: f64) -> f64 {
+    // Multiplying by the reciprocal keeps the division off the wheel mass's
+    // dependency chain in the stepping loop (it depends only on m0); the
+    // result differs from the literal quotient by at most an ulp.
     let saturation = if m0_kg > 0.0 {
-        1.0 - (-m_kg / (m0_kg * params.km2)).exp()
+        1.0 - (-m_kg * (1.0 / (m0_kg * params.km2))).exp()
     } else {
         1.0
     };
@@ -98,7 +101,8 @@ pub fn revolution_factor(params: &ProductParams, n: u32) -> f64 {
 /// `factor` (1 without one), clamped to at most 0.5 (equal shares; model.md).
 /// `revolution` is [`revolution_factor`] for this N.
 pub fn transfer_fraction(params: &ProductParams, m1_kg: f64, revolution: f64, factor: f64) -> f64 {
-    let t = params.kt * (1.0 - (-m1_kg / params.cm_kg).exp()) * revolution;
+    // `1 / cm` is a constant the compiler hoists out of the stepping loop.
+    let t = params.kt * (1.0 - (-m1_kg * (1.0 / params.cm_kg)).exp()) * revolution;
     (t * factor).min(TRANSFER_FRACTION_MAX)
 }
 
@@ -154,6 +158,8 @@ pub fn roll(
     let m = *wheel_kg + *rail_kg;
     let mut losses = ContactLosses::default();
     if m > 0.0 {
+        // Computed while the exponentials run, instead of dividing at the end.
+        let per_m = 1.0 / m;
         if let Some(revolution) = conditions.transfer_revolution {
             (*wheel_kg, *rail_kg) = transfer(*wheel_kg, *rail_kg, |m1| {
                 transfer_fraction(params, m1, revolution, 1.0)
@@ -166,7 +172,7 @@ pub fn roll(
             conditions.fp_fc,
             conditions.consumption_factor,
         );
-        let f = (m - c) / m;
+        let f = (m - c) * per_m;
         let before = *wheel_kg + *rail_kg;
         *wheel_kg *= f;
         *rail_kg *= f;
