@@ -24,7 +24,9 @@ use std::collections::VecDeque;
 use anyhow::Result;
 
 use crate::config::ModelConfig;
-use crate::model::contact::{self, HertzContact, KalkerCoefficients, PolachInput, Steel};
+use crate::model::contact::{
+    self, HertzContact, HertzShape, KalkerCoefficients, PolachInput, Steel,
+};
 use crate::model::product;
 use crate::recording::{
     BogiePosition, Creepage, Direction, Event, EventKind, Measurement, Passage, Quantity, Section,
@@ -251,6 +253,8 @@ pub struct Engine {
     /// ascending. Pulses land and readings are taken only there.
     special_points: Vec<Vec<usize>>,
     snapshot: roll::SnapshotBuffers,
+    /// Hertz shapes by wheel diameter (bits).
+    hertz_shapes: Vec<(u64, HertzShape)>,
 }
 
 impl Engine {
@@ -350,6 +354,7 @@ impl Engine {
                 })
                 .collect(),
             snapshot: roll::SnapshotBuffers::default(),
+            hertz_shapes: Vec::new(),
             cfg,
             opts,
             grid,
@@ -590,13 +595,7 @@ impl Engine {
                     cy: 0.0,
                     spin_per_m: 0.0,
                 });
-                let hertz = contact::hertz(
-                    q_n,
-                    axle.wheel_diameter_m / 2.0,
-                    self.cfg.contact.wheel_profile_radius_m,
-                    self.section.rail_head_radius_m,
-                    &self.steel,
-                );
+                let hertz = self.hertz_shape(axle.wheel_diameter_m).contact(q_n);
                 let kalker = contact::kalker(self.cfg.contact.nu, hertz.a_m, hertz.b_m);
                 let fp_fc = product::pressure_factor(&self.cfg.product, hertz.pm_pa)
                     * product::creepage_factor(&self.cfg.product, creepage.cx, creepage.cy);
@@ -628,6 +627,28 @@ impl Engine {
         self.pending = Some(record);
         self.window.clear();
         Ok(())
+    }
+
+    /// The Hertz shape of a wheel of this diameter on this section's rails,
+    /// solved once per diameter (the load only scales it).
+    fn hertz_shape(&mut self, wheel_diameter_m: f64) -> HertzShape {
+        let key = wheel_diameter_m.to_bits();
+        if let Some((_, shape)) = self.hertz_shapes.iter().find(|(k, _)| *k == key) {
+            return *shape;
+        }
+        let shape = HertzShape::new(
+            wheel_diameter_m / 2.0,
+            self.cfg.contact.wheel_profile_radius_m,
+            self.section.rail_head_radius_m,
+            &self.steel,
+        );
+        // Recordings carry a handful of wheel diameters; a recording with
+        // every wheel different keeps the cache small all the same.
+        if self.hertz_shapes.len() >= 256 {
+            self.hertz_shapes.clear();
+        }
+        self.hertz_shapes.push((key, shape));
+        shape
     }
 
     /// Rolls the buffered train and publishes its window.

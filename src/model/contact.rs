@@ -177,60 +177,110 @@ impl EllipticIntegrals {
 /// except `r_wy_m`. Outside it the result is meaningless (NaN or infinite),
 /// but the function returns.
 pub fn hertz(q_n: f64, r_wx_m: f64, r_wy_m: f64, r_ry_m: f64, steel: &Steel) -> HertzContact {
-    let ax_per_m = 1.0 / (2.0 * r_wx_m);
-    let by_per_m = 0.5 * (1.0 / r_wy_m + 1.0 / r_ry_m);
-    let e_star_pa = steel.e_star_pa();
+    HertzShape::new(r_wx_m, r_wy_m, r_ry_m, steel).contact(q_n)
+}
 
-    let (a_m, b_m) = if ax_per_m == by_per_m {
-        let r = (3.0 * q_n / (4.0 * e_star_pa * (ax_per_m + by_per_m))).cbrt();
-        (r, r)
-    } else {
-        let (c_min, c_max) = if ax_per_m < by_per_m {
-            (ax_per_m, by_per_m)
-        } else {
-            (by_per_m, ax_per_m)
-        };
-        let ratio = c_max / c_min;
+/// The part of the Hertz solution that does not depend on the load: the
+/// semi-axis ratio `k` and the elliptic integrals. A wheel of one diameter on
+/// one rail has one shape whatever its load, so the engine solves the
+/// bisection once per diameter and scales it with `Q^(1/3)`
+/// ([`HertzShape::contact`]); [`hertz`] is exactly `new(..).contact(q)`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct HertzShape {
+    e_star_pa: f64,
+    ax_per_m: f64,
+    by_per_m: f64,
+    /// `None` for a circular contact (`Ax = By`).
+    ellipse: Option<Ellipse>,
+}
 
-        // Bisection: a midpoint whose left side exceeds the curvature ratio is
-        // too slender, so k lies above it. Terminates for any input (also NaN):
-        // the interval halves until it holds no double between its ends.
-        let (mut lo, mut hi) = (0.0_f64, 1.0_f64);
-        let k = loop {
-            let mid = 0.5 * (lo + hi);
-            if mid <= lo || mid >= hi {
-                break mid;
-            }
-            // ((1/k^2) E - K) / (K - E) with E = K (1 - S) is
-            // (e^2 - S) / (k^2 S): the same number, without the cancellation
-            // of E/k^2 - K that would cost ~8 digits of k near the circle.
-            let integrals = EllipticIntegrals::new(mid);
-            let lhs = (0.5 * integrals.e_sq - integrals.sum_rest) / (mid * mid * integrals.sum());
-            if lhs > ratio {
-                lo = mid;
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Ellipse {
+    c_min: f64,
+    k: f64,
+    k_minus_e: f64,
+    e_sq: f64,
+}
+
+impl HertzShape {
+    /// Solves the shape for the curvatures of a wheel of radius `r_wx_m` with
+    /// transverse profile radius `r_wy_m` on a rail head of radius `r_ry_m`.
+    pub fn new(r_wx_m: f64, r_wy_m: f64, r_ry_m: f64, steel: &Steel) -> Self {
+        let ax_per_m = 1.0 / (2.0 * r_wx_m);
+        let by_per_m = 0.5 * (1.0 / r_wy_m + 1.0 / r_ry_m);
+        let e_star_pa = steel.e_star_pa();
+        let ellipse = (ax_per_m != by_per_m).then(|| {
+            let (c_min, c_max) = if ax_per_m < by_per_m {
+                (ax_per_m, by_per_m)
             } else {
-                hi = mid;
+                (by_per_m, ax_per_m)
+            };
+            let ratio = c_max / c_min;
+
+            // Bisection: a midpoint whose left side exceeds the curvature ratio is
+            // too slender, so k lies above it. Terminates for any input (also NaN):
+            // the interval halves until it holds no double between its ends.
+            let (mut lo, mut hi) = (0.0_f64, 1.0_f64);
+            let k = loop {
+                let mid = 0.5 * (lo + hi);
+                if mid <= lo || mid >= hi {
+                    break mid;
+                }
+                // ((1/k^2) E - K) / (K - E) with E = K (1 - S) is
+                // (e^2 - S) / (k^2 S): the same number, without the cancellation
+                // of E/k^2 - K that would cost ~8 digits of k near the circle.
+                let integrals = EllipticIntegrals::new(mid);
+                let lhs =
+                    (0.5 * integrals.e_sq - integrals.sum_rest) / (mid * mid * integrals.sum());
+                if lhs > ratio {
+                    lo = mid;
+                } else {
+                    hi = mid;
+                }
+            };
+            let integrals = EllipticIntegrals::new(k);
+            Ellipse {
+                c_min,
+                k,
+                k_minus_e: integrals.k_minus_e(),
+                e_sq: integrals.e_sq,
+            }
+        });
+        Self {
+            e_star_pa,
+            ax_per_m,
+            by_per_m,
+            ellipse,
+        }
+    }
+
+    /// The contact under wheel load `q_n`.
+    pub fn contact(&self, q_n: f64) -> HertzContact {
+        let (a_m, b_m) = match &self.ellipse {
+            None => {
+                let r =
+                    (3.0 * q_n / (4.0 * self.e_star_pa * (self.ax_per_m + self.by_per_m))).cbrt();
+                (r, r)
+            }
+            Some(el) => {
+                let a_long = (3.0 * q_n * el.k_minus_e
+                    / (2.0 * PI * self.e_star_pa * el.c_min * el.e_sq))
+                    .cbrt();
+                let a_short = el.k * a_long;
+                // The long axis lies along the direction of smaller curvature.
+                if self.ax_per_m < self.by_per_m {
+                    (a_long, a_short)
+                } else {
+                    (a_short, a_long)
+                }
             }
         };
-
-        let integrals = EllipticIntegrals::new(k);
-        let a_long = (3.0 * q_n * integrals.k_minus_e()
-            / (2.0 * PI * e_star_pa * c_min * integrals.e_sq))
-            .cbrt();
-        let a_short = k * a_long;
-        // The long axis lies along the direction of smaller curvature.
-        if ax_per_m < by_per_m {
-            (a_long, a_short)
-        } else {
-            (a_short, a_long)
+        HertzContact {
+            a_m,
+            b_m,
+            p0_pa: 3.0 * q_n / (2.0 * PI * a_m * b_m),
+            pm_pa: q_n / (PI * a_m * b_m),
         }
-    };
-
-    HertzContact {
-        a_m,
-        b_m,
-        p0_pa: 3.0 * q_n / (2.0 * PI * a_m * b_m),
-        pm_pa: q_n / (PI * a_m * b_m),
     }
 }
 

@@ -1,0 +1,48 @@
+//! End-to-end replay throughput with the outputs on: the reference
+//! recordings of ../shared/reference/recordings read from MCAP, stepped,
+//! and written to MCAP and rerun files. Reported as contacts per second.
+//! Peak memory is measured by scripts/bench-memory.sh (criterion cannot).
+//!
+//! `cargo bench --bench replay`
+
+use std::path::PathBuf;
+
+use criterion::{criterion_group, criterion_main, Criterion, Throughput};
+
+use tortwin::app::replay::{replay, ReplayArgs};
+
+fn args(recording: PathBuf, out: &std::path::Path) -> ReplayArgs {
+    ReplayArgs {
+        recording,
+        config: None,
+        out_mcap: Some(out.join("bench.mcap")),
+        out_rrd: Some(out.join("bench.rrd")),
+        state_in: None,
+        state_out: None,
+        every_wheel: false,
+        quiet: true,
+    }
+}
+
+fn replay_with_outputs(c: &mut Criterion) {
+    let mut group = c.benchmark_group("replay");
+    group.sample_size(10);
+    let out = tempfile::tempdir().expect("a temporary directory");
+    for name in ["tangent_day", "curve_2day"] {
+        let recording = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+            .join("../shared/reference/recordings")
+            .join(format!("{name}.mcap"));
+        let a = args(recording, out.path());
+        let contacts = replay(&a, &mut [])
+            .expect("the reference recording replays")
+            .contacts;
+        group.throughput(Throughput::Elements(contacts));
+        group.bench_function(format!("{name}_mcap_and_rrd_out"), |b| {
+            b.iter(|| replay(&a, &mut []).expect("replays"))
+        });
+    }
+    group.finish();
+}
+
+criterion_group!(benches, replay_with_outputs);
+criterion_main!(benches);
