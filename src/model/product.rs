@@ -80,7 +80,9 @@ pub fn consumption(params: &ProductParams, m_kg: f64, m0_kg: f64, fp_fc: f64, fa
     } else {
         1.0
     };
-    ((params.k0_kg + params.km1_kg * saturation * fp_fc) * factor).min(m_kg)
+    // Grouped so that only one multiply and one add wait for the mass:
+    // `(k0 + km1 s fp fc) factor = k0 factor + (km1 fp fc factor) s`.
+    (params.k0_kg * factor + (params.km1_kg * fp_fc * factor) * saturation).min(m_kg)
 }
 
 /// Eq. (4): the friction coefficient of a contact holding `m_kg` of product,
