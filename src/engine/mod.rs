@@ -27,6 +27,7 @@ use crate::config::ModelConfig;
 use crate::model::contact::{
     self, HertzContact, HertzShape, KalkerCoefficients, PolachInput, Steel,
 };
+use crate::model::effects::TimeEffects;
 use crate::model::product;
 use crate::recording::{
     BogiePosition, Creepage, Direction, Event, EventKind, Measurement, Passage, Quantity, Section,
@@ -99,33 +100,6 @@ impl TrackState {
             precip_at_touch_mm: vec![0.0; points],
             wheel_pass: 0,
         }
-    }
-}
-
-/// The time effects of effects.md that are switched on (step 1 and pulses).
-#[derive(Debug, Clone, Copy, Default)]
-pub(crate) struct TimeEffects {
-    pub ageing_tau_s: Option<f64>,
-    pub rain_k_per_mm: Option<f64>,
-}
-
-impl TimeEffects {
-    pub fn any(&self) -> bool {
-        self.ageing_tau_s.is_some() || self.rain_k_per_mm.is_some()
-    }
-
-    /// The rail mass after the time effects from the last touch to now:
-    /// ageing first, then rain, as two multiplications (effects.md).
-    #[inline]
-    pub fn apply(&self, mass_kg: f64, dt_s: f64, rain_mm: f64) -> f64 {
-        let mut m = mass_kg;
-        if let Some(tau) = self.ageing_tau_s {
-            m *= (-dt_s / tau).exp();
-        }
-        if let Some(k) = self.rain_k_per_mm {
-            m *= (-k * rain_mm).exp();
-        }
-        m
     }
 }
 

@@ -5,9 +5,8 @@
 use anyhow::Result;
 
 use super::weather::WeatherTimeline;
-use super::{
-    enters_at_zero, Engine, SnapshotKind, TimeEffects, TrackState, TrainRecord, NO_APPLICATOR,
-};
+use super::{enters_at_zero, Engine, SnapshotKind, TrackState, TrainRecord, NO_APPLICATOR};
+use crate::model::effects::{self, TimeEffects};
 use crate::model::product::{self, ContactConditions, ProductParams};
 use crate::sink::{FieldSnapshot, Sink};
 
@@ -98,23 +97,18 @@ impl Roller {
             transfer_revolution: st
                 .applicator_point
                 .map(|ia| revolution[i.abs_diff(ia)] * self.transfer_factor),
-            consumption_factor: self.temperature_beta.map_or(1.0, |b| {
-                (b * (weather.current.air_temperature_c - 20.0)).exp()
+            consumption_factor: self.temperature_beta.map_or(1.0, |beta| {
+                effects::temperature_factor(weather.current.air_temperature_c, beta)
             }),
         };
         let losses = product::roll(&self.params, &mut st.wheel_kg, &mut rail_kg, &conditions);
         st.consumed_kg += losses.consumed_kg;
         st.capped_kg += losses.capped_kg;
 
-        // Step 6: wheel-side effects: park alpha m_w at the band's edge, then
-        // r m_e comes back.
+        // Step 6: wheel-side effects.
         if let Some((alpha, r)) = self.reservoir {
-            let parked = alpha * st.wheel_kg;
-            st.wheel_kg -= parked;
-            st.edge_kg += parked;
-            let back = r * st.edge_kg;
-            st.edge_kg -= back;
-            st.wheel_kg += back;
+            (st.wheel_kg, st.edge_kg) =
+                effects::wheel_edge_reservoir(st.wheel_kg, st.edge_kg, alpha, r);
         }
 
         track.rail_mass_kg[i] = rail_kg;
@@ -217,7 +211,7 @@ impl Engine {
                 .cfg
                 .effects
                 .speed_transfer
-                .map_or(1.0, |e| (speed_mps / 20.0).powf(-e.n)),
+                .map_or(1.0, |e| effects::speed_transfer_factor(speed_mps, e.n)),
             temperature_beta: self
                 .cfg
                 .effects

@@ -1,0 +1,568 @@
+//! The candidate effects of ../shared/spec/effects.md inside the engine.
+//!
+//! 1. Wiring: on a section of two grid points each effect acts at its step
+//!    of "one contact" (or of a pulse, or of a reading), checked against a
+//!    hand calculation.
+//! 2. Direction: replaying a reference recording with the effect on moves the
+//!    simulated values the way effects.md says the effect shows in residuals.
+
+use std::collections::HashMap;
+use std::path::PathBuf;
+
+use tortwin::app::replay::{replay, ReplayArgs};
+use tortwin::config::ModelConfig;
+use tortwin::engine::{Engine, EngineOptions};
+use tortwin::model::{contact, product};
+use tortwin::recording::{
+    Applicator, Axle, AxleRef, BogiePosition, Creepage, Direction, Event, EventKind, Measurement,
+    Passage, Pulse, Quantity, RecordingReader, Section, Site, Weather,
+};
+use tortwin::sink::{MeasurementOutput, Sink, TrainEvent};
+
+// ---------------------------------------------------------------- wiring
+
+const S: u64 = 1_000_000_000;
+
+/// Two grid points (d = 0 and 2.89 m); the applicator at 0 on every rail;
+/// site M0 at point 0 and M1 at point 1.
+fn tiny_section(rails: &[&str]) -> Section {
+    Section {
+        section_id: "tiny".into(),
+        length_m: 5.0,
+        rails: rails.iter().map(|r| r.to_string()).collect(),
+        curve_radius_m: None,
+        rail_head_radius_m: 0.3,
+        nominal_wheel_diameter_m: 0.92,
+        applicators: vec![Applicator {
+            id: "A".into(),
+            position_m: 0.0,
+            rails: (0..rails.len()).collect(),
+            nominal_pulse_kg: 1e-4,
+        }],
+        sites: vec![
+            Site {
+                id: "M0".into(),
+                position_m: 0.0,
+            },
+            Site {
+                id: "M1".into(),
+                position_m: 2.9,
+            },
+        ],
+    }
+}
+
+fn ev(t_s: u64, kind: EventKind) -> Event {
+    Event {
+        log_time_ns: t_s * S,
+        index_in_file: t_s,
+        kind,
+    }
+}
+
+fn pulse(t_s: u64, rail: usize, mass_kg: f64) -> Event {
+    ev(
+        t_s,
+        EventKind::Pulse(Pulse {
+            applicator: 0,
+            rail,
+            mass_kg,
+        }),
+    )
+}
+
+fn reading(t_s: u64, site: usize, rail: usize) -> Event {
+    ev(
+        t_s,
+        EventKind::Measurement(Measurement {
+            site,
+            rail,
+            quantity: Quantity::RailMu,
+            axle: None,
+            value: 0.0,
+        }),
+    )
+}
+
+fn weather(t_s: u64, air_temperature_c: f64, precipitation_mm_h: f64) -> Event {
+    ev(
+        t_s,
+        EventKind::Weather(Weather {
+            air_temperature_c,
+            relative_humidity: 0.5,
+            precipitation_mm_h,
+        }),
+    )
+}
+
+/// One train of `bogies.len()` axles (2 m apart) on every rail: 100 kN, cx = 1 %.
+fn train(t_s: u64, rails: usize, speed_mps: f64, bogies: &[BogiePosition]) -> Event {
+    ev(
+        t_s,
+        EventKind::Passage(Passage {
+            train_id: format!("T{t_s}"),
+            train_seq: 0,
+            direction: Direction::Up,
+            speed_mps,
+            axles: bogies
+                .iter()
+                .enumerate()
+                .map(|(k, &bogie_position)| Axle {
+                    offset_m: 2.0 * k as f64,
+                    bogie_position,
+                    wheel_diameter_m: 0.92,
+                    wheel_load_n: vec![100e3; rails],
+                    creepage: vec![
+                        Creepage {
+                            cx: 0.01,
+                            cy: 0.0,
+                            spin_per_m: 0.0
+                        };
+                        rails
+                    ],
+                })
+                .collect(),
+        }),
+    )
+}
+
+fn mu_of(t_s: u64, train_at_s: u64, site: usize, rail: usize, axle_index: usize) -> Event {
+    ev(
+        t_s,
+        EventKind::Measurement(Measurement {
+            site,
+            rail,
+            quantity: Quantity::Mu,
+            axle: Some(AxleRef {
+                train_id: format!("T{train_at_s}"),
+                train_seq: 0,
+                axle_index,
+            }),
+            value: 0.0,
+        }),
+    )
+}
+
+#[derive(Default)]
+struct Simulated(Vec<f64>);
+impl Sink for Simulated {
+    fn measurement(&mut self, m: &MeasurementOutput<'_>) -> anyhow::Result<()> {
+        self.0.push(m.simulated);
+        Ok(())
+    }
+}
+
+fn run(section: Section, config: &str, events: Vec<Event>) -> Vec<f64> {
+    let cfg = ModelConfig::from_overlay_str(config, "test").unwrap();
+    let mut engine = Engine::new(section, cfg, EngineOptions::default(), 0);
+    let mut sink = Simulated::default();
+    for e in events {
+        engine.push(e, &mut sink).unwrap();
+    }
+    engine.finish(&mut sink, 0).unwrap();
+    sink.0
+}
+
+fn table2() -> product::ProductParams {
+    ModelConfig::default().product
+}
+
+fn mu(m_kg: f64) -> f64 {
+    let p = table2();
+    p.mu_c + (p.mu_d - p.mu_c) * (-m_kg / p.km_kg).exp()
+}
+
+fn close(got: f64, want: f64) {
+    assert!(
+        (got - want).abs() <= 1e-12 * want.abs(),
+        "got {got}, hand calculation {want}"
+    );
+}
+
+#[test]
+fn rail_ageing_acts_on_pulses_and_readings() {
+    // Pulse 0.1 g at 10 s; another at 3610 s (one tau later); read at 7210 s.
+    let events = vec![
+        pulse(10, 0, 1e-4),
+        pulse(3610, 0, 1e-4),
+        reading(7210, 0, 0),
+    ];
+    let got = run(
+        tiny_section(&["r"]),
+        "[effects.rail_ageing]\ntau_s = 3600\n",
+        events.clone(),
+    );
+    let e1 = (-1.0f64).exp();
+    close(got[0], mu((1e-4 * e1 + 1e-4) * e1));
+    // Off: no loss.
+    close(run(tiny_section(&["r"]), "", events)[0], mu(2e-4));
+}
+
+#[test]
+fn rain_washoff_follows_accumulated_precipitation() {
+    // 3.6 mm/h from 0 s, dry from 600 s: a pulse at 100 s sees 0.5 mm by 1100 s.
+    let events = vec![
+        weather(0, 15.0, 3.6),
+        pulse(100, 0, 1e-4),
+        weather(600, 15.0, 0.0),
+        reading(1100, 0, 0),
+    ];
+    let got = run(
+        tiny_section(&["r"]),
+        "[effects.rain_washoff]\nk_per_mm = 2.0\n",
+        events,
+    );
+    close(got[0], mu(1e-4 * (-2.0f64 * 3.6 * 500.0 / 3600.0).exp()));
+}
+
+/// The wheel after its first contact at point 0 (where it passes the
+/// applicator, N = 1) with 0.1 g on the rail, by hand from eq. (1)–(6);
+/// `transfer_factor` and `consumption_factor` are the effects' factors.
+fn wheel_after_first_contact(transfer_factor: f64, consumption_factor: f64) -> f64 {
+    let p = table2();
+    let steel = contact::Steel {
+        e_pa: 210e9,
+        nu: 0.3,
+    };
+    let pm = contact::hertz(100e3, 0.46, f64::INFINITY, 0.3, &steel).pm_pa;
+    let fp_fc = (1.0 + p.kp * (pm / 1178e6 - 1.0)) * (1.0 + p.kc * (0.01 / 0.01 - 1.0));
+    let m = 1e-4;
+    let t = (p.kt * (1.0 - (-m / p.cm_kg).exp()) * transfer_factor).min(0.5);
+    let wheel = t * m;
+    let c = ((p.k0_kg + p.km1_kg * (1.0 - (-m / (1e-4 * p.km2)).exp()) * fp_fc)
+        * consumption_factor)
+        .min(m);
+    wheel * (m - c) / m
+}
+
+#[test]
+fn temperature_consumption_scales_the_whole_consumption() {
+    // 30 °C, beta 0.05: c times e^0.5. M1 (point 1, clean rail) sees the wheel alone.
+    let events = |cfg: &str| {
+        let e = vec![
+            weather(0, 30.0, 0.0),
+            pulse(10, 0, 1e-4),
+            train(100, 1, 20.0, &[BogiePosition::Leading]),
+        ];
+        let mut e = e;
+        e.push(mu_of(101, 100, 1, 0, 0));
+        run(tiny_section(&["r"]), cfg, e)[0]
+    };
+    let on = events("[effects.temperature_consumption]\nbeta_per_k = 0.05\n");
+    assert!((on - mu(wheel_after_first_contact(1.0, 0.5f64.exp()))).abs() < 1e-12);
+    let off = events("");
+    assert!((off - mu(wheel_after_first_contact(1.0, 1.0))).abs() < 1e-12);
+    // More consumption when warm: less product, higher mu.
+    assert!(on > off);
+}
+
+#[test]
+fn speed_transfer_scales_the_transfer_before_its_clamp() {
+    let at = |speed: f64, cfg: &str| {
+        let e = vec![
+            pulse(10, 0, 1e-4),
+            train(100, 1, speed, &[BogiePosition::Leading]),
+            mu_of(101, 100, 1, 0, 0),
+        ];
+        run(tiny_section(&["r"]), cfg, e)[0]
+    };
+    let cfg = "[effects.speed_transfer]\nn = 1.0\n";
+    // 40 m/s: t halves; 5 m/s: t x 4, clamped at 0.5.
+    assert!((at(40.0, cfg) - mu(wheel_after_first_contact(0.5, 1.0))).abs() < 1e-12);
+    assert!((at(5.0, cfg) - mu(wheel_after_first_contact(4.0, 1.0))).abs() < 1e-12);
+    assert!((at(20.0, cfg) - at(20.0, "")).abs() < 1e-15);
+}
+
+#[test]
+fn wheel_edge_reservoir_parks_product_after_the_contact() {
+    let (alpha, r) = (0.3, 0.1);
+    let cfg = format!("[effects.wheel_edge_reservoir]\nalpha = {alpha}\nr = {r}\n");
+    let e = vec![
+        pulse(10, 0, 1e-4),
+        train(100, 1, 20.0, &[BogiePosition::Leading]),
+        mu_of(101, 100, 1, 0, 0),
+    ];
+    let got = run(tiny_section(&["r"]), &cfg, e)[0];
+    // Step 6 at point 0: alpha m_w to the edge, then r of it back.
+    let w = wheel_after_first_contact(1.0, 1.0);
+    let parked = alpha * w;
+    let back = r * parked;
+    assert!((got - mu(w - parked + back)).abs() < 1e-12);
+}
+
+#[test]
+fn bogie_bands_split_the_high_rail() {
+    let cfg = "[effects.bogie_bands]\n";
+    let e = vec![
+        pulse(10, 0, 1e-4),
+        pulse(10, 1, 1e-4),
+        reading(20, 0, 0),
+        reading(20, 0, 1),
+        train(
+            100,
+            2,
+            20.0,
+            &[BogiePosition::Leading, BogiePosition::Trailing],
+        ),
+        // Axle 0 (leading) at M0 on high: the gauge-corner band's half pulse.
+        mu_of(101, 100, 0, 0, 0),
+        // Axle 1 (trailing) at M0 on high: the top band, untouched by axle 0.
+        mu_of(101, 100, 0, 0, 1),
+        // Axle 1 at M0 on low: behind axle 0 on the same single band.
+        mu_of(101, 100, 0, 1, 1),
+    ];
+    let got = run(tiny_section(&["high", "low"]), cfg, e.clone());
+    close(got[0], mu(0.5e-4)); // tribometer on high reads the top band
+    close(got[1], mu(1e-4)); // low has one band
+    close(got[2], mu(0.5e-4));
+    close(got[3], mu(0.5e-4));
+    let plain = run(tiny_section(&["high", "low"]), "", e);
+    // Without bands the trailing axle on high sees what the leading one left,
+    // exactly like low; with bands it sees a fresh band.
+    close(plain[3], plain[4]);
+    assert_eq!(got[4], plain[4], "the low rail does not change");
+    assert!(got[3] != plain[3]);
+    // Without a rail named high the effect does nothing.
+    let tangent = vec![pulse(10, 0, 1e-4), reading(20, 0, 0)];
+    assert_eq!(
+        run(tiny_section(&["left", "right"]), cfg, tangent.clone()),
+        run(tiny_section(&["left", "right"]), "", tangent)
+    );
+}
+
+// ---------------------------------------------------------------- direction
+
+/// A measurement's simulated value with what it needs for the diagnosis.
+#[derive(Clone, Debug)]
+struct Row {
+    log_time_ns: u64,
+    quantity: Quantity,
+    rail: String,
+    site: String,
+    train: Option<(String, usize)>,
+    simulated: f64,
+}
+
+#[derive(Default)]
+struct Collect {
+    rows: Vec<Row>,
+    speed: HashMap<String, f64>,
+}
+
+impl Sink for Collect {
+    fn train(&mut self, t: &TrainEvent<'_>) -> anyhow::Result<()> {
+        self.speed.insert(t.train_id.to_string(), t.speed_mps);
+        Ok(())
+    }
+    fn measurement(&mut self, m: &MeasurementOutput<'_>) -> anyhow::Result<()> {
+        self.rows.push(Row {
+            log_time_ns: m.log_time_ns,
+            quantity: m.quantity,
+            rail: m.rail_name.to_string(),
+            site: m.site_id.to_string(),
+            train: m
+                .train_id
+                .map(|t| (t.to_string(), m.axle_index.unwrap_or(0))),
+            simulated: m.simulated,
+        });
+        Ok(())
+    }
+}
+
+fn curve_2day() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/reference/recordings/curve_2day.mcap")
+}
+
+fn replay_with(config: &str) -> Collect {
+    let dir = tempfile::tempdir().unwrap();
+    let cfg = dir.path().join("c.toml");
+    std::fs::write(&cfg, config).unwrap();
+    let args = ReplayArgs {
+        recording: curve_2day(),
+        config: Some(cfg),
+        out_mcap: None,
+        out_rrd: None,
+        state_in: None,
+        state_out: None,
+        every_wheel: false,
+        quiet: true,
+    };
+    let mut c = Collect::default();
+    replay(&args, &mut [&mut c]).unwrap();
+    c
+}
+
+/// Per mu measurement: (row, simulated with the effect minus without).
+fn deltas(config: &str) -> (Collect, Vec<(Row, f64)>) {
+    let off = replay_with("");
+    let on = replay_with(config);
+    let d = on
+        .rows
+        .iter()
+        .zip(&off.rows)
+        .filter(|(a, _)| a.quantity == Quantity::Mu)
+        .map(|(a, b)| (a.clone(), a.simulated - b.simulated))
+        .collect();
+    (on, d)
+}
+
+fn mean(v: impl Iterator<Item = f64>) -> f64 {
+    let (s, n) = v.fold((0.0, 0usize), |(s, n), x| (s + x, n + 1));
+    s / n.max(1) as f64
+}
+
+/// Bogie positions and the weather of the recording, from the reader.
+fn recording_facts() -> (HashMap<(String, usize), BogiePosition>, Vec<(u64, Weather)>) {
+    let reader = RecordingReader::open(&curve_2day(), Default::default()).unwrap();
+    let mut bogies = HashMap::new();
+    let mut weather = Vec::new();
+    for e in reader {
+        let e = e.unwrap();
+        match e.kind {
+            EventKind::Passage(p) => {
+                for (k, a) in p.axles.iter().enumerate() {
+                    bogies.insert((p.train_id.clone(), k), a.bogie_position);
+                }
+            }
+            EventKind::Weather(w) => weather.push((e.log_time_ns, w)),
+            _ => {}
+        }
+    }
+    (bogies, weather)
+}
+
+#[test]
+fn rail_ageing_raises_mu_most_after_long_gaps() {
+    let (on, d) = deltas("[effects.rail_ageing]\ntau_s = 7200\n");
+    assert!(
+        d.iter().all(|(_, x)| *x >= -1e-12),
+        "ageing only removes product"
+    );
+    // First measured train after a gap of more than 3 hours against the rest.
+    let mut starts: Vec<(u64, String)> = Vec::new();
+    for r in &on.rows {
+        if let Some((t, _)) = &r.train {
+            if starts.last().map(|s| &s.1) != Some(t) {
+                starts.push((r.log_time_ns, t.clone()));
+            }
+        }
+    }
+    let after_gap: Vec<&String> = starts
+        .windows(2)
+        .filter(|w| w[1].0 - w[0].0 > 3 * 3600 * S)
+        .map(|w| &w[1].1)
+        .collect();
+    let (long, short): (Vec<_>, Vec<_>) = d
+        .iter()
+        .partition(|(r, _)| after_gap.contains(&&r.train.as_ref().unwrap().0));
+    let (m_long, m_short) = (
+        mean(long.iter().map(|x| x.1)),
+        mean(short.iter().map(|x| x.1)),
+    );
+    eprintln!("rail_ageing: mean delta after long gaps {m_long:.4}, otherwise {m_short:.4}");
+    assert!(!long.is_empty() && m_long > m_short && m_long > 0.01);
+}
+
+#[test]
+fn rain_washoff_raises_mu_only_once_it_has_rained() {
+    let (_, d) = deltas("[effects.rain_washoff]\nk_per_mm = 1.0\n");
+    let (_, weather) = recording_facts();
+    let first_rain = weather
+        .iter()
+        .find(|(_, w)| w.precipitation_mm_h > 0.0)
+        .unwrap()
+        .0;
+    let before: Vec<f64> = d
+        .iter()
+        .filter(|(r, _)| r.log_time_ns <= first_rain)
+        .map(|x| x.1)
+        .collect();
+    let after: Vec<f64> = d
+        .iter()
+        .filter(|(r, _)| r.log_time_ns > first_rain)
+        .map(|x| x.1)
+        .collect();
+    assert!(
+        !before.is_empty() && before.iter().all(|x| *x == 0.0),
+        "no rain, no change"
+    );
+    let m_after = mean(after.iter().copied());
+    eprintln!("rain_washoff: mean delta after the first rain {m_after:.4}");
+    assert!(after.iter().all(|x| *x >= -1e-12) && m_after > 0.005);
+}
+
+#[test]
+fn temperature_consumption_follows_air_temperature() {
+    let (_, d) = deltas("[effects.temperature_consumption]\nbeta_per_k = 0.05\n");
+    let (_, weather) = recording_facts();
+    let temp_at = |t: u64| {
+        weather
+            .iter()
+            .rev()
+            .find(|(w, _)| *w <= t)
+            .map_or(20.0, |(_, w)| w.air_temperature_c)
+    };
+    let (warm, cold): (Vec<_>, Vec<_>) = d.iter().partition(|(r, _)| temp_at(r.log_time_ns) > 20.0);
+    let (m_warm, m_cold) = (
+        mean(warm.iter().map(|x| x.1)),
+        mean(cold.iter().map(|x| x.1)),
+    );
+    eprintln!("temperature_consumption: mean delta above 20 C {m_warm:.4} (n = {}), below {m_cold:.4} (n = {})", warm.len(), cold.len());
+    assert!(
+        m_cold < -0.002,
+        "colder than 20 C: less consumption, more product, lower mu"
+    );
+    assert!(warm.is_empty() || m_warm > m_cold);
+}
+
+#[test]
+fn speed_transfer_separates_fast_and_slow_trains() {
+    let (on, d) = deltas("[effects.speed_transfer]\nn = 2.0\n");
+    let (fast, slow): (Vec<_>, Vec<_>) = d
+        .iter()
+        .partition(|(r, _)| on.speed[&r.train.as_ref().unwrap().0] > 20.0);
+    let (m_fast, m_slow) = (
+        mean(fast.iter().map(|x| x.1)),
+        mean(slow.iter().map(|x| x.1)),
+    );
+    eprintln!("speed_transfer: mean delta fast trains {m_fast:.4}, slow trains {m_slow:.4}");
+    assert!(!fast.is_empty() && !slow.is_empty());
+    assert!((m_fast - m_slow).abs() > 0.01);
+}
+
+#[test]
+fn wheel_edge_reservoir_changes_with_distance() {
+    let (_, d) = deltas("[effects.wheel_edge_reservoir]\nalpha = 0.2\nr = 0.05\n");
+    let by_site: Vec<f64> = ["M1", "M2", "M3"]
+        .iter()
+        .map(|s| mean(d.iter().filter(|(r, _)| r.site == *s).map(|x| x.1)))
+        .collect();
+    eprintln!("wheel_edge_reservoir: mean delta at M1, M2, M3 {by_site:?}");
+    let spread = by_site.iter().cloned().fold(f64::MIN, f64::max)
+        - by_site.iter().cloned().fold(f64::MAX, f64::min);
+    assert!(spread > 0.01, "{by_site:?}");
+}
+
+#[test]
+fn bogie_bands_change_the_high_rail_only_and_split_leading_from_trailing() {
+    let (_, d) = deltas("[effects.bogie_bands]\n");
+    let (bogies, _) = recording_facts();
+    assert!(d
+        .iter()
+        .filter(|(r, _)| r.rail == "low")
+        .all(|(_, x)| *x == 0.0));
+    let high: Vec<&(Row, f64)> = d.iter().filter(|(r, _)| r.rail == "high").collect();
+    let lead = mean(
+        high.iter()
+            .filter(|(r, _)| bogies[r.train.as_ref().unwrap()] == BogiePosition::Leading)
+            .map(|x| x.1),
+    );
+    let trail = mean(
+        high.iter()
+            .filter(|(r, _)| bogies[r.train.as_ref().unwrap()] == BogiePosition::Trailing)
+            .map(|x| x.1),
+    );
+    eprintln!("bogie_bands: mean delta on high, leading {lead:.4}, trailing {trail:.4}");
+    assert!(high.iter().any(|(_, x)| x.abs() > 0.01));
+    assert!((lead - trail).abs() > 0.005);
+}
