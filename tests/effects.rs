@@ -225,7 +225,8 @@ fn wheel_after_first_contact(transfer_factor: f64, consumption_factor: f64) -> f
         nu: 0.3,
     };
     let pm = contact::hertz(100e3, 0.46, f64::INFINITY, 0.3, &steel).pm_pa;
-    let fp_fc = (1.0 + p.kp * (pm / 1178e6 - 1.0)) * (1.0 + p.kc * (0.01 / 0.01 - 1.0));
+    // cx = 1 %, the reference creepage of eq. (3): fc = 1.
+    let fp_fc = 1.0 + p.kp * (pm / 1178e6 - 1.0);
     let m = 1e-4;
     let t = (p.kt * (1.0 - (-m / p.cm_kg).exp()) * transfer_factor).min(0.5);
     let wheel = t * m;
@@ -411,8 +412,11 @@ fn mean(v: impl Iterator<Item = f64>) -> f64 {
     s / n.max(1) as f64
 }
 
+/// Bogie position of each (train, axle), and the weather messages with their log_time.
+type Facts = (HashMap<(String, usize), BogiePosition>, Vec<(u64, Weather)>);
+
 /// Bogie positions and the weather of the recording, from the reader.
-fn recording_facts() -> (HashMap<(String, usize), BogiePosition>, Vec<(u64, Weather)>) {
+fn recording_facts() -> Facts {
     let reader = RecordingReader::open(&curve_2day(), Default::default()).unwrap();
     let mut bogies = HashMap::new();
     let mut weather = Vec::new();
