@@ -44,6 +44,9 @@ struct Roller {
     /// speed_transfer's factor (1 when off).
     transfer_factor: f64,
     temperature_beta: Option<f64>,
+    /// The temperature factor when the weather does not change while the
+    /// train is in the section (the usual case): computed once.
+    temperature_factor: Option<f64>,
     /// wheel_edge_reservoir's (alpha, r).
     reservoir: Option<(f64, f64)>,
     observe: bool,
@@ -97,9 +100,13 @@ impl Roller {
             transfer_revolution: st
                 .applicator_point
                 .map(|ia| revolution[i.abs_diff(ia)] * self.transfer_factor),
-            consumption_factor: self.temperature_beta.map_or(1.0, |beta| {
-                effects::temperature_factor(weather.current.air_temperature_c, beta)
-            }),
+            consumption_factor: match (self.temperature_factor, self.temperature_beta) {
+                (Some(constant), _) => constant,
+                (None, Some(beta)) => {
+                    effects::temperature_factor(weather.current.air_temperature_c, beta)
+                }
+                (None, None) => 1.0,
+            },
         };
         let losses = product::roll(&self.params, &mut st.wheel_kg, &mut rail_kg, &conditions);
         st.consumed_kg += losses.consumed_kg;
@@ -217,6 +224,17 @@ impl Engine {
                 .effects
                 .temperature_consumption
                 .map(|e| e.beta_per_k),
+            temperature_factor: self
+                .cfg
+                .effects
+                .temperature_consumption
+                .filter(|_| self.timeline.is_constant())
+                .map(|e| {
+                    effects::temperature_factor(
+                        self.timeline.last().current.air_temperature_c,
+                        e.beta_per_k,
+                    )
+                }),
             reservoir: self
                 .cfg
                 .effects

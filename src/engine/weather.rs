@@ -89,6 +89,11 @@ impl WeatherTimeline {
         state
     }
 
+    /// Whether no message falls inside the window (one weather throughout).
+    pub fn is_constant(&self) -> bool {
+        self.changes.is_empty()
+    }
+
     /// The state after every message of the window.
     pub fn last(&self) -> WeatherState {
         *self.changes.last().unwrap_or(&self.base)

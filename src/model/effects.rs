@@ -73,7 +73,10 @@ impl TimeEffects {
             m *= ageing_factor(dt_s, tau);
         }
         if let Some(k) = self.rain_k_per_mm {
-            m *= washoff_factor(rain_mm, k);
+            // exp(0) = 1: most touches see no rain since the last one.
+            if rain_mm != 0.0 {
+                m *= washoff_factor(rain_mm, k);
+            }
         }
         m
     }
