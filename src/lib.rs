@@ -15,6 +15,8 @@
 //! - [`engine`]: owns time and state; steps the product wheel pass by wheel pass.
 //! - [`sink`]: listeners that publish what the engine produces.
 //! - [`plot`]: line plots (SVG) and CSV tables for figures and reports.
+//! - [`synth`]: synthetic recordings whose measurements come from the engine
+//!   run with a truth model (hidden effects), plus noise.
 
 pub mod app;
 pub mod config;
@@ -25,3 +27,4 @@ pub mod paper;
 pub mod plot;
 pub mod recording;
 pub mod sink;
+pub mod synth;

@@ -5,6 +5,7 @@
 pub mod paper;
 pub mod replay;
 pub mod summary;
+pub mod synth;
 
 use std::path::PathBuf;
 
@@ -32,12 +33,16 @@ pub enum Command {
     Replay(replay::ReplayArgs),
     /// Recompute the paper's Figures 7 and 13–17 as CSV and SVG.
     Paper(paper::PaperArgs),
+    /// Write a synthetic recording (traffic, pulses, weather, noisy
+    /// measurements from a truth model with optional hidden effects).
+    Synth(synth::SynthArgs),
 }
 
 pub fn run(cli: Cli) -> Result<()> {
     match cli.command {
         Command::Replay(args) => replay::main(args),
         Command::Paper(args) => paper::main(args),
+        Command::Synth(args) => synth::main(args),
     }
 }
 
