@@ -15,14 +15,13 @@
 # - Xvfb must run WITHOUT the Composite extension. With it, the viewer gets a
 #   32-bit ARGB (transparent) window and lavapipe's frames never reach the X
 #   framebuffer: every grab is solid black.
-# - Without a window manager the window never gets keyboard focus on its own:
-#   `xdotool windowfocus` before typing.
 # - `rerun --screenshot-to` also renders, but it shoots ~4 s after start, while
-#   the file is still loading and playback is at the first few wheel passes
-#   (empty heatmaps); it then panics on exit ("Failed to take store hub").
-#   Hence the interactive route below.
-# - Click positions are for a 1600x1000 window at scale 1 (the layout is fixed
-#   by the window size); change W/H and they must be re-measured.
+#   the file is still loading; it then panics on exit ("Failed to take store
+#   hub"). Hence a real window, grabbed once the file has loaded.
+# - No clicks: the recording's blueprint (src/sink/rerun_out.rs) opens the
+#   time panel on `time` following the data, i.e. at the end of the run, and
+#   collapses the time, blueprint and selection panels. The only pointer move
+#   parks the pointer where it draws no tooltip or hover line.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -53,8 +52,8 @@ XVFB_PID=$!
 sleep 2
 export DISPLAY=":$DNUM" WGPU_BACKEND=vulkan
 # A throwaway home for the viewer: it persists its UI state (panel sizes,
-# playback speed, ...) in $XDG_DATA_HOME/rerun/app.ron, and a stale one moves
-# the widgets the clicks below aim at.
+# blueprints edited by hand, ...) in $XDG_DATA_HOME/rerun/, and a stale one
+# would be drawn instead of the recording's own layout.
 STATE=$(mktemp -d)
 export XDG_DATA_HOME="$STATE/data" XDG_CONFIG_HOME="$STATE/config" XDG_CACHE_HOME="$STATE/cache"
 export XDG_RUNTIME_DIR="$STATE/run"
@@ -73,28 +72,8 @@ for _ in $(seq 60); do
     sleep 1
 done
 [ -n "$WIN" ] || { echo "viewer window never appeared; see /tmp/tortwin-screenshot-viewer.log" >&2; exit 1; }
-sleep "$LOAD_WAIT"   # let the .rrd load (playback starts at wheel_pass #0)
+sleep "$LOAD_WAIT"   # let the .rrd load; the time cursor follows it to the end
 
-# Pause playback (play/pause button, left end of the time panel bar).
-xdotool mousemove 19 764 click 1
-sleep 1
-# Time cursor to the end: double-click the time field ("#123" right of "30 FPS"),
-# type a number past the end; the viewer clamps it to the last wheel_pass.
-xdotool mousemove 360 764 click --repeat 2 --delay 100 1
-sleep 1
-xdotool windowfocus "$WIN"
-xdotool key ctrl+a
-xdotool type --delay 80 999999
-xdotool key Return
-sleep 1
-xdotool key Escape    # drop keyboard focus (else a toolbar button is drawn focused)
-sleep 0.5
-# Collapse the right (Selection) and left (Sources/Blueprint) side panels:
-# toggles in the top bar, more room for the plots.
-xdotool mousemove 1442 14 click 1
-sleep 0.5
-xdotool mousemove 1388 14 click 1
-sleep 0.5
 # Park the pointer on the empty middle of the top bar: no tooltip, no hover
 # line, no highlighted button.
 xdotool mousemove 700 12

@@ -263,6 +263,22 @@ fn rerun_reads_back_the_fields_the_sink_was_given() {
         dir.path(),
         "last_train_high_top",
     );
+    // high/gauge_corner (track 0) after the first train: a one-row heatmap
+    // (the viewer stretches it), and the band's name in its views.
+    check_rrd(
+        &rrd,
+        json!({
+            "rail": "high",
+            "band": "gauge_corner",
+            "wheel_pass": AXLES,
+            "mu": field(0, AXLES).mu,
+            "check_history": true,
+            "history_rows": 1,
+            "blueprint": true,
+        }),
+        dir.path(),
+        "first_train_high_gauge_corner",
+    );
     // low/top (track 2) mid-train: a wheel snapshot of the second train.
     check_rrd(
         &rrd,

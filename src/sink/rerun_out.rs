@@ -2,14 +2,17 @@
 //! opens in the rerun viewer (rerun 0.36).
 //!
 //! # Timelines
+//! - `time` (timestamp): the event's log_time. The viewer opens on it.
 //! - `wheel_pass` (sequence): wheels that have rolled over the section so far,
 //!   the largest [`FieldSnapshot::wheel_pass`] seen. Scrubbing it steps
 //!   through the run train by train (or wheel by wheel).
-//! - `time` (timestamp): the event's log_time.
 //!
-//! Every event is logged on both. The SDK's automatic `log_time` / `log_tick`
-//! timelines are switched off: they would record when the twin ran, not when
-//! the trains did.
+//! Field snapshots and trains are logged on both. Pulses and measurements are
+//! logged on `time` only: several of them fall between two snapshots, where
+//! `wheel_pass` does not advance, so on that timeline a whole train's
+//! measurements would stack at one abscissa. The SDK's automatic `log_time` /
+//! `log_tick` timelines are switched off: they would record when the twin
+//! ran, not when the trains did.
 //!
 //! # Entity layout
 //! Rail and band names are taken verbatim (escaped by [`EntityPath`]).
@@ -24,9 +27,9 @@
 //! | `field/<rail>/<band>/rail_mass_mg`      | `BarChart`                | every snapshot|
 //! | `field/<rail>/<band>/wheel_mass_mg`     | `BarChart`                | every snapshot|
 //! | `field/<rail>/<band>/mu_history`        | `Tensor` (heatmap)        | train snapshot|
-//! | `sites/<site>/<rail>/<quantity>/measured`  | `Scalars` + `SeriesPoints` | measurement |
-//! | `sites/<site>/<rail>/<quantity>/simulated` | `Scalars` + `SeriesLines`  | measurement |
-//! | `applicator/<id>/<rail>`                | `Scalars` in g + `SeriesPoints` | pulse   |
+//! | `sites/<site>/<rail>/<quantity>/measured`  | `Scalars` + `SeriesPoints` | measurement (`time`) |
+//! | `sites/<site>/<rail>/<quantity>/simulated` | `Scalars` + `SeriesLines` + `SeriesPoints` | measurement (`time`) |
+//! | `applicator/<id>/<rail>`                | `Scalars` in g + `SeriesPoints` | pulse (`time`) |
 //! | `trains`                                | `TextLog`                 | train         |
 //! | `run/summary`                           | `TextDocument` (markdown) | static, at finish |
 //!
@@ -35,7 +38,9 @@
 //! along the section (the viewer draws bin `i` over `[d_i, d_i + C)`). The
 //! abscissa, widths and colour are logged once, statically, and only the
 //! values at each snapshot: rerun joins the two per component, and a long run
-//! does not store the grid once per wheel.
+//! does not store the grid once per wheel. Every track (rail/band) has a
+//! fixed colour: its rail's (blue for the first rail, red for the second),
+//! and a second shade of it for a rail's band other than `top`.
 //!
 //! The heatmap `mu_history` of a track is its `mu` after each of the last
 //! [`RerunOptions::history_rows`] trains: row 0 is the oldest, the last row
@@ -45,15 +50,47 @@
 //! profiles): a run stores up to `trains * K * N * 2` bytes per track before
 //! compression, e.g. 0.28 GB for 300 trains, K = 256, N = 600 and 3 tracks
 //! (40 MB on disk with the smooth profiles of `tests/rerun_out.rs`). Lower
-//! `K` for long runs.
+//! `K` for long runs. It holds only the trains run so far, not `K` rows
+//! padded with NaN: the 0.36 viewer paints NaN in the colormap's low end,
+//! which would read as low mu (the blueprint stretches the image instead, so
+//! a one-train heatmap is not a one-pixel strip). Its colour scale (a
+//! `ValueRange` on the entity) is [`RerunOptions::mu_color_range`], or by
+//! default the run's mu range rounded out to 0.05, logged at
+//! [`Sink::finish`]; the heatmap views and the run summary state it.
 //!
 //! # Blueprint
-//! The rerun 0.36 Rust SDK can send a blueprint ([`rerun::blueprint`], marked
-//! experimental): [`Blueprint::send`] logs it as a separate blueprint store
-//! through the recording's sink, so it lands in the same `.rrd`, followed by
-//! an activation command. It is sent at [`Sink::begin`], when the tracks and
-//! sites are known, so that every view can name its entities exactly (view
-//! queries only know `/**` subtree wildcards).
+//! The layout is written by hand into a blueprint store rather than through
+//! [`rerun::blueprint::Blueprint`]: the 0.36 Rust builder has no way to set
+//! view properties (a time series' visible range, a tensor view's fit and
+//! colormap, a plot legend), which this layout needs. It logs the same
+//! archetypes the builder does (`ContainerBlueprint`, `ViewBlueprint`,
+//! `ViewContents`, `ViewportBlueprint`, the panels) plus those properties
+//! under `view/<id>/<Archetype>`, where the viewer looks them up, and sends
+//! the store with [`RecordingStream::send_blueprint`], so it lands in the
+//! same `.rrd`, followed by the activation command.
+//!
+//! It is sent at [`Sink::finish`], when the run is known: which sites
+//! measured which quantities on which rails (a plot for each, no empty
+//! ones), the mu range of the heatmaps, the time span (the playback speed).
+//! The layout:
+//! - left, a grid with one column per track: a row per quantity along `d`
+//!   (mu, adhesion, rail product, wheel product), each view titled with its
+//!   rail and band ("high rail (top band): mu along d [m]") and no legend,
+//!   and a last row with the track's mu history heatmap (stretched to fill
+//!   the view, Viridis, the colour range in the title);
+//! - right, a tab per site, in it a row per quantity measured there and a
+//!   plot per rail over the whole run (measured as dots in the rail's
+//!   colour, simulated as a pale line through small dots); below, tabs with
+//!   the trains, pulses, section, section map and run summary;
+//! - the time panel collapsed to its bar, on `time`, following the data, so
+//!   the viewer opens at the end of the run; playback (should one rewind)
+//!   covers the run in about a minute; the blueprint and selection side
+//!   panels collapsed.
+//!
+//! What 0.36 cannot do: set the time cursor itself (following the data is
+//! the only way to open at the end), bind a view to a timeline other than
+//! the time panel's, draw a colour bar next to a tensor view or leave NaN
+//! cells blank, or set a bar chart's axes.
 //!
 //! # Files
 //! The recording is written to `.NAME.partial-<pid>` next to the target;
@@ -61,25 +98,37 @@
 //! footer) and renames the file into place. A sink dropped without `finish`
 //! closes the stream and deletes the temporary file.
 
-use std::collections::{HashSet, VecDeque};
+use std::collections::{BTreeMap, BTreeSet, HashSet, VecDeque};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 use anyhow::{anyhow, bail, Context};
-use rerun::blueprint::{
-    BarChartView, Blueprint, BlueprintActivation, ContainerLike, Horizontal, Spatial2DView, Tabs,
-    TensorView, TextDocumentView, TextLogView, TimePanel, TimeSeriesView, Vertical,
+use rerun::blueprint::components::{
+    AutoLayout, AutoViews, ColumnShare, ContainerKind, Corner2D, Fps, GridColumns, IncludedContent,
+    PanelState, PlayState, PlaybackSpeed, QueryExpression, RootContainer, RowShare, TimelineName,
+    ViewClass, ViewFit,
 };
-use rerun::components::{Color, Radius, TextLogLevel, ValueRange};
-use rerun::datatypes::{TensorBuffer, TensorData};
+use rerun::components::{
+    Color, Colormap, MagnificationFilter, MarkerShape, Name, Radius, TextLogLevel, ValueRange,
+};
+use rerun::datatypes::{TensorBuffer, TensorData, TimeRange, VisibleTimeRange};
 use rerun::external::arrow::datatypes::{ArrowPrimitiveType, Float16Type};
-use rerun::{EntityPath, EntityPathPart, RecordingStream, RecordingStreamBuilder, TimeCell};
+use rerun::external::re_log_types::{BlueprintActivationCommand, LogMsg, RecordingId};
+use rerun::external::re_sdk_types::blueprint::archetypes::{
+    ContainerBlueprint, PanelBlueprint, PlotLegend, TensorScalarMapping, TensorViewFit, TimeAxis,
+    TimePanelBlueprint, ViewBlueprint, ViewContents, ViewportBlueprint, VisibleTimeRanges,
+};
+use rerun::external::re_sdk_types::external::uuid::Uuid;
+use rerun::{
+    Archetype, AsComponents, EntityPath, EntityPathPart, RecordingStream, RecordingStreamBuilder,
+    TimeCell,
+};
 
 use super::{
     FieldSnapshot, MeasurementOutput, PulseEvent, RunSummary, SectionInfo, Sink, SnapshotKind,
-    TrainEvent,
+    TrackInfo, TrainEvent,
 };
-use crate::recording::Direction;
+use crate::recording::{Direction, Quantity};
 
 /// Name of the sequence timeline: wheel passes so far.
 pub const TIMELINE_WHEEL_PASS: &str = "wheel_pass";
@@ -91,6 +140,11 @@ type F16 = <Float16Type as ArrowPrimitiveType>::Native;
 
 const MG_PER_KG: f64 = 1e6;
 const G_PER_KG: f64 = 1e3;
+/// Playback (should the user rewind and press play) covers the run in this.
+const PLAYBACK_S: f64 = 60.0;
+/// The default heatmap colour range is the run's mu rounded out to 1/this
+/// (0.05).
+const MU_COLOR_STEPS_PER_UNIT: f64 = 20.0;
 
 /// What the rerun recording holds beyond the fixed layout.
 #[derive(Debug, Clone)]
@@ -101,9 +155,10 @@ pub struct RerunOptions {
     pub recording_name: Option<String>,
     /// `K`: trains kept in each track's `mu_history` heatmap; 0 logs none.
     pub history_rows: usize,
-    /// The heatmap colour scale for mu, fixed so a colour means the same mu
-    /// at every train.
-    pub mu_color_range: [f64; 2],
+    /// The heatmap colour scale for mu, fixed for the whole run so a colour
+    /// means the same mu at every train. `None`: the run's mu range, rounded
+    /// out to 0.05 (known, and logged, at [`Sink::finish`]).
+    pub mu_color_range: Option<[f64; 2]>,
     /// Send the default layout (see the module docs).
     pub blueprint: bool,
 }
@@ -114,7 +169,7 @@ impl Default for RerunOptions {
             application_id: "tortwin".to_owned(),
             recording_name: None,
             history_rows: 256,
-            mu_color_range: [0.0, 0.6],
+            mu_color_range: None,
             blueprint: true,
         }
     }
@@ -128,16 +183,39 @@ pub struct RerunSink {
     final_path: PathBuf,
     finished: bool,
     options: RerunOptions,
+    /// What the blueprint needs from [`Sink::begin`], `None` before it.
+    layout: Option<Layout>,
     tracks: Vec<TrackState>,
     grid_len: usize,
     /// Largest wheel_pass of any track so far: the `wheel_pass` timeline.
     wheel_pass: u64,
     /// Series entities whose static style has been logged.
     styled: HashSet<EntityPath>,
+    /// Per site index, per quantity (in [`QUANTITIES`] order): the
+    /// quantity and the rails it was measured on.
+    measured: BTreeMap<usize, BTreeMap<usize, (Quantity, BTreeSet<usize>)>>,
+    /// Applicator entities that received a pulse.
+    pulsed: BTreeSet<EntityPath>,
+    /// Smallest and largest mu put into a heatmap.
+    mu_seen: Option<[f64; 2]>,
+    /// First and last log_time of anything logged on `time`.
+    time_span_ns: Option<[u64; 2]>,
 }
 
+/// The section as the blueprint needs it, copied at [`Sink::begin`].
+struct Layout {
+    rails: Vec<String>,
+    /// `(id, position_m)`, in section order.
+    sites: Vec<(String, f64)>,
+}
+
+/// Picks one of a track's entities.
+type TrackEntity = fn(&TrackState) -> &EntityPath;
+
 struct TrackState {
+    /// "high rail (top band)".
     label: String,
+    color: Color,
     mu: EntityPath,
     adhesion: EntityPath,
     rail_mass: EntityPath,
@@ -184,10 +262,15 @@ impl RerunSink {
             final_path: path.to_path_buf(),
             finished: false,
             options,
+            layout: None,
             tracks: Vec::new(),
             grid_len: 0,
             wheel_pass: 0,
             styled: HashSet::new(),
+            measured: BTreeMap::new(),
+            pulsed: BTreeSet::new(),
+            mu_seen: None,
+            time_span_ns: None,
         })
     }
 
@@ -200,14 +283,24 @@ impl RerunSink {
         })
     }
 
-    /// Sets both timelines for the calling thread: the next logs land there.
-    fn set_time(&self, log_time_ns: u64) -> anyhow::Result<()> {
-        let rec = self.rec()?;
-        let wheel_pass = i64::try_from(self.wheel_pass)
-            .with_context(|| format!("wheel_pass {} out of range", self.wheel_pass))?;
+    /// Sets the calling thread's time: `time` always, `wheel_pass` only
+    /// `with_wheel_pass` (else that timeline is cleared). The next logs land
+    /// there.
+    fn set_time(&mut self, log_time_ns: u64, with_wheel_pass: bool) -> anyhow::Result<()> {
         let time_ns = i64::try_from(log_time_ns)
             .with_context(|| format!("log_time {log_time_ns} ns out of range"))?;
-        rec.set_time(TIMELINE_WHEEL_PASS, TimeCell::from_sequence(wheel_pass));
+        let wheel_pass = i64::try_from(self.wheel_pass)
+            .with_context(|| format!("wheel_pass {} out of range", self.wheel_pass))?;
+        self.time_span_ns = Some(match self.time_span_ns {
+            Some([first, last]) => [first.min(log_time_ns), last.max(log_time_ns)],
+            None => [log_time_ns, log_time_ns],
+        });
+        let rec = self.rec()?;
+        if with_wheel_pass {
+            rec.set_time(TIMELINE_WHEEL_PASS, TimeCell::from_sequence(wheel_pass));
+        } else {
+            rec.disable_timeline(TIMELINE_WHEEL_PASS);
+        }
         rec.set_time(
             TIMELINE_TIME,
             TimeCell::from_timestamp_nanos_since_epoch(time_ns),
@@ -219,12 +312,14 @@ impl RerunSink {
     fn style_once(
         &mut self,
         path: &EntityPath,
-        style: &dyn rerun::AsComponents,
+        styles: &[&dyn AsComponents],
     ) -> anyhow::Result<()> {
         if self.styled.contains(path) {
             return Ok(());
         }
-        self.rec()?.log_static(path.clone(), style)?;
+        for style in styles {
+            self.rec()?.log_static(path.clone(), *style)?;
+        }
         self.styled.insert(path.clone());
         Ok(())
     }
@@ -247,7 +342,7 @@ impl RerunSink {
             &rerun::LineStrips2D::new(
                 (0..section.rails.len()).map(|r| vec![[0.0, rail_y(r)], [length, rail_y(r)]]),
             )
-            .with_labels(section.rails.iter().map(String::as_str))
+            .with_labels(section.rails.iter().map(|r| format!("{r} rail")))
             .with_colors((0..section.rails.len()).map(rail_color))
             .with_radii([Radius::new_ui_points(2.0)]),
         )?;
@@ -292,8 +387,7 @@ impl RerunSink {
             _ => 1.0,
         };
         let abscissa = TensorData::from(info.grid_d_m);
-        for (index, track) in self.tracks.iter().enumerate() {
-            let color = track_color(index);
+        for track in &self.tracks {
             for path in [
                 &track.mu,
                 &track.adhesion,
@@ -305,98 +399,325 @@ impl RerunSink {
                     &rerun::BarChart::update_fields()
                         .with_abscissa(abscissa.clone())
                         .with_widths(vec![spacing_m; info.grid_d_m.len()])
-                        .with_color(color),
+                        .with_color(track.color),
                 )?;
             }
-            let [low, high] = self.options.mu_color_range;
-            rec.log_static(
-                track.mu_history.clone(),
-                &rerun::Tensor::update_fields().with_value_range(ValueRange::new(low, high)),
-            )?;
+            if let Some([low, high]) = self.options.mu_color_range {
+                rec.log_static(
+                    track.mu_history.clone(),
+                    &rerun::Tensor::update_fields().with_value_range(ValueRange::new(low, high)),
+                )?;
+            }
         }
         Ok(())
     }
 
-    fn blueprint(&self, info: &SectionInfo<'_>) -> Blueprint {
-        fn include<'p>(paths: impl IntoIterator<Item = &'p EntityPath>) -> Vec<String> {
-            paths.into_iter().map(|p| format!("+ {p}")).collect()
+    /// The heatmaps' colour range: the option, or the run's mu rounded out.
+    fn mu_color_range(&self) -> [f64; 2] {
+        if let Some(range) = self.options.mu_color_range {
+            return range;
         }
-        let profile = |name: &str, pick: fn(&TrackState) -> &EntityPath| -> ContainerLike {
-            BarChartView::new(name)
-                .with_contents(include(self.tracks.iter().map(pick)))
-                .into()
+        match self.mu_seen {
+            Some([low, high]) => {
+                let steps = MU_COLOR_STEPS_PER_UNIT;
+                let low = (low * steps).floor() / steps;
+                let high = (high * steps).ceil() / steps;
+                [low, high.max(low + 1.0 / steps)]
+            }
+            None => [0.0, 0.6],
+        }
+    }
+
+    /// Builds the default layout (see the module docs) as blueprint messages.
+    fn blueprint(&self) -> anyhow::Result<Vec<LogMsg>> {
+        let Some(layout) = &self.layout else {
+            bail!("no section: the sink was never begun");
         };
-        let profiles = Vertical::new([
-            profile("mu along d (m)", |t| &t.mu),
-            profile("adhesion T/N along d (m)", |t| &t.adhesion),
-            profile("rail product (mg) along d (m)", |t| &t.rail_mass),
-            profile("wheel product (mg) along d (m)", |t| &t.wheel_mass),
-        ])
-        .with_name("Profiles");
+        let application_id = rerun::ApplicationId::try_new(self.options.application_id.as_str())
+            .map_err(|err| anyhow!("{err}"))?;
+        let (rec, storage) = RecordingStreamBuilder::new(application_id)
+            .recording_id(RecordingId::random())
+            .blueprint()
+            .memory()?;
+        // The viewer identifies blueprint data by this timeline.
+        rec.set_time_sequence("blueprint", 0);
+        let bp = BlueprintWriter { rec: &rec };
+        let everything = [TIMELINE_TIME, TIMELINE_WHEEL_PASS].map(|timeline| VisibleTimeRange {
+            timeline: timeline.into(),
+            range: TimeRange::EVERYTHING,
+        });
+        // A time series over the whole run, whatever the time cursor: the
+        // default x range of 0.36 is a window of +-30 s (or +-1000 passes)
+        // around the cursor once the data spans more.
+        let whole_run = |bp: &BlueprintWriter<'_>, view: &BlueprintItem| -> anyhow::Result<()> {
+            bp.property(view, &VisibleTimeRanges::new(everything.clone()))?;
+            bp.property(
+                view,
+                &TimeAxis::update_fields().with_view_range(TimeRange::EVERYTHING),
+            )?;
+            bp.property(
+                view,
+                &PlotLegend::update_fields().with_corner(Corner2D::LeftTop),
+            )
+        };
 
-        let heatmaps = Tabs::new(
-            self.tracks
-                .iter()
-                .map(|t| {
-                    TensorView::new(format!("mu history {}", t.label))
-                        .with_contents(include([&t.mu_history]))
-                        .into()
-                })
-                .collect::<Vec<ContainerLike>>(),
-        )
-        .with_name("mu history (train x grid point)");
+        // Left: a column per track, a row per quantity along d, and the
+        // mu history below them (its columns are the same grid points).
+        let quantities: [(&str, TrackEntity); 4] = [
+            ("mu", |t| &t.mu),
+            ("adhesion T/N", |t| &t.adhesion),
+            ("rail product (mg)", |t| &t.rail_mass),
+            ("wheel product (mg)", |t| &t.wheel_mass),
+        ];
+        let mut grid = Vec::new();
+        for (quantity, pick) in quantities {
+            for track in &self.tracks {
+                let view = bp.view(
+                    "BarChart",
+                    &format!("{}: {quantity} along d [m]", track.label),
+                    [format!("+ {}", pick(track))],
+                )?;
+                // The title names the track; the legend would only repeat
+                // the entity path.
+                bp.property(&view, &PlotLegend::update_fields().with_visible(false))?;
+                grid.push(view);
+            }
+        }
+        if self.options.history_rows > 0 {
+            // 0.36 draws no colour bar next to a tensor: the title says it.
+            let [low, high] = self.mu_color_range();
+            for track in &self.tracks {
+                let view = bp.view(
+                    "Tensor",
+                    &format!("{}: mu history, colour {low:.2} → {high:.2}", track.label),
+                    [format!("+ {}", track.mu_history)],
+                )?;
+                // Stretched: a few trains by 600 points is a strip otherwise.
+                bp.property(
+                    &view,
+                    &TensorViewFit::update_fields().with_scaling(ViewFit::Fill),
+                )?;
+                bp.property(
+                    &view,
+                    &TensorScalarMapping::update_fields()
+                        .with_colormap(Colormap::Viridis)
+                        .with_mag_filter(MagnificationFilter::Nearest),
+                )?;
+                grid.push(view);
+            }
+        }
+        // The heatmap's row a little taller than a profile's.
+        let row_shares = [1.0, 1.0, 1.0, 1.0, 1.6].map(RowShare::from);
+        let rows = grid.len() / self.tracks.len().max(1);
+        let profiles = bp.container(
+            ContainerKind::Grid,
+            "Along the section (a column per rail/band)",
+            grid,
+            |c| {
+                c.with_grid_columns(GridColumns::from(self.tracks.len().max(1) as u32))
+                    .with_row_shares(row_shares.into_iter().take(rows))
+            },
+        )?;
 
-        let sites = Tabs::new(
-            info.section
-                .sites
-                .iter()
-                .map(|site| {
-                    let origin = entity(&["sites", &site.id]);
-                    TimeSeriesView::new(format!("site {}: measured vs simulated", site.id))
-                        .with_origin(origin)
-                        .into()
-                })
-                .collect::<Vec<ContainerLike>>(),
-        )
-        .with_name("Sites");
+        // Right, top: a tab per site; in it a row per quantity measured
+        // there and a plot per rail, like the profiles.
+        let mut sites = Vec::new();
+        for (&site, quantities) in &self.measured {
+            let Some((site_id, position_m)) = layout.sites.get(site) else {
+                continue;
+            };
+            let mut rows = Vec::new();
+            for (quantity, rails) in quantities.values() {
+                let mut views = Vec::new();
+                for &rail in rails {
+                    let Some(rail) = layout.rails.get(rail) else {
+                        continue;
+                    };
+                    let view = bp.view(
+                        "TimeSeries",
+                        &format!("{site_id}, {rail} rail: {}", quantity_label(*quantity)),
+                        [format!(
+                            "+ {}/**",
+                            entity(&["sites", site_id, rail, quantity.as_str()])
+                        )],
+                    )?;
+                    whole_run(&bp, &view)?;
+                    views.push(view);
+                }
+                rows.push(bp.container(
+                    ContainerKind::Horizontal,
+                    &format!("site {site_id}: {}", quantity_label(*quantity)),
+                    views,
+                    |c| c,
+                )?);
+            }
+            sites.push(bp.container(
+                ContainerKind::Vertical,
+                &format!("site {site_id} ({position_m:.1} m)"),
+                rows,
+                |c| c,
+            )?);
+        }
 
-        let context = Tabs::new([
-            TextLogView::new("Trains")
-                .with_contents(["+ /trains"])
-                .into(),
-            TimeSeriesView::new("Pulses (g)")
-                .with_origin("applicator")
-                .into(),
-            TextDocumentView::new("Section")
-                .with_contents(["+ /section/description"])
-                .into(),
-            Spatial2DView::new("Section map")
-                .with_origin("section/map")
-                .into(),
-            TextDocumentView::new("Run summary")
-                .with_contents(["+ /run/summary"])
-                .into(),
-        ]);
+        // Right, bottom: the context.
+        let trains = bp.view("TextLog", "Trains", ["+ /trains"])?;
+        let pulses = bp.view(
+            "TimeSeries",
+            "Applicator pulses (g)",
+            self.pulsed.iter().map(|p| format!("+ {p}")),
+        )?;
+        whole_run(&bp, &pulses)?;
+        let section = bp.view("TextDocument", "Section", ["+ /section/description"])?;
+        let map = bp.view("2D", "Section map", ["+ /section/map/**"])?;
+        let summary = bp.view("TextDocument", "Run summary", ["+ /run/summary"])?;
+        let context = bp.container(
+            ContainerKind::Tabs,
+            "Run",
+            vec![trains, pulses, section, map, summary],
+            |c| c,
+        )?;
 
-        let right = Vertical::new([heatmaps.into(), sites.into(), context.into()])
-            .with_row_shares([0.4, 0.35, 0.25]);
-        Blueprint::new(
-            Horizontal::new([profiles.into(), right.into()]).with_column_shares([0.55, 0.45]),
-        )
-        .with_time_panel(TimePanel::new().with_timeline(TIMELINE_WHEEL_PASS))
+        let mut right = Vec::new();
+        let mut shares = Vec::new();
+        if !sites.is_empty() {
+            right.push(bp.container(ContainerKind::Tabs, "Sites", sites, |c| c)?);
+            shares.push(0.62);
+        }
+        right.push(context);
+        shares.push(0.38);
+        let right = bp.container(ContainerKind::Vertical, "Sites and run", right, |c| {
+            c.with_row_shares(shares.iter().map(|&s| RowShare::from(s)))
+        })?;
+        let root = bp.container(
+            ContainerKind::Horizontal,
+            "tortwin",
+            vec![profiles, right],
+            |c| c.with_col_shares([0.55, 0.45].map(ColumnShare::from)),
+        )?;
+
+        rec.log(
+            "viewport",
+            &ViewportBlueprint::new()
+                .with_root_container(RootContainer::from(root.id))
+                .with_auto_layout(AutoLayout::from(false))
+                .with_auto_views(AutoViews::from(false)),
+        )?;
+        for panel in ["blueprint_panel", "selection_panel"] {
+            rec.log(
+                panel,
+                &PanelBlueprint::new().with_state(PanelState::Collapsed),
+            )?;
+        }
+        // Follow the data: the viewer opens at the end of the run (0.36 has
+        // no blueprint field for the time cursor itself).
+        let span_s = self
+            .time_span_ns
+            .map_or(0.0, |[first, last]| (last - first) as f64 * 1e-9);
+        rec.log(
+            "time_panel",
+            &TimePanelBlueprint::new()
+                .with_state(PanelState::Collapsed)
+                .with_timeline(TimelineName::from(TIMELINE_TIME))
+                .with_play_state(PlayState::Following)
+                .with_playback_speed(PlaybackSpeed::from((span_s / PLAYBACK_S).max(1.0)))
+                .with_fps(Fps::from((self.wheel_pass as f64 / PLAYBACK_S).max(30.0))),
+        )?;
+        Ok(storage.take())
+    }
+}
+
+/// A view or container logged to a blueprint store.
+struct BlueprintItem {
+    id: Uuid,
+    path: String,
+}
+
+/// Logs containers, views and view properties as the viewer reads them.
+struct BlueprintWriter<'r> {
+    rec: &'r RecordingStream,
+}
+
+impl BlueprintWriter<'_> {
+    /// A view of `class` showing what the `+ /path` queries include.
+    fn view(
+        &self,
+        class: &str,
+        name: &str,
+        queries: impl IntoIterator<Item = impl Into<String>>,
+    ) -> anyhow::Result<BlueprintItem> {
+        let id = Uuid::new_v4();
+        let path = format!("view/{id}");
+        self.rec.log(
+            format!("{path}/ViewContents"),
+            &ViewContents::new(queries.into_iter().map(|q| QueryExpression::from(q.into()))),
+        )?;
+        self.rec.log(
+            path.as_str(),
+            &ViewBlueprint::new(ViewClass::from(class))
+                .with_display_name(Name::from(name))
+                .with_space_origin("/"),
+        )?;
+        Ok(BlueprintItem { id, path })
+    }
+
+    /// A view property: `view/<id>/<Archetype>`, where the viewer looks.
+    fn property<A: Archetype + AsComponents>(
+        &self,
+        view: &BlueprintItem,
+        property: &A,
+    ) -> anyhow::Result<()> {
+        self.rec.log(
+            format!("{}/{}", view.path, A::name().short_name()),
+            property,
+        )?;
+        Ok(())
+    }
+
+    fn container(
+        &self,
+        kind: ContainerKind,
+        name: &str,
+        children: Vec<BlueprintItem>,
+        extra: impl FnOnce(ContainerBlueprint) -> ContainerBlueprint,
+    ) -> anyhow::Result<BlueprintItem> {
+        let id = Uuid::new_v4();
+        let path = format!("container/{id}");
+        let contents: Vec<IncludedContent> = children
+            .iter()
+            .map(|child| IncludedContent::from(child.path.as_str()))
+            .collect();
+        self.rec.log(
+            path.as_str(),
+            &extra(
+                ContainerBlueprint::new(kind)
+                    .with_display_name(Name::from(name))
+                    .with_contents(contents),
+            ),
+        )?;
+        Ok(BlueprintItem { id, path })
     }
 }
 
 impl Sink for RerunSink {
     fn begin(&mut self, info: &SectionInfo<'_>) -> anyhow::Result<()> {
         self.grid_len = info.grid_d_m.len();
+        self.layout = Some(Layout {
+            rails: info.section.rails.clone(),
+            sites: info
+                .section
+                .sites
+                .iter()
+                .map(|s| (s.id.clone(), s.position_m))
+                .collect(),
+        });
         self.tracks = info
             .tracks
             .iter()
             .map(|t| {
                 let path = |leaf: &str| entity(&["field", &t.rail_name, &t.band, leaf]);
                 TrackState {
-                    label: format!("{}/{}", t.rail_name, t.band),
+                    label: track_label(t),
+                    color: track_color(t, info.tracks),
                     mu: path("mu"),
                     adhesion: path("adhesion"),
                     rail_mass: path("rail_mass_mg"),
@@ -407,23 +728,11 @@ impl Sink for RerunSink {
             })
             .collect();
         self.log_context(info)
-            .with_context(|| format!("rerun output {}", self.temp_path.display()))?;
-        if self.options.blueprint {
-            self.blueprint(info)
-                .send(
-                    self.rec()?,
-                    BlueprintActivation {
-                        make_active: true,
-                        make_default: true,
-                    },
-                )
-                .with_context(|| format!("rerun output {}: blueprint", self.temp_path.display()))?;
-        }
-        Ok(())
+            .with_context(|| format!("rerun output {}", self.temp_path.display()))
     }
 
     fn train(&mut self, train: &TrainEvent<'_>) -> anyhow::Result<()> {
-        self.set_time(train.log_time_ns)?;
+        self.set_time(train.log_time_ns, true)?;
         let direction = match train.direction {
             Direction::Up => "up (d increasing)",
             Direction::Down => "down (d decreasing)",
@@ -446,14 +755,17 @@ impl Sink for RerunSink {
 
     fn pulse(&mut self, pulse: &PulseEvent<'_>) -> anyhow::Result<()> {
         let path = entity(&["applicator", pulse.applicator_id, pulse.rail_name]);
-        let name = format!("{} {} (g)", pulse.applicator_id, pulse.rail_name);
+        let name = format!("{} on {} rail (g)", pulse.applicator_id, pulse.rail_name);
         self.style_once(
             &path,
-            &rerun::SeriesPoints::new()
+            &[&rerun::SeriesPoints::new()
                 .with_names([name])
-                .with_colors([rail_color(pulse.rail)]),
+                .with_colors([rail_color(pulse.rail)])
+                .with_markers([MarkerShape::Diamond])
+                .with_marker_sizes([3.0])],
         )?;
-        self.set_time(pulse.log_time_ns)?;
+        self.pulsed.insert(path.clone());
+        self.set_time(pulse.log_time_ns, false)?;
         self.rec()?
             .log(path, &rerun::Scalars::single(pulse.mass_kg * G_PER_KG))
             .with_context(|| format!("rerun output: pulse of {}", pulse.applicator_id))?;
@@ -466,19 +778,42 @@ impl Sink for RerunSink {
         let measured = entity(&[&base[..], &["measured"]].concat());
         let simulated = entity(&[&base[..], &["simulated"]].concat());
         let color = rail_color(m.rail);
+        let pale = lighten(color, 0.45);
         self.style_once(
             &measured,
-            &rerun::SeriesPoints::new()
-                .with_names([format!("{} {quantity} measured", m.rail_name)])
-                .with_colors([color]),
+            &[&rerun::SeriesPoints::new()
+                .with_names(["measured"])
+                .with_colors([color])
+                .with_markers([MarkerShape::Circle])
+                .with_marker_sizes([2.5])],
         )?;
+        // Points and a line: a lone simulated value still shows.
         self.style_once(
             &simulated,
-            &rerun::SeriesLines::new()
-                .with_names([format!("{} {quantity} simulated", m.rail_name)])
-                .with_colors([color]),
+            &[
+                &rerun::SeriesLines::new()
+                    .with_names(["simulated (twin)"])
+                    .with_colors([pale])
+                    .with_widths([1.5]),
+                &rerun::SeriesPoints::new()
+                    .with_names(["simulated (twin)"])
+                    .with_colors([pale])
+                    .with_markers([MarkerShape::Circle])
+                    .with_marker_sizes([1.5]),
+            ],
         )?;
-        self.set_time(m.log_time_ns)?;
+        let rank = QUANTITIES
+            .iter()
+            .position(|&q| q == m.quantity)
+            .unwrap_or(QUANTITIES.len());
+        self.measured
+            .entry(m.site)
+            .or_default()
+            .entry(rank)
+            .or_insert_with(|| (m.quantity, BTreeSet::new()))
+            .1
+            .insert(m.rail);
+        self.set_time(m.log_time_ns, false)?;
         let rec = self.rec()?;
         rec.log(measured, &rerun::Scalars::single(m.measured))
             .and_then(|()| rec.log(simulated, &rerun::Scalars::single(m.simulated)))
@@ -517,8 +852,16 @@ impl Sink for RerunSink {
         }
 
         self.wheel_pass = self.wheel_pass.max(f.wheel_pass);
-        self.set_time(f.log_time_ns)?;
+        self.set_time(f.log_time_ns, true)?;
         let history_rows = self.options.history_rows;
+        if f.kind == SnapshotKind::Train && history_rows > 0 {
+            for &mu in f.mu.iter().filter(|mu| mu.is_finite()) {
+                self.mu_seen = Some(match self.mu_seen {
+                    Some([low, high]) => [low.min(mu), high.max(mu)],
+                    None => [mu, mu],
+                });
+            }
+        }
         let Some(rec) = self.rec.as_ref() else {
             bail!(
                 "rerun output {}: already finished",
@@ -560,7 +903,7 @@ impl Sink for RerunSink {
                 vec![rows as u64, grid_len as u64],
                 TensorBuffer::F16(flat.into()),
             )
-            .with_dim_names(["train (oldest first)", "grid point i (d = i*C)"]);
+            .with_dim_names(["train (newest at the bottom)", "grid point i (d = i*C)"]);
             rec.log(track.mu_history.clone(), &rerun::Tensor::new(heatmap))
                 .with_context(context)?;
         }
@@ -568,12 +911,40 @@ impl Sink for RerunSink {
     }
 
     fn finish(&mut self, summary: &RunSummary) -> anyhow::Result<()> {
-        self.rec()?
-            .log_static(
-                "run/summary",
-                &rerun::TextDocument::from_markdown(summarize(summary)),
-            )
-            .with_context(|| format!("rerun output {}: summary", self.temp_path.display()))?;
+        let context = || format!("rerun output {}", self.temp_path.display());
+        let [low, high] = self.mu_color_range();
+        let rec = self.rec()?;
+        rec.log_static(
+            "run/summary",
+            &rerun::TextDocument::from_markdown(summarize(summary, [low, high])),
+        )
+        .with_context(|| format!("{}: summary", context()))?;
+        if self.options.mu_color_range.is_none() {
+            for track in &self.tracks {
+                rec.log_static(
+                    track.mu_history.clone(),
+                    &rerun::Tensor::update_fields().with_value_range(ValueRange::new(low, high)),
+                )
+                .with_context(|| format!("{}: heatmap colour range", context()))?;
+            }
+        }
+        if self.options.blueprint {
+            let blueprint = self
+                .blueprint()
+                .with_context(|| format!("{}: blueprint", context()))?;
+            let Some(blueprint_id) = blueprint.first().map(|msg| msg.store_id().clone()) else {
+                bail!("{}: blueprint: no messages", context());
+            };
+            self.rec()?.send_blueprint(
+                blueprint,
+                BlueprintActivationCommand {
+                    blueprint_id,
+                    make_active: true,
+                    make_default: true,
+                },
+            );
+        }
+
         let rec = self.rec.take().ok_or_else(|| {
             anyhow!(
                 "rerun output {}: already finished",
@@ -613,28 +984,62 @@ fn entity(parts: &[&str]) -> EntityPath {
     EntityPath::new(parts.iter().map(|p| EntityPathPart::new(*p)).collect())
 }
 
+/// "high rail (top band)", "high rail (gauge corner band)".
+fn track_label(track: &TrackInfo) -> String {
+    format!(
+        "{} rail ({} band)",
+        track.rail_name,
+        track.band.replace('_', " ")
+    )
+}
+
+/// The order of a site's plots.
+const QUANTITIES: [Quantity; 3] = [Quantity::Mu, Quantity::Adhesion, Quantity::RailMu];
+
+fn quantity_label(quantity: Quantity) -> &'static str {
+    match quantity {
+        Quantity::Mu => "wheel-rail mu per axle",
+        Quantity::Adhesion => "adhesion T/N per axle",
+        Quantity::RailMu => "rail mu (tribometer)",
+    }
+}
+
+const RAIL_COLORS: [(u8, u8, u8); 4] = [
+    (66, 135, 245),
+    (235, 87, 70),
+    (160, 100, 220),
+    (240, 200, 60),
+];
+/// A second shade per rail, for its bands other than `top`.
+const BAND_COLORS: [(u8, u8, u8); 4] = [
+    (60, 200, 200),
+    (245, 160, 50),
+    (220, 120, 200),
+    (150, 200, 70),
+];
+
 fn rail_color(rail: usize) -> Color {
-    const RAILS: [(u8, u8, u8); 4] = [
-        (66, 135, 245),
-        (235, 87, 70),
-        (160, 100, 220),
-        (240, 200, 60),
-    ];
-    let (r, g, b) = RAILS[rail % RAILS.len()];
+    let (r, g, b) = RAIL_COLORS[rail % RAIL_COLORS.len()];
     Color::from_rgb(r, g, b)
 }
 
-fn track_color(track: usize) -> Color {
-    const TRACKS: [(u8, u8, u8); 6] = [
-        (66, 135, 245),
-        (235, 87, 70),
-        (60, 190, 120),
-        (160, 100, 220),
-        (240, 200, 60),
-        (90, 200, 220),
-    ];
-    let (r, g, b) = TRACKS[track % TRACKS.len()];
-    Color::from_rgb(r, g, b)
+/// The rail's colour for its `top` band (or its only one), a second shade
+/// for another band: the same rail reads alike in every plot.
+fn track_color(track: &TrackInfo, tracks: &[TrackInfo]) -> Color {
+    let single_band = tracks.iter().filter(|t| t.rail == track.rail).count() == 1;
+    if track.band == "top" || single_band {
+        rail_color(track.rail)
+    } else {
+        let (r, g, b) = BAND_COLORS[track.rail % BAND_COLORS.len()];
+        Color::from_rgb(r, g, b)
+    }
+}
+
+/// `color` blended towards white by `amount` (0 to 1).
+fn lighten(color: Color, amount: f32) -> Color {
+    let [r, g, b, _] = color.to_array();
+    let blend = |c: u8| (f32::from(c) + (255.0 - f32::from(c)) * amount).round() as u8;
+    Color::from_rgb(blend(r), blend(g), blend(b))
 }
 
 /// The section as a markdown page.
@@ -710,7 +1115,7 @@ fn describe(info: &SectionInfo<'_>) -> String {
 }
 
 /// The end-of-run figures as a markdown page.
-fn summarize(summary: &RunSummary) -> String {
+fn summarize(summary: &RunSummary, mu_color_range: [f64; 2]) -> String {
     let mut md = String::new();
     // Writing to a String cannot fail.
     let _ = writeln!(md, "# Run summary\n");
@@ -751,6 +1156,17 @@ fn summarize(summary: &RunSummary) -> String {
         md,
         "\nrelative closing error: {:.2e}",
         balance.closing_error()
+    );
+    let [low, high] = mu_color_range;
+    let _ = writeln!(md, "\n## Reading the views\n");
+    let _ = writeln!(
+        md,
+        "- mu history heatmaps: one row per train, newest at the bottom, one column per grid \
+         point; colour Viridis from mu = {low:.2} (dark purple) to {high:.2} (yellow)"
+    );
+    let _ = writeln!(
+        md,
+        "- site plots: dots are the measurements, the pale line through small dots the twin"
     );
     md
 }

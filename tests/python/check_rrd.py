@@ -12,6 +12,10 @@ the crate's rerun dependency).
    the writer closed it), and the timelines `wheel_pass` and `time`.
 3. The `mu` profile of one track, `/field/<rail>/<band>/mu` (a BarChart), at
    one snapshot must equal the expected values.
+4. Every track's mu profile has a static colour of its own; pulses and site
+   measurements (`/applicator/**`, `/sites/**`) are on the `time` timeline
+   only (on `wheel_pass` a train's measurements would stack).
+5. With "blueprint": the layout the viewer opens (see `blueprint_checks`).
 
 EXPECTED.json:
 
@@ -25,7 +29,7 @@ EXPECTED.json:
                                            #   mu_history at that snapshot is mu (f16)
       "history_rows": 2,                   # optional: rows mu_history holds then
       "blueprint": true                    # optional: require a blueprint store
-                                           #   with a view of that mu profile
+                                           #   laid out as `blueprint_checks` says
     }
 
 Exit status 0 when every check passes, 1 when one fails, 2 when the file or
@@ -172,16 +176,212 @@ def check(rrd: Path, expected: dict) -> list[str]:
         )
         done.append(f"{history} at {timeline} {time}: {shape[0]} rows, newest is mu")
 
+    done += colour_checks(store, schema_text)
+    done += time_only_checks(store, schema_text)
+
     if expected.get("blueprint"):
-        # The default layout must show this profile in some view.
-        queries = []
-        for chunk in reader.stream(store=blueprints[0]):
-            for name, column in chunk.to_record_batch().to_pydict().items():
-                if name.endswith("ViewContents:query"):
-                    queries += [q for cell in column if cell for q in cell]
-        if f"+ {entity}" not in queries:
-            raise CheckFailed(f"no blueprint view shows {entity}; view queries: {queries}")
-        done.append(f"blueprint has a view of {entity}")
+        done += blueprint_checks(reader, blueprints, store, expected)
+    return done
+
+
+def entities_in(schema_text: str) -> list[str]:
+    return sorted(
+        {
+            line.split("Entity path:", 1)[1].strip()
+            for line in schema_text.splitlines()
+            if "Entity path:" in line
+        }
+    )
+
+
+def colour_checks(store, schema_text: str) -> list[str]:
+    """Every track's mu profile has its own fixed (static) colour."""
+    profiles = [
+        e for e in entities_in(schema_text) if e.startswith("/field/") and e.endswith("/mu")
+    ]
+    colours = {}
+    for entity in profiles:
+        static = store.reader(index=None, contents=entity).to_arrow_table()
+        column = f"{entity}:BarChart:color"
+        if column not in static.column_names or static.num_rows != 1:
+            raise CheckFailed(f"{entity}: no static colour ({static.column_names})")
+        colours[entity] = static.column(column)[0].as_py()[0]
+    if len(set(colours.values())) != len(colours):
+        raise CheckFailed(f"tracks share a colour: {colours}")
+    return [f"{len(colours)} tracks, {len(colours)} distinct colours"]
+
+
+def time_only_checks(store, schema_text: str) -> list[str]:
+    """Pulses and measurements have rows on `time` and none on `wheel_pass`."""
+    series = [
+        e for e in entities_in(schema_text) if e.startswith(("/sites/", "/applicator/"))
+    ]
+    for entity in series:
+        on_wheel_pass = store.reader(index="wheel_pass", contents=entity).to_arrow_table()
+        if on_wheel_pass.num_rows != 0:
+            raise CheckFailed(
+                f"{entity}: {on_wheel_pass.num_rows} rows on wheel_pass, expected `time` only"
+            )
+        if store.reader(index="time", contents=entity).to_arrow_table().num_rows == 0:
+            raise CheckFailed(f"{entity}: nothing on the `time` timeline")
+    if not series:
+        return []
+    return [f"{len(series)} pulse/measurement series on `time` only"]
+
+
+# View classes the 0.36 viewer knows; any other shows "Unknown view class".
+KNOWN_VIEW_CLASSES = {
+    "2D", "3D", "BarChart", "Dataframe", "Graph", "Map", "StateTimeline",
+    "Tensor", "TextDocument", "TextLog", "TimeSeries",
+}
+PANEL_HIDDEN, PANEL_COLLAPSED = 1, 2
+PLAY_FOLLOWING = 3
+VIEW_FIT_FILL = 2
+
+
+def boundary_kinds(range_struct) -> list[tuple[str, str]]:
+    """(start, end) boundary kinds of a struct<start: union, end: union> array."""
+    kinds = []
+    for side in ("start", "end"):
+        union = range_struct.field(side)
+        names = {code: union.type.field(i).name for i, code in enumerate(union.type.type_codes)}
+        kinds.append([names[code] for code in union.type_codes.to_pylist()])
+    return list(zip(*kinds))
+
+
+def blueprint_checks(reader, blueprints, store, expected: dict) -> list[str]:
+    """The default layout: what the viewer opens, reached from the viewport.
+
+    - every view has a class the viewer knows;
+    - the track's mu profile has a BarChart view of its own, named after its
+      rail and band, and no BarChart view mixes entities (one track per view);
+    - with check_history: the track's mu_history has a Tensor view stretched
+      to fill it, whose name states the colour range the entity carries;
+    - every TimeSeries view shows the whole run on `time` (visible range and
+      x axis infinite at both ends);
+    - the time panel is on `time` and follows the data (opens at the end),
+      the blueprint and selection panels are collapsed or hidden.
+    """
+    import uuid
+
+    if len(blueprints) != 1:
+        raise CheckFailed(f"expected 1 blueprint store, found {blueprints}")
+    # entity path -> {column: first cell}, and the raw record batches.
+    cells: dict[str, dict] = {}
+    batches: dict[str, list] = {}
+    for chunk in reader.stream(store=blueprints[0]):
+        path = str(chunk.entity_path)
+        batch = chunk.to_record_batch()
+        batches.setdefault(path, []).append(batch)
+        for name, column in batch.to_pydict().items():
+            for cell in column:
+                if cell is not None:
+                    cells.setdefault(path, {})[name] = cell
+
+    def component(path: str, name: str):
+        value = cells.get(path, {}).get(name)
+        if value is None:
+            raise CheckFailed(f"blueprint: no {name} at {path}")
+        return value
+
+    # Walk the layout from the viewport's root container.
+    root = uuid.UUID(bytes=bytes(component("/viewport", "ViewportBlueprint:root_container")[0]))
+    views = []
+    pending = [f"/container/{root}"]
+    while pending:
+        path = pending.pop()
+        if path.startswith("/view/"):
+            views.append(path)
+            continue
+        for child in component(path, "ContainerBlueprint:contents"):
+            pending.append("/" + child.lstrip("/"))
+    if not views:
+        raise CheckFailed("blueprint: the layout has no views")
+
+    def view_info(path: str) -> tuple[str, str, list[str]]:
+        class_ = component(path, "ViewBlueprint:class_identifier")[0]
+        name = component(path, "ViewBlueprint:display_name")[0]
+        queries = component(f"{path}/ViewContents", "ViewContents:query")
+        return class_, name, queries
+
+    infos = {path: view_info(path) for path in views}
+    for path, (class_, name, _) in infos.items():
+        if class_ not in KNOWN_VIEW_CLASSES:
+            raise CheckFailed(f"blueprint: view {name!r} has unknown class {class_!r}")
+
+    rail, band = expected["rail"], expected["band"]
+    track = f"{rail} rail ({band.replace('_', ' ')} band)"
+    entity = f"/field/{rail}/{band}/mu"
+    done = []
+
+    profile = [
+        (name, queries)
+        for class_, name, queries in infos.values()
+        if class_ == "BarChart" and f"+ {entity}" in queries
+    ]
+    if not profile:
+        shown = sorted(q for _, _, qs in infos.values() for q in qs)
+        raise CheckFailed(f"no blueprint view shows {entity}; view queries: {shown}")
+    for name, queries in profile:
+        if not name.startswith(f"{track}: mu"):
+            raise CheckFailed(f"blueprint: the view of {entity} is named {name!r}, not {track!r}")
+    for class_, name, queries in infos.values():
+        if class_ == "BarChart" and (len(queries) != 1 or "*" in queries[0]):
+            raise CheckFailed(f"blueprint: bar chart {name!r} shows {queries}, not one track")
+    done.append(f"blueprint: {entity} in its own bar chart {profile[0][0]!r}")
+
+    if expected.get("check_history"):
+        history = f"/field/{rail}/{band}/mu_history"
+        heatmaps = [
+            path
+            for path, (class_, _, queries) in infos.items()
+            if class_ == "Tensor" and f"+ {history}" in queries
+        ]
+        if not heatmaps:
+            raise CheckFailed(f"blueprint: no Tensor view of {history}")
+        static = store.reader(index=None, contents=history).to_arrow_table()
+        column = f"{history}:Tensor:value_range"
+        if column not in static.column_names or static.num_rows != 1:
+            raise CheckFailed(f"{history}: no static value range ({static.column_names})")
+        low, high = static.column(column)[0].as_py()[0]
+        mu = [float(v) for v in expected["mu"]]
+        if not low <= min(mu) <= max(mu) <= high:
+            raise CheckFailed(f"{history}: colour range [{low}, {high}] misses mu {min(mu)}..{max(mu)}")
+        for path in heatmaps:
+            name = infos[path][1]
+            if f"{low:.2f} → {high:.2f}" not in name:
+                raise CheckFailed(f"blueprint: heatmap {name!r} does not state [{low:.2f}, {high:.2f}]")
+            fit = component(f"{path}/TensorViewFit", "TensorViewFit:scaling")
+            if fit != [VIEW_FIT_FILL]:
+                raise CheckFailed(f"blueprint: heatmap {name!r} fit {fit}, expected Fill")
+        done.append(f"blueprint: {history} stretched, colour {low:.2f} → {high:.2f} in its name")
+
+    series_views = [path for path, (class_, _, _) in infos.items() if class_ == "TimeSeries"]
+    for path in series_views:
+        name = infos[path][1]
+        axis = batches.get(f"{path}/TimeAxis", [])
+        ranges = batches.get(f"{path}/VisibleTimeRanges", [])
+        if not axis or not ranges:
+            raise CheckFailed(f"blueprint: time series {name!r} has no TimeAxis/VisibleTimeRanges")
+        view_range = axis[-1].column("TimeAxis:view_range").values
+        if boundary_kinds(view_range) != [("Infinite", "Infinite")]:
+            raise CheckFailed(f"blueprint: {name!r} x axis is {boundary_kinds(view_range)}")
+        visible = ranges[-1].column("VisibleTimeRanges:ranges").values
+        timelines = visible.field("timeline").to_pylist()
+        kinds = dict(zip(timelines, boundary_kinds(visible.field("range"))))
+        if kinds.get("time") != ("Infinite", "Infinite"):
+            raise CheckFailed(f"blueprint: {name!r} visible range on time is {kinds.get('time')}")
+    done.append(f"blueprint: {len(series_views)} time series over the whole run")
+
+    timeline = component("/time_panel", "TimePanelBlueprint:timeline")
+    play = component("/time_panel", "TimePanelBlueprint:play_state")
+    if timeline != ["time"] or play != [PLAY_FOLLOWING]:
+        raise CheckFailed(f"blueprint: time panel on {timeline}, play state {play}")
+    for panel in ("/blueprint_panel", "/selection_panel"):
+        state = component(panel, "PanelBlueprint:state")
+        if state[0] not in (PANEL_HIDDEN, PANEL_COLLAPSED):
+            raise CheckFailed(f"blueprint: {panel} state {state}, expected collapsed")
+    done.append("blueprint: opens following `time`, side panels collapsed")
     return done
 
 
