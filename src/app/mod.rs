@@ -14,7 +14,7 @@ use clap::{Parser, Subcommand};
 
 /// The recording the main job replays when none is given.
 pub const DEFAULT_RECORDING: &str =
-    concat!(env!("CARGO_MANIFEST_DIR"), "/recordings/curve_2day.mcap");
+    concat!(env!("CARGO_MANIFEST_DIR"), "/recordings/demo_day.mcap");
 
 #[derive(Debug, Parser)]
 #[command(
