@@ -32,7 +32,8 @@ fn outputs(recording: &Path) -> (String, String) {
     };
     replay(&args, &mut []).unwrap();
     let bytes = std::fs::read(&out).unwrap();
-    let mut table = String::from("log_time_ns,site_id,rail,quantity,train_id,axle_index,measured,simulated\n");
+    let mut table =
+        String::from("log_time_ns,site_id,rail,quantity,train_id,axle_index,measured,simulated\n");
     let mut digest = Sha256::new();
     let mut fields = 0;
     for m in mcap::MessageStream::new(&bytes).unwrap() {
@@ -40,7 +41,11 @@ fn outputs(recording: &Path) -> (String, String) {
         match m.channel.topic.as_str() {
             "/twin/measurement" => {
                 let v: serde_json::Value = serde_json::from_slice(&m.data).unwrap();
-                let text = |k: &str| v.get(k).map_or(String::new(), |x| x.to_string().trim_matches('"').to_string());
+                let text = |k: &str| {
+                    v.get(k).map_or(String::new(), |x| {
+                        x.to_string().trim_matches('"').to_string()
+                    })
+                };
                 writeln!(
                     table,
                     "{},{},{},{},{},{},{},{}",
@@ -63,8 +68,15 @@ fn outputs(recording: &Path) -> (String, String) {
             _ => {}
         }
     }
-    let hex: String = digest.finalize().iter().map(|b| format!("{b:02x}")).collect();
-    (table, format!("{fields} /twin/field messages, sha256 {hex}\n"))
+    let hex: String = digest
+        .finalize()
+        .iter()
+        .map(|b| format!("{b:02x}"))
+        .collect();
+    (
+        table,
+        format!("{fields} /twin/field messages, sha256 {hex}\n"),
+    )
 }
 
 fn check(golden: &Path, got: &str) {
@@ -74,7 +86,10 @@ fn check(golden: &Path, got: &str) {
         return;
     }
     let want = std::fs::read_to_string(golden).unwrap_or_else(|e| {
-        panic!("{}: {e}; make it deliberately with TORTWIN_BLESS=1", golden.display())
+        panic!(
+            "{}: {e}; make it deliberately with TORTWIN_BLESS=1",
+            golden.display()
+        )
     });
     if want != got {
         let (line, (w, g)) = want
@@ -82,8 +97,15 @@ fn check(golden: &Path, got: &str) {
             .zip(got.lines())
             .enumerate()
             .find(|(_, (w, g))| w != g)
-            .unwrap_or((want.lines().count().min(got.lines().count()), ("<end>", "<end>")));
-        panic!("{} differs at line {}:\n  golden: {w}\n  now:    {g}", golden.display(), line + 1);
+            .unwrap_or((
+                want.lines().count().min(got.lines().count()),
+                ("<end>", "<end>"),
+            ));
+        panic!(
+            "{} differs at line {}:\n  golden: {w}\n  now:    {g}",
+            golden.display(),
+            line + 1
+        );
     }
 }
 
@@ -100,7 +122,13 @@ fn bundled_recordings_replay_to_their_golden_files() {
         let name = recording.file_stem().unwrap().to_string_lossy();
         let (table, digest) = outputs(recording);
         assert!(table.lines().count() > 1000, "{name}: too few measurements");
-        check(&root().join(format!("tests/golden/{name}.measurements.csv")), &table);
-        check(&root().join(format!("tests/golden/{name}.field.txt")), &digest);
+        check(
+            &root().join(format!("tests/golden/{name}.measurements.csv")),
+            &table,
+        );
+        check(
+            &root().join(format!("tests/golden/{name}.field.txt")),
+            &digest,
+        );
     }
 }
