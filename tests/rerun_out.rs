@@ -6,12 +6,13 @@
 //! without them the test fails and says so. Set `TORTWIN_KEEP_RRD=FILE` to
 //! keep a copy of the recording for a look in the viewer (`rerun FILE`).
 
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use serde_json::json;
 use tortwin::recording::{Applicator, Direction, Quantity, Section, Site};
-use tortwin::sink::rerun_out::{RerunOptions, RerunSink};
+use tortwin::sink::rerun_out::{RerunOptions, RerunSink, SERIES_CHUNK_ROWS};
 use tortwin::sink::{
     FieldSnapshot, MeasurementOutput, PulseEvent, RunSummary, SectionInfo, Sink, SnapshotKind,
     TrackInfo, TrainEvent,
@@ -87,10 +88,15 @@ fn field(track: usize, wheel_pass: u64) -> Field {
     }
 }
 
-/// A synthetic run: three trains of eight axles over three tracks, a pulse
-/// before each, a measurement after each, and wheel snapshots for the
-/// second train.
-fn feed(sink: &mut dyn Sink, trains: u64) -> anyhow::Result<()> {
+/// What a run logged on the `time` series: per entity, `(log_time_ns, value)`.
+type Logged = BTreeMap<String, Vec<(u64, f64)>>;
+
+/// A synthetic run: `trains` trains of eight axles over three tracks, a
+/// pulse before each, a measurement after each, and wheel snapshots for the
+/// second train. Returns the pulses and measurements as the rrd must hold
+/// them (pulses in g).
+fn feed(sink: &mut dyn Sink, trains: u64) -> anyhow::Result<Logged> {
+    let mut logged = Logged::new();
     let section = section();
     let tracks = tracks();
     let grid_d_m: Vec<f64> = (0..GRID_POINTS).map(|i| i as f64 * SPACING_M).collect();
@@ -108,13 +114,18 @@ fn feed(sink: &mut dyn Sink, trains: u64) -> anyhow::Result<()> {
         let end_ns = start_ns + 20_000_000_000;
         let train_id = format!("T{train}");
         for rail in 0..2 {
-            sink.pulse(&PulseEvent {
+            let pulse = PulseEvent {
                 log_time_ns: start_ns - 60_000_000_000,
                 applicator_id: "A1",
                 rail,
                 rail_name: &section.rails[rail],
                 mass_kg: 0.0019 + 0.0001 * train as f64,
-            })?;
+            };
+            sink.pulse(&pulse)?;
+            logged
+                .entry(format!("/applicator/A1/{}", pulse.rail_name))
+                .or_default()
+                .push((pulse.log_time_ns, pulse.mass_kg * 1e3));
         }
         sink.train(&TrainEvent {
             log_time_ns: start_ns,
@@ -160,7 +171,7 @@ fn feed(sink: &mut dyn Sink, trains: u64) -> anyhow::Result<()> {
             }
         }
         for (rail, quantity) in [(0, Quantity::Mu), (1, Quantity::RailMu)] {
-            sink.measurement(&MeasurementOutput {
+            let m = MeasurementOutput {
                 log_time_ns: end_ns + 5_000_000_000,
                 index_in_file: train * 10 + rail as u64,
                 site_id: "S1",
@@ -172,10 +183,27 @@ fn feed(sink: &mut dyn Sink, trains: u64) -> anyhow::Result<()> {
                 axle_index: (quantity == Quantity::Mu).then_some(3),
                 measured: 0.25 + 0.01 * train as f64,
                 simulated: 0.24 + 0.012 * train as f64,
-            })?;
+            };
+            sink.measurement(&m)?;
+            let base = format!("/sites/S1/{}/{}", m.rail_name, m.quantity.as_str());
+            for (leaf, value) in [("measured", m.measured), ("simulated", m.simulated)] {
+                logged
+                    .entry(format!("{base}/{leaf}"))
+                    .or_default()
+                    .push((m.log_time_ns, value));
+            }
         }
     }
-    Ok(())
+    Ok(logged)
+}
+
+/// `logged` as the checker's "series" expectation.
+fn series_json(logged: &Logged) -> serde_json::Value {
+    logged
+        .iter()
+        .map(|(entity, points)| (entity.clone(), json!(points)))
+        .collect::<serde_json::Map<_, _>>()
+        .into()
 }
 
 fn python() -> String {
@@ -227,11 +255,13 @@ fn rerun_reads_back_the_fields_the_sink_was_given() {
         &rrd,
         RerunOptions {
             history_rows: 2,
+            // The heatmap at every train: the first train's is checked.
+            history_every: 1,
             ..RerunOptions::default()
         },
     )
     .expect("creating the rerun sink");
-    feed(&mut sink, TRAINS).expect("feeding the sink");
+    let logged = feed(&mut sink, TRAINS).expect("feeding the sink");
     assert!(!rrd.exists(), "the target must not exist before finish");
     sink.finish(&RunSummary::default())
         .expect("finishing the sink");
@@ -279,7 +309,8 @@ fn rerun_reads_back_the_fields_the_sink_was_given() {
         dir.path(),
         "first_train_high_gauge_corner",
     );
-    // low/top (track 2) mid-train: a wheel snapshot of the second train.
+    // low/top (track 2) mid-train: a wheel snapshot of the second train;
+    // every pulse and measurement, at its time.
     check_rrd(
         &rrd,
         json!({
@@ -287,10 +318,103 @@ fn rerun_reads_back_the_fields_the_sink_was_given() {
             "band": "top",
             "wheel_pass": AXLES + 3,
             "mu": field(2, AXLES + 3).mu,
+            "series": series_json(&logged),
         }),
         dir.path(),
         "wheel_low_top",
     );
+}
+
+#[test]
+fn the_heatmap_is_logged_every_n_trains_and_after_the_last() {
+    let dir = tempfile::tempdir().expect("creating a temporary directory");
+    // E = 2 over three trains: after the second, and the third's at finish
+    // (where its snapshot was). E = 3: after the third only, not twice.
+    for (every, logged_at) in [(2, vec![2 * AXLES, 3 * AXLES]), (3, vec![3 * AXLES])] {
+        let rrd = dir.path().join(format!("every_{every}.rrd"));
+        let mut sink = RerunSink::create(
+            &rrd,
+            RerunOptions {
+                history_rows: 3,
+                history_every: every,
+                ..RerunOptions::default()
+            },
+        )
+        .expect("creating the rerun sink");
+        feed(&mut sink, TRAINS).expect("feeding the sink");
+        sink.finish(&RunSummary::default())
+            .expect("finishing the sink");
+        drop(sink);
+        for (track, rail, band) in [(1, "high", "top"), (2, "low", "top")] {
+            check_rrd(
+                &rrd,
+                json!({
+                    "rail": rail,
+                    "band": band,
+                    "wheel_pass": TRAINS * AXLES,
+                    "mu": field(track, TRAINS * AXLES).mu,
+                    "check_history": true,
+                    "history_rows": 3,
+                    "history_logged_at": logged_at,
+                    "blueprint": true,
+                }),
+                dir.path(),
+                &format!("every_{every}_{rail}_{band}"),
+            );
+        }
+    }
+}
+
+#[test]
+fn a_long_run_comes_back_whole() {
+    // Longer than a chunk of every kind: the profiles (a few hundred
+    // snapshots a chunk), the pulse series (SERIES_CHUNK_ROWS values) and
+    // the default heatmap cadence and depth.
+    const LONG: u64 = 600;
+    let dir = tempfile::tempdir().expect("creating a temporary directory");
+    let rrd = dir.path().join("long.rrd");
+    let options = RerunOptions::default();
+    let (every, rows) = (options.history_every as u64, options.history_rows as u64);
+    let mut sink = RerunSink::create(&rrd, options).expect("creating the rerun sink");
+    let mut logged = feed(&mut sink, LONG).expect("feeding the sink");
+    let first_ns = ORIGIN_NS + (LONG + 1) * TRAIN_INTERVAL_NS;
+    for i in 0..2 * SERIES_CHUNK_ROWS as u64 + 7 {
+        let pulse = PulseEvent {
+            log_time_ns: first_ns + i * 1_000_000_000,
+            applicator_id: "A1",
+            rail: 0,
+            rail_name: "high",
+            mass_kg: 1e-3 + 1e-7 * i as f64,
+        };
+        sink.pulse(&pulse).expect("a pulse");
+        logged
+            .entry("/applicator/A1/high".to_owned())
+            .or_default()
+            .push((pulse.log_time_ns, pulse.mass_kg * 1e3));
+    }
+    sink.finish(&RunSummary::default())
+        .expect("finishing the sink");
+    drop(sink);
+
+    let mut logged_at: Vec<u64> = (1..=LONG / every).map(|n| n * every * AXLES).collect();
+    if !LONG.is_multiple_of(every) {
+        logged_at.push(LONG * AXLES);
+    }
+    for wheel_pass in [every * AXLES + AXLES, LONG * AXLES] {
+        let mut expected = json!({
+            "rail": "high",
+            "band": "gauge_corner",
+            "wheel_pass": wheel_pass,
+            "mu": field(0, wheel_pass).mu,
+        });
+        if wheel_pass == LONG * AXLES {
+            expected["check_history"] = json!(true);
+            expected["history_rows"] = json!(rows.min(LONG));
+            expected["history_logged_at"] = json!(logged_at);
+            expected["series"] = series_json(&logged);
+        }
+        check_rrd(&rrd, expected, dir.path(), &format!("long_{wheel_pass}"));
+    }
 }
 
 #[test]

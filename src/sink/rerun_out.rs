@@ -14,6 +14,36 @@
 //! `log_tick` timelines are switched off: they would record when the twin
 //! ran, not when the trains did.
 //!
+//! # Memory and size
+//! Memory grows with the section, not with the recording, and a month of
+//! traffic (1200 trains on a 1.5 km curve) is a file of about 40 MB:
+//! - what is logged at every snapshot, pulse or measurement (the profiles,
+//!   hundreds of thousands of series values a month) is not logged row by
+//!   row: the sink buffers it and sends it as columns
+//!   ([`RecordingStream::send_columns`]), a chunk per entity of
+//!   [`SERIES_CHUNK_ROWS`] values or, for the profiles, about
+//!   [`BATCH_CHUNK_BYTES`], and the rest at [`Sink::finish`]. A row logged
+//!   through the SDK's batcher costs several times its data while it waits
+//!   (its own arrays and arrow types), and the batcher fell behind the
+//!   engine: the backlog, and the process, grew with the length of the run;
+//! - the heatmaps are logged every [`RerunOptions::history_every`] trains
+//!   and after the last train, not at every train: each log is the whole
+//!   `K * N` heatmap, and at every train they made most of the file;
+//! - the profiles are stored as f32 (seven significant digits, far below
+//!   what a bar chart shows; the exact values are in the MCAP output): as
+//!   f64 they were the bulk of a long run's file once the heatmaps were not;
+//! - what still goes through the batcher (trains, heatmaps, static data) is
+//!   cut into chunks by size ([`BATCH_CHUNK_BYTES`], about the viewer's own
+//!   chunk size, or [`SERIES_CHUNK_ROWS`] rows), not every 200 ms of wall
+//!   clock, and the SDK's queues hold at most [`MAX_BYTES_IN_FLIGHT`]: few
+//!   large chunks (the file's footer keeps an entry per chunk until the
+//!   end) and a file that does not depend on how fast the machine ran.
+//!
+//! The sink's own collections are bounded by the section: a style flag per
+//! series, the sites' quantities and rails, the applicators, up to
+//! [`SERIES_CHUNK_ROWS`] values per series, about [`BATCH_CHUNK_BYTES`] of
+//! profiles per quantity and track, and `K` rows of f16 per heatmap.
+//!
 //! # Entity layout
 //! Rail and band names are taken verbatim (escaped by [`EntityPath`]).
 //!
@@ -22,14 +52,14 @@
 //! | `section/description`                   | `TextDocument` (markdown) | static        |
 //! | `section/map/rails`                     | `LineStrips2D`            | static        |
 //! | `section/map/applicators`, `…/sites`    | `Points2D` with labels    | static        |
-//! | `field/<rail>/<band>/mu`                | `BarChart`                | every snapshot|
-//! | `field/<rail>/<band>/adhesion`          | `BarChart` (T/N)          | every snapshot|
-//! | `field/<rail>/<band>/rail_mass_mg`      | `BarChart`                | every snapshot|
-//! | `field/<rail>/<band>/wheel_mass_mg`     | `BarChart`                | every snapshot|
-//! | `field/<rail>/<band>/mu_history`        | `Tensor` (heatmap)        | train snapshot|
-//! | `sites/<site>/<rail>/<quantity>/measured`  | `Scalars` + `SeriesPoints` | measurement (`time`) |
-//! | `sites/<site>/<rail>/<quantity>/simulated` | `Scalars` + `SeriesLines` + `SeriesPoints` | measurement (`time`) |
-//! | `applicator/<id>/<rail>`                | `Scalars` in g + `SeriesPoints` | pulse (`time`) |
+//! | `field/<rail>/<band>/mu`                | `BarChart` (f32)          | every snapshot (sent in columns) |
+//! | `field/<rail>/<band>/adhesion`          | `BarChart` (T/N, f32)     | every snapshot (sent in columns) |
+//! | `field/<rail>/<band>/rail_mass_mg`      | `BarChart` (f32)          | every snapshot (sent in columns) |
+//! | `field/<rail>/<band>/wheel_mass_mg`     | `BarChart` (f32)          | every snapshot (sent in columns) |
+//! | `field/<rail>/<band>/mu_history`        | `Tensor` (heatmap)        | every `E`-th train, last train |
+//! | `sites/<site>/<rail>/<quantity>/measured`  | `Scalars` + `SeriesPoints` | measurement (`time`, sent in columns) |
+//! | `sites/<site>/<rail>/<quantity>/simulated` | `Scalars` + `SeriesLines` + `SeriesPoints` | measurement (`time`, sent in columns) |
+//! | `applicator/<id>/<rail>`                | `Scalars` in g + `SeriesPoints` | pulse (`time`, sent in columns) |
 //! | `trains`                                | `TextLog`                 | train         |
 //! | `run/summary`                           | `TextDocument` (markdown) | static, at finish |
 //!
@@ -44,13 +74,16 @@
 //!
 //! The heatmap `mu_history` of a track is its `mu` after each of the last
 //! [`RerunOptions::history_rows`] trains: row 0 is the oldest, the last row
-//! the newest, one column per grid point. It is rewritten whole at every
-//! train (rerun has no "append a row"), so it is stored as f16 (three
-//! significant digits, plenty for a colour; the exact values are in the
-//! profiles): a run stores up to `trains * K * N * 2` bytes per track before
-//! compression, e.g. 0.28 GB for 300 trains, K = 256, N = 600 and 3 tracks
-//! (40 MB on disk with the smooth profiles of `tests/rerun_out.rs`). Lower
-//! `K` for long runs. It holds only the trains run so far, not `K` rows
+//! the newest, one column per grid point. rerun has no "append a row", so it
+//! is rewritten whole, after every [`RerunOptions::history_every`]-th train
+//! (`E`) and after the last train at [`Sink::finish`] (at that train's time
+//! and wheel pass), and stored as f16 (three significant digits, plenty for
+//! a colour; the profiles hold the finer values): a run stores about
+//! `trains / E * K * N * 2` bytes per track before compression, e.g. 20 MB
+//! for a month of 1200 trains, E = 32, K = 256, N = 527 and 2 tracks (at
+//! E = 1, 0.6 GB).
+//! Between two logs the viewer shows the latest one, at most `E - 1` trains
+//! behind the profiles. It holds only the trains run so far, not `K` rows
 //! padded with NaN: the 0.36 viewer paints NaN in the colormap's low end,
 //! which would read as low mu (the blueprint stretches the image instead, so
 //! a one-train heatmap is not a one-pixel strip). Its colour scale (a
@@ -75,7 +108,7 @@
 //! The layout:
 //! - left, a grid with one column per track: a row per quantity along `d`
 //!   (mu, adhesion, rail product, wheel product), each view titled with its
-//!   rail and band ("high rail (top band): mu along d [m]") and no legend,
+//!   rail and band ("high rail (top band): mu along d \[m\]") and no legend,
 //!   and a last row with the track's mu history heatmap (stretched to fill
 //!   the view, Viridis, the colour range in the title);
 //! - right, a tab per site, in it a row per quantity measured there and a
@@ -94,13 +127,15 @@
 //!
 //! # Files
 //! The recording is written to `.NAME.partial-<pid>` next to the target;
-//! [`Sink::finish`] flushes the stream, closes it (which writes the rrd
-//! footer) and renames the file into place. A sink dropped without `finish`
-//! closes the stream and deletes the temporary file.
+//! [`Sink::finish`] sends the buffered profiles and series and the last
+//! heatmaps, flushes the stream, closes it (which writes the rrd footer) and
+//! renames the file into place. A sink dropped without `finish` closes the
+//! stream and deletes the temporary file.
 
 use std::collections::{BTreeMap, BTreeSet, HashSet, VecDeque};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
+use std::time::Duration;
 
 use anyhow::{anyhow, bail, Context};
 use rerun::blueprint::components::{
@@ -119,9 +154,10 @@ use rerun::external::re_sdk_types::blueprint::archetypes::{
     TimePanelBlueprint, ViewBlueprint, ViewContents, ViewportBlueprint, VisibleTimeRanges,
 };
 use rerun::external::re_sdk_types::external::uuid::Uuid;
+use rerun::log::ChunkBatcherConfig;
 use rerun::{
     Archetype, AsComponents, EntityPath, EntityPathPart, RecordingStream, RecordingStreamBuilder,
-    TimeCell,
+    TimeCell, TimeColumn,
 };
 
 use super::{
@@ -145,6 +181,18 @@ const PLAYBACK_S: f64 = 60.0;
 /// The default heatmap colour range is the run's mu rounded out to 1/this
 /// (0.05).
 const MU_COLOR_STEPS_PER_UNIT: f64 = 20.0;
+/// Values a pulse or measurement series buffers before it is sent as one
+/// chunk; also the batcher's row limit. The viewer's own chunks hold up to
+/// 4096 rows (`ChunkStoreConfig::DEFAULT`).
+pub const SERIES_CHUNK_ROWS: usize = 4096;
+/// The batcher sends an entity's rows as a chunk once they reach this size
+/// (the viewer's own chunk size, `ChunkStoreConfig::DEFAULT`), not every
+/// 200 ms: fewer, larger chunks, and a file that does not depend on how fast
+/// the machine ran.
+pub const BATCH_CHUNK_BYTES: u64 = 384 * 1024;
+/// The most the SDK's queues hold before `log` waits for the writer (rerun's
+/// default is 100 MiB).
+pub const MAX_BYTES_IN_FLIGHT: u64 = 8 * 1024 * 1024;
 
 /// What the rerun recording holds beyond the fixed layout.
 #[derive(Debug, Clone)]
@@ -155,6 +203,11 @@ pub struct RerunOptions {
     pub recording_name: Option<String>,
     /// `K`: trains kept in each track's `mu_history` heatmap; 0 logs none.
     pub history_rows: usize,
+    /// `E`: the heatmaps are logged after every `E`-th train, and after the
+    /// last train at [`Sink::finish`]; 1 (or 0) logs them at every train.
+    /// Each log stores the whole heatmap (`K` rows), so this divides their
+    /// share of the file.
+    pub history_every: usize,
     /// The heatmap colour scale for mu, fixed for the whole run so a colour
     /// means the same mu at every train. `None`: the run's mu range, rounded
     /// out to 0.05 (known, and logged, at [`Sink::finish`]).
@@ -169,6 +222,9 @@ impl Default for RerunOptions {
             application_id: "tortwin".to_owned(),
             recording_name: None,
             history_rows: 256,
+            // K / 8: the heatmap is never more than an eighth of its rows
+            // behind, and a month of trains stores it about 40 times.
+            history_every: 32,
             mu_color_range: None,
             blueprint: true,
         }
@@ -187,6 +243,9 @@ pub struct RerunSink {
     layout: Option<Layout>,
     tracks: Vec<TrackState>,
     grid_len: usize,
+    /// Snapshots a track buffers before its profiles are sent: a chunk of
+    /// about [`BATCH_CHUNK_BYTES`] per quantity.
+    profile_chunk_rows: usize,
     /// Largest wheel_pass of any track so far: the `wheel_pass` timeline.
     wheel_pass: u64,
     /// Series entities whose static style has been logged.
@@ -196,6 +255,8 @@ pub struct RerunSink {
     measured: BTreeMap<usize, BTreeMap<usize, (Quantity, BTreeSet<usize>)>>,
     /// Applicator entities that received a pulse.
     pulsed: BTreeSet<EntityPath>,
+    /// Pulse and measurement values not sent yet, per entity.
+    series: BTreeMap<EntityPath, Series>,
     /// Smallest and largest mu put into a heatmap.
     mu_seen: Option<[f64; 2]>,
     /// First and last log_time of anything logged on `time`.
@@ -223,6 +284,30 @@ struct TrackState {
     mu_history: EntityPath,
     /// mu after each of the last K trains, oldest first.
     history: VecDeque<Vec<F16>>,
+    /// Trains added to `history` since it was last logged.
+    history_unlogged: usize,
+    /// `(log_time_ns, wheel_pass)` of the last train snapshot: where the
+    /// heatmap is logged at finish if that train's was not.
+    last_train: Option<(u64, u64)>,
+    /// Profiles not sent yet.
+    pending: PendingProfiles,
+}
+
+/// A track's profiles not sent yet, a row per snapshot; the quantities
+/// share the times.
+#[derive(Default)]
+struct PendingProfiles {
+    times_ns: Vec<i64>,
+    wheel_passes: Vec<i64>,
+    /// mu, adhesion, rail product (mg), wheel product (mg), as f32.
+    values: [Vec<Vec<f32>>; 4],
+}
+
+/// A scalar series on `time`, buffered until it is sent as columns.
+#[derive(Default)]
+struct Series {
+    times_ns: Vec<i64>,
+    values: Vec<f64>,
 }
 
 impl RerunSink {
@@ -251,6 +336,13 @@ impl RerunSink {
         let rec = RecordingStreamBuilder::new(application_id)
             .recording_name(recording_name)
             .enabled(true)
+            .batcher_config(ChunkBatcherConfig {
+                flush_tick: Duration::MAX,
+                flush_num_bytes: BATCH_CHUNK_BYTES,
+                flush_num_rows: SERIES_CHUNK_ROWS as u64,
+                max_bytes_in_flight: MAX_BYTES_IN_FLIGHT,
+                ..ChunkBatcherConfig::DEFAULT
+            })
             .save(&temp_path)
             .with_context(|| format!("creating rerun output {}", temp_path.display()))?;
         rec.set_log_time_enabled(false);
@@ -265,10 +357,12 @@ impl RerunSink {
             layout: None,
             tracks: Vec::new(),
             grid_len: 0,
+            profile_chunk_rows: 1,
             wheel_pass: 0,
             styled: HashSet::new(),
             measured: BTreeMap::new(),
             pulsed: BTreeSet::new(),
+            series: BTreeMap::new(),
             mu_seen: None,
             time_span_ns: None,
         })
@@ -283,28 +377,71 @@ impl RerunSink {
         })
     }
 
-    /// Sets the calling thread's time: `time` always, `wheel_pass` only
-    /// `with_wheel_pass` (else that timeline is cleared). The next logs land
-    /// there.
-    fn set_time(&mut self, log_time_ns: u64, with_wheel_pass: bool) -> anyhow::Result<()> {
-        let time_ns = i64::try_from(log_time_ns)
-            .with_context(|| format!("log_time {log_time_ns} ns out of range"))?;
-        let wheel_pass = i64::try_from(self.wheel_pass)
-            .with_context(|| format!("wheel_pass {} out of range", self.wheel_pass))?;
-        self.time_span_ns = Some(match self.time_span_ns {
-            Some([first, last]) => [first.min(log_time_ns), last.max(log_time_ns)],
-            None => [log_time_ns, log_time_ns],
-        });
+    /// Sets the calling thread's time: `time` always, `wheel_pass` if given
+    /// (else that timeline is cleared). The next logs land there. Returns
+    /// the time as rerun takes it.
+    fn set_time(&mut self, log_time_ns: u64, wheel_pass: Option<u64>) -> anyhow::Result<i64> {
+        let time_ns = self.note_time(log_time_ns)?;
+        let wheel_pass = wheel_pass
+            .map(|w| i64::try_from(w).with_context(|| format!("wheel_pass {w} out of range")))
+            .transpose()?;
         let rec = self.rec()?;
-        if with_wheel_pass {
-            rec.set_time(TIMELINE_WHEEL_PASS, TimeCell::from_sequence(wheel_pass));
-        } else {
-            rec.disable_timeline(TIMELINE_WHEEL_PASS);
+        match wheel_pass {
+            Some(wheel_pass) => {
+                rec.set_time(TIMELINE_WHEEL_PASS, TimeCell::from_sequence(wheel_pass));
+            }
+            None => rec.disable_timeline(TIMELINE_WHEEL_PASS),
         }
         rec.set_time(
             TIMELINE_TIME,
             TimeCell::from_timestamp_nanos_since_epoch(time_ns),
         );
+        Ok(time_ns)
+    }
+
+    /// Checks a log_time and widens the run's time span by it.
+    fn note_time(&mut self, log_time_ns: u64) -> anyhow::Result<i64> {
+        let time_ns = i64::try_from(log_time_ns)
+            .with_context(|| format!("log_time {log_time_ns} ns out of range"))?;
+        self.time_span_ns = Some(match self.time_span_ns {
+            Some([first, last]) => [first.min(log_time_ns), last.max(log_time_ns)],
+            None => [log_time_ns, log_time_ns],
+        });
+        Ok(time_ns)
+    }
+
+    /// Adds a value to the series at `path` on `time`; sends the series once
+    /// it holds [`SERIES_CHUNK_ROWS`] values.
+    fn push_series(
+        &mut self,
+        path: EntityPath,
+        log_time_ns: u64,
+        value: f64,
+    ) -> anyhow::Result<()> {
+        let time_ns = self.note_time(log_time_ns)?;
+        let series = self.series.entry(path.clone()).or_default();
+        series.times_ns.push(time_ns);
+        series.values.push(value);
+        if series.values.len() >= SERIES_CHUNK_ROWS {
+            let series = std::mem::take(series);
+            send_series(self.rec()?, path, series)?;
+        }
+        Ok(())
+    }
+
+    /// Sends every buffered series.
+    fn flush_series(&mut self) -> anyhow::Result<()> {
+        let rec = self.rec.as_ref().ok_or_else(|| {
+            anyhow!(
+                "rerun output {}: already finished",
+                self.final_path.display()
+            )
+        })?;
+        for (path, series) in std::mem::take(&mut self.series) {
+            if !series.values.is_empty() {
+                send_series(rec, path, series)?;
+            }
+        }
         Ok(())
     }
 
@@ -701,6 +838,9 @@ impl BlueprintWriter<'_> {
 impl Sink for RerunSink {
     fn begin(&mut self, info: &SectionInfo<'_>) -> anyhow::Result<()> {
         self.grid_len = info.grid_d_m.len();
+        self.profile_chunk_rows = (BATCH_CHUNK_BYTES as usize
+            / (self.grid_len * std::mem::size_of::<f32>()).max(1))
+        .clamp(1, SERIES_CHUNK_ROWS);
         self.layout = Some(Layout {
             rails: info.section.rails.clone(),
             sites: info
@@ -724,6 +864,9 @@ impl Sink for RerunSink {
                     wheel_mass: path("wheel_mass_mg"),
                     mu_history: path("mu_history"),
                     history: VecDeque::new(),
+                    history_unlogged: 0,
+                    last_train: None,
+                    pending: PendingProfiles::default(),
                 }
             })
             .collect();
@@ -732,7 +875,7 @@ impl Sink for RerunSink {
     }
 
     fn train(&mut self, train: &TrainEvent<'_>) -> anyhow::Result<()> {
-        self.set_time(train.log_time_ns, true)?;
+        self.set_time(train.log_time_ns, Some(self.wheel_pass))?;
         let direction = match train.direction {
             Direction::Up => "up (d increasing)",
             Direction::Down => "down (d decreasing)",
@@ -765,11 +908,8 @@ impl Sink for RerunSink {
                 .with_marker_sizes([3.0])],
         )?;
         self.pulsed.insert(path.clone());
-        self.set_time(pulse.log_time_ns, false)?;
-        self.rec()?
-            .log(path, &rerun::Scalars::single(pulse.mass_kg * G_PER_KG))
-            .with_context(|| format!("rerun output: pulse of {}", pulse.applicator_id))?;
-        Ok(())
+        self.push_series(path, pulse.log_time_ns, pulse.mass_kg * G_PER_KG)
+            .with_context(|| format!("rerun output: pulse of {}", pulse.applicator_id))
     }
 
     fn measurement(&mut self, m: &MeasurementOutput<'_>) -> anyhow::Result<()> {
@@ -813,17 +953,14 @@ impl Sink for RerunSink {
             .or_insert_with(|| (m.quantity, BTreeSet::new()))
             .1
             .insert(m.rail);
-        self.set_time(m.log_time_ns, false)?;
-        let rec = self.rec()?;
-        rec.log(measured, &rerun::Scalars::single(m.measured))
-            .and_then(|()| rec.log(simulated, &rerun::Scalars::single(m.simulated)))
+        self.push_series(measured, m.log_time_ns, m.measured)
+            .and_then(|()| self.push_series(simulated, m.log_time_ns, m.simulated))
             .with_context(|| {
                 format!(
                     "rerun output: measurement {} at site {}",
                     m.index_in_file, m.site_id
                 )
-            })?;
-        Ok(())
+            })
     }
 
     fn field(&mut self, f: &FieldSnapshot<'_>) -> anyhow::Result<()> {
@@ -852,7 +989,10 @@ impl Sink for RerunSink {
         }
 
         self.wheel_pass = self.wheel_pass.max(f.wheel_pass);
-        self.set_time(f.log_time_ns, true)?;
+        let wheel_pass = self.wheel_pass;
+        let time_ns = self.set_time(f.log_time_ns, Some(wheel_pass))?;
+        let wheel_pass_seq = i64::try_from(wheel_pass)
+            .with_context(|| format!("wheel_pass {wheel_pass} out of range"))?;
         let history_rows = self.options.history_rows;
         if f.kind == SnapshotKind::Train && history_rows > 0 {
             for &mu in f.mu.iter().filter(|mu| mu.is_finite()) {
@@ -873,22 +1013,21 @@ impl Sink for RerunSink {
         };
         let label = track.label.clone();
         let context = || format!("rerun output: field of train {} on {label}", f.train_id);
-        let in_mg = |kg: &[f64]| kg.iter().map(|m| m * MG_PER_KG).collect::<Vec<f64>>();
-        rec.log(track.mu.clone(), &rerun::BarChart::new(f.mu))
-            .and_then(|()| rec.log(track.adhesion.clone(), &rerun::BarChart::new(f.adhesion)))
-            .and_then(|()| {
-                rec.log(
-                    track.rail_mass.clone(),
-                    &rerun::BarChart::new(in_mg(f.rail_mass_kg)),
-                )
-            })
-            .and_then(|()| {
-                rec.log(
-                    track.wheel_mass.clone(),
-                    &rerun::BarChart::new(in_mg(f.wheel_mass_kg)),
-                )
-            })
-            .with_context(context)?;
+        let pending = &mut track.pending;
+        pending.times_ns.push(time_ns);
+        pending.wheel_passes.push(wheel_pass_seq);
+        let profiles = [
+            (f.mu, 1.0),
+            (f.adhesion, 1.0),
+            (f.rail_mass_kg, MG_PER_KG),
+            (f.wheel_mass_kg, MG_PER_KG),
+        ];
+        for (rows, (values, scale)) in pending.values.iter_mut().zip(profiles) {
+            rows.push(values.iter().map(|&v| (v * scale) as f32).collect());
+        }
+        if pending.times_ns.len() >= self.profile_chunk_rows {
+            send_profiles(rec, track).with_context(context)?;
+        }
 
         if f.kind == SnapshotKind::Train && history_rows > 0 {
             while track.history.len() >= history_rows {
@@ -897,26 +1036,48 @@ impl Sink for RerunSink {
             track
                 .history
                 .push_back(f.mu.iter().map(|&mu| F16::from_f64(mu)).collect());
-            let rows = track.history.len();
-            let flat: Vec<F16> = track.history.iter().flatten().copied().collect();
-            let heatmap = TensorData::new(
-                vec![rows as u64, grid_len as u64],
-                TensorBuffer::F16(flat.into()),
-            )
-            .with_dim_names(["train (newest at the bottom)", "grid point i (d = i*C)"]);
-            rec.log(track.mu_history.clone(), &rerun::Tensor::new(heatmap))
-                .with_context(context)?;
+            track.history_unlogged += 1;
+            track.last_train = Some((f.log_time_ns, wheel_pass));
+            if track.history_unlogged >= self.options.history_every.max(1) {
+                log_history(rec, track, grid_len).with_context(context)?;
+            }
         }
         Ok(())
     }
 
     fn finish(&mut self, summary: &RunSummary) -> anyhow::Result<()> {
-        let context = || format!("rerun output {}", self.temp_path.display());
+        let temp_path = self.temp_path.clone();
+        let context = || format!("rerun output {}", temp_path.display());
+        self.flush_series()
+            .with_context(|| format!("{}: pulses and measurements", context()))?;
+        if let Some(rec) = self.rec.as_ref() {
+            for track in &mut self.tracks {
+                send_profiles(rec, track).with_context(|| format!("{}: profiles", context()))?;
+            }
+        }
+        // The last train's heatmap, where its snapshot was, if not yet logged.
+        for index in 0..self.tracks.len() {
+            let track = &self.tracks[index];
+            let Some((log_time_ns, wheel_pass)) = track.last_train else {
+                continue;
+            };
+            if track.history_unlogged == 0 {
+                continue;
+            }
+            self.set_time(log_time_ns, Some(wheel_pass))?;
+            let rec = self
+                .rec
+                .as_ref()
+                .ok_or_else(|| anyhow!("{}: already finished", context()))?;
+            log_history(rec, &mut self.tracks[index], self.grid_len)
+                .with_context(|| format!("{}: last heatmap", context()))?;
+        }
         let [low, high] = self.mu_color_range();
         let rec = self.rec()?;
+        let history = (self.options.history_rows, self.options.history_every.max(1));
         rec.log_static(
             "run/summary",
-            &rerun::TextDocument::from_markdown(summarize(summary, [low, high])),
+            &rerun::TextDocument::from_markdown(summarize(summary, [low, high], history)),
         )
         .with_context(|| format!("{}: summary", context()))?;
         if self.options.mu_color_range.is_none() {
@@ -977,6 +1138,66 @@ impl Drop for RerunSink {
             let _ = std::fs::remove_file(&self.temp_path);
         }
     }
+}
+
+/// Sends a track's buffered profiles, a chunk per quantity.
+fn send_profiles(rec: &RecordingStream, track: &mut TrackState) -> anyhow::Result<()> {
+    let pending = std::mem::take(&mut track.pending);
+    if pending.times_ns.is_empty() {
+        return Ok(());
+    }
+    let paths = [
+        &track.mu,
+        &track.adhesion,
+        &track.rail_mass,
+        &track.wheel_mass,
+    ];
+    for (path, rows) in paths.into_iter().zip(pending.values) {
+        let indexes = [
+            TimeColumn::new_timestamp_nanos_since_epoch(
+                TIMELINE_TIME,
+                pending.times_ns.iter().copied(),
+            ),
+            TimeColumn::new_sequence(TIMELINE_WHEEL_PASS, pending.wheel_passes.iter().copied()),
+        ];
+        rec.send_columns(
+            path.clone(),
+            indexes,
+            rerun::BarChart::update_fields()
+                .with_many_values(rows)
+                .columns_of_unit_batches()?,
+        )?;
+    }
+    Ok(())
+}
+
+/// Logs a track's heatmap: its history as it stands, at the thread's time.
+fn log_history(
+    rec: &RecordingStream,
+    track: &mut TrackState,
+    grid_len: usize,
+) -> anyhow::Result<()> {
+    let rows = track.history.len();
+    let flat: Vec<F16> = track.history.iter().flatten().copied().collect();
+    let heatmap = TensorData::new(
+        vec![rows as u64, grid_len as u64],
+        TensorBuffer::F16(flat.into()),
+    )
+    .with_dim_names(["train (newest at the bottom)", "grid point i (d = i*C)"]);
+    rec.log(track.mu_history.clone(), &rerun::Tensor::new(heatmap))?;
+    track.history_unlogged = 0;
+    Ok(())
+}
+
+/// Sends a buffered series as one chunk on `time`.
+fn send_series(rec: &RecordingStream, path: EntityPath, series: Series) -> anyhow::Result<()> {
+    let time = TimeColumn::new_timestamp_nanos_since_epoch(TIMELINE_TIME, series.times_ns);
+    rec.send_columns(
+        path,
+        [time],
+        rerun::Scalars::new(series.values).columns_of_unit_batches()?,
+    )?;
+    Ok(())
 }
 
 /// An entity path from verbatim names (rail names may hold any character).
@@ -1114,8 +1335,8 @@ fn describe(info: &SectionInfo<'_>) -> String {
     md
 }
 
-/// The end-of-run figures as a markdown page.
-fn summarize(summary: &RunSummary, mu_color_range: [f64; 2]) -> String {
+/// The end-of-run figures as a markdown page; `history` is `(K, E)`.
+fn summarize(summary: &RunSummary, mu_color_range: [f64; 2], history: (usize, usize)) -> String {
     let mut md = String::new();
     // Writing to a String cannot fail.
     let _ = writeln!(md, "# Run summary\n");
@@ -1158,12 +1379,16 @@ fn summarize(summary: &RunSummary, mu_color_range: [f64; 2]) -> String {
         balance.closing_error()
     );
     let [low, high] = mu_color_range;
+    let (rows, every) = history;
     let _ = writeln!(md, "\n## Reading the views\n");
-    let _ = writeln!(
-        md,
-        "- mu history heatmaps: one row per train, newest at the bottom, one column per grid \
-         point; colour Viridis from mu = {low:.2} (dark purple) to {high:.2} (yellow)"
-    );
+    if rows > 0 {
+        let _ = writeln!(
+            md,
+            "- mu history heatmaps: one row per train (the last {rows}), newest at the bottom, \
+             one column per grid point, updated every {every} trains and after the last one; \
+             colour Viridis from mu = {low:.2} (dark purple) to {high:.2} (yellow)"
+        );
+    }
     let _ = writeln!(
         md,
         "- site plots: dots are the measurements, the pale line through small dots the twin"

@@ -11,7 +11,9 @@ the crate's rerun dependency).
 2. The file must hold exactly one recording, with an rrd footer (proof that
    the writer closed it), and the timelines `wheel_pass` and `time`.
 3. The `mu` profile of one track, `/field/<rail>/<band>/mu` (a BarChart), at
-   one snapshot must equal the expected values.
+   one snapshot must equal the expected values at the precision it is stored
+   in: F64 exactly, F32 as the expected values rounded to f32 (any other
+   buffer type fails).
 4. Every track's mu profile has a static colour of its own; pulses and site
    measurements (`/applicator/**`, `/sites/**`) are on the `time` timeline
    only (on `wheel_pass` a train's measurements would stack).
@@ -28,8 +30,13 @@ EXPECTED.json:
       "check_history": true,               # optional: the newest row of
                                            #   mu_history at that snapshot is mu (f16)
       "history_rows": 2,                   # optional: rows mu_history holds then
-      "blueprint": true                    # optional: require a blueprint store
+      "history_logged_at": [16, 24],       # optional: exactly the wheel_pass values
+                                           #   at which mu_history was logged
+      "blueprint": true,                   # optional: require a blueprint store
                                            #   laid out as `blueprint_checks` says
+      "series": {                          # optional: per Scalars entity, every
+        "/applicator/A1/high": [[t, v], ...]   # (time in ns, value) it holds on
+      }                                    #   `time`, exactly, none missing or extra
     }
 
 Exit status 0 when every check passes, 1 when one fails, 2 when the file or
@@ -41,6 +48,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import struct
 import subprocess
 import sys
 from pathlib import Path
@@ -77,19 +85,45 @@ def tensor_values(cell: object, what: str) -> tuple[list[int], list[float]]:
     return [int(n) for n in tensor["shape"]], [float(v) for v in tensor["buffer"]]
 
 
-def last_cell_at(table, column: str, timeline: str, time: int) -> object:
-    """The last non-null cell of `column` logged exactly at `time` (latest-at wins)."""
+def logged_at(table, column: str, timeline: str) -> list[int]:
+    """The times at which `column` has a non-null cell, ascending, without repeats."""
     if column not in table.column_names:
         raise CheckFailed(f"no column {column}; columns: {table.column_names}")
     times = table.column(timeline).to_pylist()
     cells = table.column(column).to_pylist()
-    found = [cell for t, cell in zip(times, cells) if t == time and cell is not None]
+    return sorted({t for t, cell in zip(times, cells) if cell is not None})
+
+
+def last_index_at(table, column: str, timeline: str, time: int) -> int:
+    """The row of the last non-null cell of `column` logged exactly at `time`."""
+    if column not in table.column_names:
+        raise CheckFailed(f"no column {column}; columns: {table.column_names}")
+    times = table.column(timeline).to_pylist()
+    cells = table.column(column).to_pylist()
+    found = [i for i, (t, cell) in enumerate(zip(times, cells)) if t == time and cell is not None]
     if not found:
-        logged = sorted({t for t, cell in zip(times, cells) if cell is not None})
+        logged = logged_at(table, column, timeline)
         raise CheckFailed(
             f"{column}: nothing logged at {timeline} = {time}; logged at {logged[:20]}"
         )
     return found[-1]
+
+
+def last_cell_at(table, column: str, timeline: str, time: int) -> object:
+    """The last non-null cell of `column` logged exactly at `time` (latest-at wins)."""
+    return table.column(column)[last_index_at(table, column, timeline, time)].as_py()
+
+
+def buffer_type(table, column: str, index: int) -> str:
+    """The TensorBuffer variant ("F32", "F64", ...) of a one-tensor cell."""
+    tensor = table.column(column)[index].values
+    union = tensor.field("buffer")
+    code = union.type_codes[0].as_py()
+    return union.type[list(union.type.type_codes).index(code)].name
+
+
+def to_f32(value: float) -> float:
+    return struct.unpack("f", struct.pack("f", value))[0]
 
 
 def compare(what: str, actual: list[float], expected: list[float], tolerance: float) -> None:
@@ -134,14 +168,22 @@ def check(rrd: Path, expected: dict) -> list[str]:
     mu = [float(v) for v in expected["mu"]]
 
     table = store.reader(index=timeline, contents=entity).to_arrow_table()
+    column = f"{entity}:BarChart:values"
+    index = last_index_at(table, column, timeline, time)
     shape, values = tensor_values(
-        last_cell_at(table, f"{entity}:BarChart:values", timeline, time),
-        f"{entity} values at {timeline} {time}",
+        table.column(column)[index].as_py(), f"{entity} values at {timeline} {time}"
     )
     if shape != [len(values)]:
         raise CheckFailed(f"{entity}: values shape {shape} is not a vector")
-    compare(f"{entity} at {timeline} {time}", values, mu, tolerance)
-    done = [f"{entity} at {timeline} {time}: {len(mu)} values match"]
+    stored = buffer_type(table, column, index)
+    if stored == "F32":
+        want = [to_f32(v) for v in mu]
+    elif stored == "F64":
+        want = mu
+    else:
+        raise CheckFailed(f"{entity}: values stored as {stored}, expected F32 or F64")
+    compare(f"{entity} at {timeline} {time}", values, want, tolerance)
+    done = [f"{entity} at {timeline} {time}: {len(mu)} values match ({stored})"]
 
     if "d_m" in expected:
         # Logged once, statically: read it from the static-only view.
@@ -156,6 +198,14 @@ def check(rrd: Path, expected: dict) -> list[str]:
     if expected.get("check_history"):
         history = f"/field/{rail}/{band}/mu_history"
         table = store.reader(index=timeline, contents=history).to_arrow_table()
+        if "history_logged_at" in expected:
+            want_times = sorted(int(t) for t in expected["history_logged_at"])
+            got = logged_at(table, f"{history}:Tensor:data", timeline)
+            if got != want_times:
+                raise CheckFailed(
+                    f"{history}: logged at {timeline} {got}, expected {want_times}"
+                )
+            done.append(f"{history} logged at {timeline} {got}")
         shape, flat = tensor_values(
             last_cell_at(table, f"{history}:Tensor:data", timeline, time),
             f"{history} at {timeline} {time}",
@@ -178,9 +228,36 @@ def check(rrd: Path, expected: dict) -> list[str]:
 
     done += colour_checks(store, schema_text)
     done += time_only_checks(store, schema_text)
+    done += series_checks(store, expected.get("series", {}))
 
     if expected.get("blueprint"):
         done += blueprint_checks(reader, blueprints, store, expected)
+    return done
+
+
+def series_checks(store, series: dict) -> list[str]:
+    """Each Scalars series holds exactly the expected (time, value) points."""
+    import pyarrow as pa
+
+    done = []
+    for entity, points in series.items():
+        table = store.reader(index="time", contents=entity).to_arrow_table()
+        column = f"{entity}:Scalars:scalars"
+        if column not in table.column_names:
+            raise CheckFailed(f"{entity}: no scalars; columns: {table.column_names}")
+        times = table.column("time").cast(pa.int64()).to_pylist()
+        cells = table.column(column).to_pylist()
+        got = sorted((t, cell[0]) for t, cell in zip(times, cells) if cell is not None)
+        want = sorted((int(t), float(v)) for t, v in points)
+        if got != want:
+            diff = next(
+                (f"#{i}: got {g}, expected {w}" for i, (g, w) in enumerate(zip(got, want)) if g != w),
+                "",
+            )
+            raise CheckFailed(
+                f"{entity}: {len(got)} points, expected {len(want)}; first difference {diff}"
+            )
+        done.append(f"{entity}: {len(got)} (time, value) points match")
     return done
 
 
