@@ -14,12 +14,15 @@
 //! - [`recording`]: turns an MCAP recording into typed, validated events.
 //! - [`engine`]: owns time and state; steps the product wheel pass by wheel pass.
 //! - [`sink`]: listeners that publish what the engine produces.
+//! - [`discover`]: the discrepancy workflow: residuals, covariates, candidate
+//!   effects fitted by re-running the engine, forward selection.
 //! - [`plot`]: line plots (SVG) and CSV tables for figures and reports.
 //! - [`synth`]: synthetic recordings whose measurements come from the engine
 //!   run with a truth model (hidden effects), plus noise.
 
 pub mod app;
 pub mod config;
+pub mod discover;
 pub mod engine;
 pub mod error;
 pub mod model;

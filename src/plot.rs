@@ -76,6 +76,8 @@ pub enum Stroke {
     #[default]
     Solid,
     Dashed,
+    /// A dot of radius `width_px` at every point, unjoined: a scatter plot.
+    Dots,
 }
 
 /// One line: `y[k]` over `x[k]`. Points where either is not finite are left
@@ -111,6 +113,12 @@ impl Series {
 
     pub fn dashed(mut self) -> Self {
         self.stroke = Stroke::Dashed;
+        self
+    }
+
+    /// Dots instead of a line (see [`Stroke::Dots`]).
+    pub fn dots(mut self) -> Self {
+        self.stroke = Stroke::Dots;
         self
     }
 
@@ -378,13 +386,15 @@ fn draw_panel(
         .x_label_area_size(30 + extra_px)
         .y_label_area_size(85)
         .build_cartesian_2d(x0..x1, y0..y1)?;
-    let ticks = |v: &f64| tick_label(*v);
+    // A tick computed as a sum of steps lands a rounding error off 0.
+    let x_ticks = |v: &f64| tick_label(snap_to_zero(*v, x1 - x0));
+    let y_ticks = |v: &f64| tick_label(snap_to_zero(*v, y1 - y0));
     chart
         .configure_mesh()
         .x_desc(x_label.unwrap_or(""))
         .y_desc(&panel.y_label)
-        .x_label_formatter(&ticks)
-        .y_label_formatter(&ticks)
+        .x_label_formatter(&x_ticks)
+        .y_label_formatter(&y_ticks)
         .label_style((FONT, TICK_PX))
         .axis_desc_style((FONT, AXIS_DESC_PX))
         .bold_line_style(BLACK.mix(0.12))
@@ -403,7 +413,10 @@ fn draw_panel(
     let mut series_px = Vec::new();
     for s in &panel.series {
         let points: Vec<(i32, i32)> = finite_points(s).map(|(x, y)| to_px(x, y)).collect();
-        densify(&points, &mut series_px);
+        match s.stroke {
+            Stroke::Dots => series_px.extend(points),
+            Stroke::Solid | Stroke::Dashed => densify(&points, &mut series_px),
+        }
     }
     let mut lines_px = Vec::new();
     for line in &panel.reference_lines {
@@ -468,6 +481,11 @@ fn draw_panel(
                 let (dash, gap) = dash_px(s.width_px);
                 chart.draw_series(DashedLineSeries::new(points, dash, gap, style))?
             }
+            Stroke::Dots => chart.draw_series(
+                points
+                    .into_iter()
+                    .map(|p| Circle::new(p, s.width_px, style.filled())),
+            )?,
         };
     }
 
@@ -555,6 +573,11 @@ fn draw_panel(
                     style,
                 ))?
             }
+            Stroke::Dots => plot.draw(&Circle::new(
+                ((xa + xb) / 2, y),
+                s.width_px.max(3),
+                style.filled(),
+            ))?,
         }
         plot.draw(&Text::new(s.name.clone(), (xb + 8, y), text_style.clone()))?;
     }
@@ -635,6 +658,15 @@ fn tick_label(v: f64) -> String {
     }
     let text = format!("{v:.6}");
     text.trim_end_matches('0').trim_end_matches('.').to_string()
+}
+
+/// 0 for a value within a billionth of the axis span of it.
+fn snap_to_zero(v: f64, span: f64) -> f64 {
+    if v.abs() <= 1e-9 * span.abs() {
+        0.0
+    } else {
+        v
+    }
 }
 
 fn finite_points(s: &Series) -> impl Iterator<Item = (f64, f64)> + '_ {
@@ -757,7 +789,8 @@ mod tests {
             vec![
                 Panel::new("mass [mg]").series(Series::new("rail", x.clone(), vec![3.0, 2.0, 1.0])),
                 Panel::new("mu [-]")
-                    .series(Series::new("dashed one", x, vec![0.2, f64::NAN, 0.4]).dashed())
+                    .series(Series::new("dashed one", x.clone(), vec![0.2, f64::NAN, 0.4]).dashed())
+                    .series(Series::new("dots", x, vec![0.25, 0.3, 0.35]).dots())
                     .reference_line(ReferenceLine::new(0.58, "muD")),
             ],
         );
@@ -769,10 +802,13 @@ mod tests {
             "mu [-]",
             "rail",
             "dashed one",
+            "dots",
             "muD",
         ] {
             assert!(svg.contains(text), "{text} missing");
         }
+        // Three dots in the panel and one in the legend.
+        assert!(svg.matches("<circle").count() >= 4, "dots missing");
     }
 
     #[test]
@@ -782,6 +818,8 @@ mod tests {
         assert_eq!(tick_label(-2.5), "-2.5");
         assert_eq!(tick_label(0.0), "0");
         assert_eq!(tick_label(1.5e-6), "1.50e-6");
+        assert_eq!(tick_label(snap_to_zero(-0.15 + 3.0 * 0.05, 0.3)), "0");
+        assert_eq!(tick_label(snap_to_zero(1.5e-6, 3e-6)), "1.50e-6");
     }
 
     #[test]

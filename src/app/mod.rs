@@ -2,6 +2,7 @@
 //! Each command is a function of its arguments over the library; `main.rs`
 //! only parses and maps errors to exit codes.
 
+pub mod discover;
 pub mod paper;
 pub mod replay;
 pub mod summary;
@@ -36,6 +37,11 @@ pub enum Command {
     /// Write a synthetic recording (traffic, pulses, weather, noisy
     /// measurements from a truth model with optional hidden effects).
     Synth(synth::SynthArgs),
+    /// Find the effects the model misses in a recording: residuals,
+    /// covariates, candidate effects fitted and selected (BIC, share of the
+    /// excess over the noise, cross-validation by day and by site); writes
+    /// report.json, report.md with plots, model.toml and residuals.rrd.
+    Discover(discover::DiscoverArgs),
 }
 
 pub fn run(cli: Cli) -> Result<()> {
@@ -43,6 +49,7 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Replay(args) => replay::main(args),
         Command::Paper(args) => paper::main(args),
         Command::Synth(args) => synth::main(args),
+        Command::Discover(args) => discover::main(args),
     }
 }
 
