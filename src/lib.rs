@@ -14,6 +14,7 @@
 //! - [`recording`]: turns an MCAP recording into typed, validated events.
 //! - [`engine`]: owns time and state; steps the product wheel pass by wheel pass.
 //! - [`sink`]: listeners that publish what the engine produces.
+//! - [`output`]: files written under a temporary name, renamed when complete.
 //! - [`discover`]: the discrepancy workflow: residuals, covariates, candidate
 //!   effects fitted by re-running the engine, forward selection.
 //! - [`plot`]: line plots (SVG) and CSV tables for figures and reports.
@@ -26,6 +27,7 @@ pub mod discover;
 pub mod engine;
 pub mod error;
 pub mod model;
+pub mod output;
 pub mod paper;
 pub mod plot;
 pub mod recording;

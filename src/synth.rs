@@ -45,9 +45,9 @@
 //! parameters give byte-identical files.
 
 use std::collections::BTreeMap;
-use std::fs::{self, File};
+use std::fs::File;
 use std::io::BufWriter;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::str::FromStr;
 
 use anyhow::{anyhow, Context, Result};
@@ -60,6 +60,7 @@ use serde::Serialize;
 use crate::config::ModelConfig;
 use crate::engine::{Engine, EngineOptions, Grid};
 use crate::error::UsageError;
+use crate::output::PartialFile;
 use crate::recording::{
     Applicator, Axle, AxleRef, BogiePosition, Creepage, Direction, Event, EventKind, Measurement,
     Passage, Pulse, Quantity, Section, Site, Weather,
@@ -1566,8 +1567,7 @@ impl Topic {
 struct RecordingWriter {
     // Before `temp`: on drop the writer closes the file before it is deleted.
     writer: Option<mcap::Writer<BufWriter<File>>>,
-    temp: TempFile,
-    final_path: PathBuf,
+    temp: PartialFile,
     channels: [u16; 5],
     sequences: [u32; 5],
     json: Vec<u8>,
@@ -1576,23 +1576,9 @@ struct RecordingWriter {
 
 impl RecordingWriter {
     fn create(path: &Path, p: &SynthParams) -> Result<Self> {
-        let file_name = path
-            .file_name()
-            .ok_or_else(|| anyhow!("{}: not a file name", path.display()))?;
-        let dir = match path.parent() {
-            Some(dir) if !dir.as_os_str().is_empty() => dir,
-            _ => Path::new("."),
-        };
-        let mut temp_name = std::ffi::OsString::from(".");
-        temp_name.push(file_name);
-        temp_name.push(format!(".partial-{}", std::process::id()));
-        let temp_path = dir.join(temp_name);
-        let file = File::create(&temp_path)
-            .with_context(|| format!("creating {}", temp_path.display()))?;
-        let temp = TempFile {
-            path: temp_path,
-            keep: false,
-        };
+        let temp = PartialFile::beside(path)?;
+        let file = File::create(temp.temp_path())
+            .with_context(|| format!("creating {}", temp.temp_path().display()))?;
         let version = env!("CARGO_PKG_VERSION");
         let mut writer = mcap::WriteOptions::new()
             .compression(Some(mcap::Compression::Zstd))
@@ -1600,7 +1586,7 @@ impl RecordingWriter {
             .compression_threads(0)
             .library(format!("{GENERATOR} {version} (mcap-rs)"))
             .create(BufWriter::new(file))
-            .with_context(|| format!("starting {}", temp.path.display()))?;
+            .with_context(|| format!("starting {}", temp.temp_path().display()))?;
         writer
             .write_metadata(&mcap::records::Metadata {
                 name: "tortwin.synth".to_owned(),
@@ -1611,7 +1597,7 @@ impl RecordingWriter {
                     ("preset".to_owned(), p.preset.as_str().to_owned()),
                 ]),
             })
-            .with_context(|| format!("writing {}", temp.path.display()))?;
+            .with_context(|| format!("writing {}", temp.temp_path().display()))?;
         let mut channels = [0; 5];
         for topic in Topic::ALL {
             let schema_id = writer
@@ -1624,7 +1610,6 @@ impl RecordingWriter {
         Ok(RecordingWriter {
             writer: Some(writer),
             temp,
-            final_path: path.to_path_buf(),
             channels,
             sequences: [0; 5],
             json: Vec::with_capacity(64 * 1024),
@@ -1636,7 +1621,7 @@ impl RecordingWriter {
         let writer = self
             .writer
             .as_mut()
-            .ok_or_else(|| anyhow!("{}: already finished", self.final_path.display()))?;
+            .ok_or_else(|| anyhow!("{}: already finished", self.temp.final_path().display()))?;
         let sequence = &mut self.sequences[topic as usize];
         *sequence = sequence.wrapping_add(1);
         writer
@@ -1649,7 +1634,13 @@ impl RecordingWriter {
                 },
                 json,
             )
-            .with_context(|| format!("writing {} to {}", topic.name(), self.temp.path.display()))?;
+            .with_context(|| {
+                format!(
+                    "writing {} to {}",
+                    topic.name(),
+                    self.temp.temp_path().display()
+                )
+            })?;
         self.messages += 1;
         Ok(())
     }
@@ -1812,8 +1803,8 @@ impl RecordingWriter {
         let mut writer = self
             .writer
             .take()
-            .ok_or_else(|| anyhow!("{}: already finished", self.final_path.display()))?;
-        let temp_path = self.temp.path.clone();
+            .ok_or_else(|| anyhow!("{}: already finished", self.temp.final_path().display()))?;
+        let temp_path = self.temp.temp_path().to_path_buf();
         writer
             .finish()
             .with_context(|| format!("finishing {}", temp_path.display()))?;
@@ -1829,14 +1820,7 @@ impl RecordingWriter {
             .with_context(|| format!("reading the size of {}", temp_path.display()))?
             .len();
         drop(file);
-        fs::rename(&temp_path, &self.final_path).with_context(|| {
-            format!(
-                "renaming {} to {}",
-                temp_path.display(),
-                self.final_path.display()
-            )
-        })?;
-        self.temp.keep = true;
+        self.temp.commit()?;
         Ok(size)
     }
 }
@@ -1898,21 +1882,6 @@ impl<T: Serialize> Serialize for PerRail<'_, T> {
             map.serialize_entry(rail, value)?;
         }
         map.end()
-    }
-}
-
-/// Deletes the temporary output unless it was renamed into place.
-struct TempFile {
-    path: PathBuf,
-    keep: bool,
-}
-
-impl Drop for TempFile {
-    fn drop(&mut self) {
-        if !self.keep {
-            // Nothing useful to do if this fails while unwinding from another error.
-            let _ = fs::remove_file(&self.path);
-        }
     }
 }
 

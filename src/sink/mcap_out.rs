@@ -25,9 +25,9 @@
 //! error that names the topic, the field and the log_time.
 
 use std::collections::BTreeMap;
-use std::fs::{self, File};
+use std::fs::File;
 use std::io::BufWriter;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use anyhow::{anyhow, Context};
 use serde::ser::{SerializeSeq, Serializer};
@@ -37,6 +37,7 @@ use super::{
     FieldSnapshot, MeasurementOutput, PulseEvent, RunSummary, SectionInfo, Sink, SnapshotKind,
     TrainEvent,
 };
+use crate::output::PartialFile;
 use crate::recording::Direction;
 
 /// A float the sink was asked to write is NaN or infinite.
@@ -56,8 +57,7 @@ pub struct McapSink {
     // Declared before `temp` so that on drop the writer closes the file
     // before the guard deletes it.
     writer: Option<mcap::Writer<BufWriter<File>>>,
-    temp: TempFile,
-    final_path: PathBuf,
+    temp: PartialFile,
     channel_ids: [u16; Topic::ALL.len()],
     sequences: [u32; Topic::ALL.len()],
     /// Reused for every message so that serializing allocates only on growth.
@@ -67,24 +67,9 @@ pub struct McapSink {
 impl McapSink {
     /// Opens `.NAME.partial-<pid>` next to `path` and registers every channel.
     pub fn create(path: &Path) -> anyhow::Result<McapSink> {
-        let file_name = path
-            .file_name()
-            .ok_or_else(|| anyhow!("MCAP output {}: not a file name", path.display()))?;
-        let dir = match path.parent() {
-            Some(dir) if !dir.as_os_str().is_empty() => dir,
-            _ => Path::new("."),
-        };
-        let mut temp_name = std::ffi::OsString::from(".");
-        temp_name.push(file_name);
-        temp_name.push(format!(".partial-{}", std::process::id()));
-        let temp_path = dir.join(temp_name);
-
-        let file = File::create(&temp_path)
-            .with_context(|| format!("creating MCAP output {}", temp_path.display()))?;
-        let temp = TempFile {
-            path: temp_path,
-            keep: false,
-        };
+        let temp = PartialFile::beside(path)?;
+        let file = File::create(temp.temp_path())
+            .with_context(|| format!("creating MCAP output {}", temp.temp_path().display()))?;
 
         let version = env!("CARGO_PKG_VERSION");
         // Several replays may run at once under rayon (sweeps): compress on the
@@ -96,7 +81,7 @@ impl McapSink {
             .library(format!("tortwin {version} (mcap-rs)"));
         let mut writer = options
             .create(BufWriter::new(file))
-            .with_context(|| format!("starting MCAP output {}", temp.path.display()))?;
+            .with_context(|| format!("starting MCAP output {}", temp.temp_path().display()))?;
 
         writer
             .write_metadata(&mcap::records::Metadata {
@@ -106,7 +91,7 @@ impl McapSink {
                     ("version".to_owned(), version.to_owned()),
                 ]),
             })
-            .with_context(|| format!("writing MCAP output {}", temp.path.display()))?;
+            .with_context(|| format!("writing MCAP output {}", temp.temp_path().display()))?;
 
         let no_metadata = BTreeMap::new();
         let mut channel_ids = [0; Topic::ALL.len()];
@@ -122,7 +107,6 @@ impl McapSink {
         Ok(McapSink {
             writer: Some(writer),
             temp,
-            final_path: path.to_path_buf(),
             channel_ids,
             sequences: [0; Topic::ALL.len()],
             json: Vec::with_capacity(4096),
@@ -140,7 +124,7 @@ impl McapSink {
         let writer = self.writer.as_mut().ok_or_else(|| {
             anyhow!(
                 "MCAP output {}: already finished",
-                self.final_path.display()
+                self.temp.final_path().display()
             )
         })?;
         self.json.clear();
@@ -160,7 +144,7 @@ impl McapSink {
                 format!(
                     "writing {} to MCAP output {}",
                     topic.name(),
-                    self.temp.path.display()
+                    self.temp.temp_path().display()
                 )
             })
     }
@@ -357,10 +341,10 @@ impl Sink for McapSink {
         let mut writer = self.writer.take().ok_or_else(|| {
             anyhow!(
                 "MCAP output {}: already finished",
-                self.final_path.display()
+                self.temp.final_path().display()
             )
         })?;
-        let temp_path = &self.temp.path;
+        let temp_path = self.temp.temp_path().to_path_buf();
         writer
             .finish()
             .with_context(|| format!("finishing MCAP output {}", temp_path.display()))?;
@@ -372,30 +356,7 @@ impl Sink for McapSink {
         file.sync_all()
             .with_context(|| format!("syncing MCAP output {}", temp_path.display()))?;
         drop(file);
-        fs::rename(temp_path, &self.final_path).with_context(|| {
-            format!(
-                "renaming {} to {}",
-                temp_path.display(),
-                self.final_path.display()
-            )
-        })?;
-        self.temp.keep = true;
-        Ok(())
-    }
-}
-
-/// Deletes the temporary output unless it was renamed into place.
-struct TempFile {
-    path: PathBuf,
-    keep: bool,
-}
-
-impl Drop for TempFile {
-    fn drop(&mut self) {
-        if !self.keep {
-            // Nothing useful to do if this fails while unwinding from another error.
-            let _ = fs::remove_file(&self.path);
-        }
+        self.temp.commit()
     }
 }
 

@@ -134,7 +134,7 @@
 
 use std::collections::{BTreeMap, BTreeSet, HashSet, VecDeque};
 use std::fmt::Write as _;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::time::Duration;
 
 use anyhow::{anyhow, bail, Context};
@@ -164,6 +164,7 @@ use super::{
     FieldSnapshot, MeasurementOutput, PulseEvent, RunSummary, SectionInfo, Sink, SnapshotKind,
     TrackInfo, TrainEvent,
 };
+use crate::output::PartialFile;
 use crate::recording::{Direction, Quantity};
 
 /// Name of the sequence timeline: wheel passes so far.
@@ -235,9 +236,8 @@ impl Default for RerunOptions {
 pub struct RerunSink {
     /// `None` once [`Sink::finish`] has closed the stream.
     rec: Option<RecordingStream>,
-    temp_path: PathBuf,
-    final_path: PathBuf,
-    finished: bool,
+    /// The output under its temporary name; renamed at finish, deleted if dropped before.
+    file: PartialFile,
     options: RerunOptions,
     /// What the blueprint needs from [`Sink::begin`], `None` before it.
     layout: Option<Layout>,
@@ -313,17 +313,9 @@ struct Series {
 impl RerunSink {
     /// Opens `.NAME.partial-<pid>` next to `path` as the recording's file.
     pub fn create(path: &Path, options: RerunOptions) -> anyhow::Result<RerunSink> {
-        let file_name = path
-            .file_name()
-            .ok_or_else(|| anyhow!("rerun output {}: not a file name", path.display()))?;
-        let dir = match path.parent() {
-            Some(dir) if !dir.as_os_str().is_empty() => dir,
-            _ => Path::new("."),
-        };
-        let mut temp_name = std::ffi::OsString::from(".");
-        temp_name.push(file_name);
-        temp_name.push(format!(".partial-{}", std::process::id()));
-        let temp_path = dir.join(temp_name);
+        let file = PartialFile::beside(path)?;
+        let temp_path = file.temp_path().to_path_buf();
+        let file_name = path.file_name().unwrap_or_default();
 
         let recording_name = options
             .recording_name
@@ -350,9 +342,7 @@ impl RerunSink {
 
         Ok(RerunSink {
             rec: Some(rec),
-            temp_path,
-            final_path: path.to_path_buf(),
-            finished: false,
+            file,
             options,
             layout: None,
             tracks: Vec::new(),
@@ -372,7 +362,7 @@ impl RerunSink {
         self.rec.as_ref().ok_or_else(|| {
             anyhow!(
                 "rerun output {}: already finished",
-                self.final_path.display()
+                self.file.final_path().display()
             )
         })
     }
@@ -434,7 +424,7 @@ impl RerunSink {
         let rec = self.rec.as_ref().ok_or_else(|| {
             anyhow!(
                 "rerun output {}: already finished",
-                self.final_path.display()
+                self.file.final_path().display()
             )
         })?;
         for (path, series) in std::mem::take(&mut self.series) {
@@ -871,7 +861,7 @@ impl Sink for RerunSink {
             })
             .collect();
         self.log_context(info)
-            .with_context(|| format!("rerun output {}", self.temp_path.display()))
+            .with_context(|| format!("rerun output {}", self.file.temp_path().display()))
     }
 
     fn train(&mut self, train: &TrainEvent<'_>) -> anyhow::Result<()> {
@@ -1005,7 +995,7 @@ impl Sink for RerunSink {
         let Some(rec) = self.rec.as_ref() else {
             bail!(
                 "rerun output {}: already finished",
-                self.final_path.display()
+                self.file.final_path().display()
             );
         };
         let Some(track) = self.tracks.get_mut(f.track) else {
@@ -1046,7 +1036,7 @@ impl Sink for RerunSink {
     }
 
     fn finish(&mut self, summary: &RunSummary) -> anyhow::Result<()> {
-        let temp_path = self.temp_path.clone();
+        let temp_path = self.file.temp_path().to_path_buf();
         let context = || format!("rerun output {}", temp_path.display());
         self.flush_series()
             .with_context(|| format!("{}: pulses and measurements", context()))?;
@@ -1109,34 +1099,24 @@ impl Sink for RerunSink {
         let rec = self.rec.take().ok_or_else(|| {
             anyhow!(
                 "rerun output {}: already finished",
-                self.final_path.display()
+                self.file.final_path().display()
             )
         })?;
-        rec.flush_blocking()
-            .with_context(|| format!("flushing rerun output {}", self.temp_path.display()))?;
+        rec.flush_blocking().with_context(|| {
+            format!("flushing rerun output {}", self.file.temp_path().display())
+        })?;
         // Dropping the only handle joins the SDK's threads; the file sink
         // writes the rrd footer and closes the file before this returns.
         drop(rec);
-        std::fs::rename(&self.temp_path, &self.final_path).with_context(|| {
-            format!(
-                "renaming rerun output {} to {}",
-                self.temp_path.display(),
-                self.final_path.display()
-            )
-        })?;
-        self.finished = true;
-        Ok(())
+        self.file.commit()
     }
 }
 
 impl Drop for RerunSink {
     fn drop(&mut self) {
-        // Close the stream first so no writer thread still holds the file.
+        // Close the stream first so no writer thread still holds the file;
+        // then the `file` field, dropped after this, deletes it unless finished.
         drop(self.rec.take());
-        if !self.finished {
-            // Nothing to report to: the run already failed (or was abandoned).
-            let _ = std::fs::remove_file(&self.temp_path);
-        }
     }
 }
 
