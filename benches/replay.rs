@@ -13,14 +13,9 @@ use tortwin::app::replay::{replay, ReplayArgs};
 
 fn args(recording: PathBuf, out: &std::path::Path) -> ReplayArgs {
     ReplayArgs {
-        recording,
-        config: None,
         out_mcap: Some(out.join("bench.mcap")),
         out_rrd: Some(out.join("bench.rrd")),
-        state_in: None,
-        state_out: None,
-        every_wheel: false,
-        quiet: true,
+        ..ReplayArgs::new(recording)
     }
 }
 

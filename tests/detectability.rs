@@ -44,16 +44,7 @@ impl Sink for Residuals {
 }
 
 fn rmse_of_default_model(recording: &Path) -> f64 {
-    let args = ReplayArgs {
-        recording: recording.to_path_buf(),
-        config: None,
-        out_mcap: None,
-        out_rrd: None,
-        state_in: None,
-        state_out: None,
-        every_wheel: false,
-        quiet: true,
-    };
+    let args = ReplayArgs::new(recording);
     let mut r = Residuals::default();
     replay(&args, &mut [&mut r]).unwrap();
     (r.sq / r.n as f64).sqrt()

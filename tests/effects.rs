@@ -379,14 +379,8 @@ fn replay_with(config: &str) -> Collect {
     let cfg = dir.path().join("c.toml");
     std::fs::write(&cfg, config).unwrap();
     let args = ReplayArgs {
-        recording: curve_2day(),
         config: Some(cfg),
-        out_mcap: None,
-        out_rrd: None,
-        state_in: None,
-        state_out: None,
-        every_wheel: false,
-        quiet: true,
+        ..ReplayArgs::new(curve_2day())
     };
     let mut c = Collect::default();
     replay(&args, &mut [&mut c]).unwrap();

@@ -21,14 +21,8 @@ fn outputs(recording: &Path) -> (String, String) {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("out.mcap");
     let args = ReplayArgs {
-        recording: recording.to_path_buf(),
-        config: None,
         out_mcap: Some(out.clone()),
-        out_rrd: None,
-        state_in: None,
-        state_out: None,
-        every_wheel: false,
-        quiet: true,
+        ..ReplayArgs::new(recording)
     };
     replay(&args, &mut []).unwrap();
     let bytes = std::fs::read(&out).unwrap();

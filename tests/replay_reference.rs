@@ -48,16 +48,7 @@ pub fn reference_dir() -> PathBuf {
 }
 
 pub fn args(recording: PathBuf) -> ReplayArgs {
-    ReplayArgs {
-        recording,
-        config: None,
-        out_mcap: None,
-        out_rrd: None,
-        state_in: None,
-        state_out: None,
-        every_wheel: false,
-        quiet: true,
-    }
+    ReplayArgs::new(recording)
 }
 
 fn check(name: &str) {

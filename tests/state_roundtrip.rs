@@ -18,16 +18,7 @@ fn reference(name: &str) -> PathBuf {
 }
 
 fn args(recording: &Path) -> ReplayArgs {
-    ReplayArgs {
-        recording: recording.to_path_buf(),
-        config: None,
-        out_mcap: None,
-        out_rrd: None,
-        state_in: None,
-        state_out: None,
-        every_wheel: false,
-        quiet: true,
-    }
+    ReplayArgs::new(recording)
 }
 
 /// One field snapshot as bits: log_time, train, track, wheel_pass, mu,

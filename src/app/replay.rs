@@ -43,6 +43,23 @@ pub struct ReplayArgs {
     pub quiet: bool,
 }
 
+impl ReplayArgs {
+    /// A quiet replay of `recording` with the default model and no outputs;
+    /// set the fields a caller needs.
+    pub fn new(recording: impl Into<PathBuf>) -> Self {
+        Self {
+            recording: recording.into(),
+            config: None,
+            out_mcap: None,
+            out_rrd: None,
+            state_in: None,
+            state_out: None,
+            every_wheel: false,
+            quiet: true,
+        }
+    }
+}
+
 pub fn main(args: ReplayArgs) -> Result<()> {
     let summary = replay(&args, &mut [])?;
     if !args.quiet {
