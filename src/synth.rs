@@ -63,7 +63,7 @@ use crate::error::UsageError;
 use crate::output::PartialFile;
 use crate::recording::{
     Applicator, Axle, AxleRef, BogiePosition, Creepage, Direction, Event, EventKind, Measurement,
-    Passage, Pulse, Quantity, Section, Site, Weather,
+    Passage, Pulse, Quantity, Section, Site, Topic, Weather,
 };
 use crate::sink::{MeasurementOutput, Sink};
 
@@ -1511,35 +1511,13 @@ impl<'p> Planner<'p> {
 // ---------------------------------------------------------------------------
 // Writing
 
-/// The recording's channels, in the format's topic order.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Topic {
-    Section,
-    Passage,
-    Pulse,
-    Measurement,
-    Weather,
+/// What the writer declares for each topic of the format.
+trait TopicSchema {
+    fn schema_name(self) -> &'static str;
+    fn schema(self) -> &'static str;
 }
 
-impl Topic {
-    const ALL: [Topic; 5] = [
-        Topic::Section,
-        Topic::Passage,
-        Topic::Pulse,
-        Topic::Measurement,
-        Topic::Weather,
-    ];
-
-    fn name(self) -> &'static str {
-        match self {
-            Topic::Section => "/section",
-            Topic::Passage => "/train/passage",
-            Topic::Pulse => "/applicator/pulse",
-            Topic::Measurement => "/measurement/friction",
-            Topic::Weather => "/environment/weather",
-        }
-    }
-
+impl TopicSchema for Topic {
     fn schema_name(self) -> &'static str {
         match self {
             Topic::Section => "tortwin.input.Section",

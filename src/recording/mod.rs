@@ -10,6 +10,43 @@ pub mod reader;
 
 pub use reader::{ReaderContext, RecordingReader};
 
+/// The topics of ../shared/spec/recording-format.md, in their tie-break
+/// order (a replay orders equal log_times by this, then by file order).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub enum Topic {
+    Section,
+    Passage,
+    Pulse,
+    Measurement,
+    Weather,
+}
+
+impl Topic {
+    pub const ALL: [Topic; 5] = [
+        Topic::Section,
+        Topic::Passage,
+        Topic::Pulse,
+        Topic::Measurement,
+        Topic::Weather,
+    ];
+
+    /// The topic's name in a recording.
+    pub fn name(self) -> &'static str {
+        match self {
+            Topic::Section => "/section",
+            Topic::Passage => "/train/passage",
+            Topic::Pulse => "/applicator/pulse",
+            Topic::Measurement => "/measurement/friction",
+            Topic::Weather => "/environment/weather",
+        }
+    }
+
+    /// The topic of a channel name; `None` for a topic the format does not know.
+    pub fn from_name(name: &str) -> Option<Topic> {
+        Topic::ALL.into_iter().find(|t| t.name() == name)
+    }
+}
+
 /// The `/section` message: the track section the recording describes.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Section {

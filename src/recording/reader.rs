@@ -108,14 +108,16 @@ enum Topic {
 }
 
 impl Topic {
+    /// The format's topic (names defined once, in [`super::Topic`]), or
+    /// `Unknown`, which sorts after every known topic.
     fn of(topic: &str) -> Self {
-        match topic {
-            "/section" => Topic::Section,
-            "/train/passage" => Topic::Passage,
-            "/applicator/pulse" => Topic::Pulse,
-            "/measurement/friction" => Topic::Measurement,
-            "/environment/weather" => Topic::Weather,
-            _ => Topic::Unknown,
+        match super::Topic::from_name(topic) {
+            Some(super::Topic::Section) => Topic::Section,
+            Some(super::Topic::Passage) => Topic::Passage,
+            Some(super::Topic::Pulse) => Topic::Pulse,
+            Some(super::Topic::Measurement) => Topic::Measurement,
+            Some(super::Topic::Weather) => Topic::Weather,
+            None => Topic::Unknown,
         }
     }
 }
