@@ -133,6 +133,7 @@ pub fn replay(args: &ReplayArgs, extra: &mut [&mut dyn Sink]) -> Result<RunSumma
     let mut reader = RecordingReader::open(&args.recording, ctx)?;
     let opts = EngineOptions {
         snapshot_every_wheel: args.every_wheel,
+        ..EngineOptions::default()
     };
     let section = reader.section().clone();
     let mut engine = match (&saved, &args.state_in) {

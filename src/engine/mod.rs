@@ -52,6 +52,9 @@ const NO_APPLICATOR: u32 = u32::MAX;
 pub struct EngineOptions {
     /// Also emit a [`SnapshotKind::Wheel`] field snapshot after every wheel.
     pub snapshot_every_wheel: bool,
+    /// Give every wheel's contacts to [`Sink::wheel_contacts`] (what strategy
+    /// statistics over every contact need; far cheaper than a snapshot).
+    pub every_wheel_contacts: bool,
 }
 
 /// The calculation grid: `d_i = i * C`, `C = pi * nominal wheel diameter`,
@@ -220,7 +223,7 @@ pub struct Engine {
     point_events: Vec<Vec<PointEvent>>,
     pending_at: Vec<Vec<u32>>,
     /// Per track: what its last wheel saw at each point.
-    observed: Vec<Vec<roll::Observed>>,
+    observed: Vec<roll::Observed>,
     /// Per track: the axle that rolled over it last in the current train.
     last_axle: Vec<usize>,
     /// Per track: the points where an applicator or a measurement site is,
@@ -316,7 +319,7 @@ impl Engine {
             latest_pulse_kg: vec![f64::NAN; section.applicators.len() * n_tracks],
             point_events: vec![Vec::new(); n_tracks],
             pending_at: vec![vec![0; points]; n_tracks],
-            observed: vec![vec![roll::Observed::default(); points]; n_tracks],
+            observed: vec![roll::Observed::new(points); n_tracks],
             last_axle: vec![usize::MAX; n_tracks],
             special_points: (0..n_tracks)
                 .map(|t| {

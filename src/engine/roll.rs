@@ -8,15 +8,25 @@ use super::weather::WeatherTimeline;
 use super::{enters_at_zero, Engine, SnapshotKind, TrackState, TrainRecord, NO_APPLICATOR};
 use crate::model::effects::{self, TimeEffects};
 use crate::model::product::{self, ContactConditions, ProductParams};
-use crate::sink::{FieldSnapshot, Sink};
+use crate::sink::{FieldSnapshot, Sink, WheelContacts};
 
-/// What a wheel saw at one point (kept for the last wheel of each track).
-#[derive(Debug, Clone, Copy, Default)]
+/// What a wheel saw at every point of its track (kept for the last wheel of
+/// each track, or for every wheel when a sink asks for it).
+#[derive(Debug, Clone, Default)]
 pub(crate) struct Observed {
-    /// Total mass at step 2.
-    pub mass_kg: f64,
-    /// The wheel's mass after the contact (after step 6).
-    pub wheel_mass_kg: f64,
+    /// Total mass at step 2, per point.
+    pub mass_kg: Vec<f64>,
+    /// The wheel's mass after the contact (after step 6), per point.
+    pub wheel_mass_kg: Vec<f64>,
+}
+
+impl Observed {
+    pub(crate) fn new(points: usize) -> Self {
+        Self {
+            mass_kg: vec![0.0; points],
+            wheel_mass_kg: vec![0.0; points],
+        }
+    }
 }
 
 /// The rolling wheel's own state.
@@ -68,7 +78,7 @@ impl Roller {
         &self,
         st: &mut WheelRoll,
         track: &mut TrackState,
-        observed: &mut [Observed],
+        observed: &mut Observed,
         d_m: &[f64],
         revolution: &[f64],
         timeline: &WeatherTimeline,
@@ -120,10 +130,8 @@ impl Roller {
 
         track.rail_mass_kg[i] = rail_kg;
         if self.observe {
-            observed[i] = Observed {
-                mass_kg: m_kg,
-                wheel_mass_kg: st.wheel_kg,
-            };
+            observed.mass_kg[i] = m_kg;
+            observed.wheel_mass_kg[i] = st.wheel_kg;
         }
         m_kg
     }
@@ -155,8 +163,20 @@ impl Engine {
         for a in 0..axles {
             for r in 0..rails {
                 let track = record.wheels[a * rails + r].track;
-                let observe = self.opts.snapshot_every_wheel || self.last_axle[track] == a;
+                let observe = self.opts.snapshot_every_wheel
+                    || self.opts.every_wheel_contacts
+                    || self.last_axle[track] == a;
                 self.roll_wheel(record, a, r, observe);
+                if self.opts.every_wheel_contacts {
+                    sink.wheel_contacts(&WheelContacts {
+                        track,
+                        rail: r,
+                        direction: record.passage.direction,
+                        train_seq: record.passage.train_seq,
+                        axle: a,
+                        seen_mass_kg: &self.observed[track].mass_kg,
+                    })?;
+                }
                 if self.opts.snapshot_every_wheel {
                     let end_s = self.wheel_exit_s(record, a);
                     let end_ns = (self.origin_ns as f64 + end_s * 1e9).round() as u64;
@@ -371,12 +391,13 @@ impl Engine {
         buf.mu.clear();
         buf.adhesion.clear();
         buf.wheel_mass_kg.clear();
-        for o in &self.observed[track] {
-            let mu = product::friction(&self.cfg.product, o.mass_kg);
+        let observed = &self.observed[track];
+        for (&mass_kg, &wheel_mass_kg) in observed.mass_kg.iter().zip(&observed.wheel_mass_kg) {
+            let mu = product::friction(&self.cfg.product, mass_kg);
             buf.mu.push(mu);
             buf.adhesion
                 .push(self.adhesion(&wheel, record.passage.speed_mps, mu));
-            buf.wheel_mass_kg.push(o.wheel_mass_kg);
+            buf.wheel_mass_kg.push(wheel_mass_kg);
         }
         let info = &self.track_info[track];
         let result = sink.field(&FieldSnapshot {

@@ -109,6 +109,22 @@ pub struct FieldSnapshot<'a> {
     pub wheel_mass_kg: &'a [f64],
 }
 
+/// What one wheel saw at every grid point of its track, given to
+/// [`Sink::wheel_contacts`] after the wheel has rolled (only when
+/// `EngineOptions::every_wheel_contacts` is set).
+#[derive(Debug, Clone, Copy)]
+pub struct WheelContacts<'a> {
+    pub track: usize,
+    pub rail: usize,
+    pub direction: Direction,
+    pub train_seq: usize,
+    /// 0-based axle index in its train.
+    pub axle: usize,
+    /// The total mass `m = m_w + m_r` of step 2 at each grid point, in grid
+    /// order (d ascending): mu of the contact is eq. (4) of it.
+    pub seen_mass_kg: &'a [f64],
+}
+
 /// The end-of-run figures.
 #[derive(Debug, Clone, Default, serde::Serialize)]
 pub struct RunSummary {
@@ -175,6 +191,9 @@ pub trait Sink {
     fn field(&mut self, _f: &FieldSnapshot<'_>) -> anyhow::Result<()> {
         Ok(())
     }
+    fn wheel_contacts(&mut self, _w: &WheelContacts<'_>) -> anyhow::Result<()> {
+        Ok(())
+    }
     /// Completes the output (e.g. renames the temporary file into place).
     fn finish(&mut self, _summary: &RunSummary) -> anyhow::Result<()> {
         Ok(())
@@ -202,6 +221,9 @@ impl Sink for Fanout<'_> {
     }
     fn field(&mut self, f: &FieldSnapshot<'_>) -> anyhow::Result<()> {
         self.sinks.iter_mut().try_for_each(|s| s.field(f))
+    }
+    fn wheel_contacts(&mut self, w: &WheelContacts<'_>) -> anyhow::Result<()> {
+        self.sinks.iter_mut().try_for_each(|s| s.wheel_contacts(w))
     }
     fn finish(&mut self, summary: &RunSummary) -> anyhow::Result<()> {
         self.sinks.iter_mut().try_for_each(|s| s.finish(summary))
