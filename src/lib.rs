@@ -32,4 +32,5 @@ pub mod paper;
 pub mod plot;
 pub mod recording;
 pub mod sink;
+pub mod strategy;
 pub mod synth;

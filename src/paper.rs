@@ -4,8 +4,10 @@
 //! - Figure 7: the twin disc of section 2.5: eq. (1) and (4) alone.
 //! - Figures 13–17: a single applicator at d = 0 and a wheel that passes
 //!   100 times (100 kN, cx = 1 %, cy = 0, diameter 0.92 m), product applied
-//!   before passes; these run through [`Engine`] as a synthetic event stream
-//!   (one axle per "train"), so the paper's figures check the replay engine.
+//!   before passes; these are application strategies (`tortwin strategy`'s
+//!   machinery: traffic of one-axle "trains", pulses by an axle counter)
+//!   through [`Engine`], so the paper's figures check the replay engine and
+//!   the strategy machinery.
 
 use anyhow::Result;
 
@@ -13,9 +15,10 @@ use crate::config::ModelConfig;
 use crate::engine::{Engine, EngineOptions};
 use crate::model::product;
 use crate::recording::{
-    Applicator, Axle, BogiePosition, Creepage, Direction, Event, EventKind, Passage, Pulse, Section,
+    Applicator, Axle, BogiePosition, Creepage, Direction, Event, EventKind, Passage, Section,
 };
 use crate::sink::{FieldSnapshot, Sink, SnapshotKind};
+use crate::strategy::{self, Plan, Strategy, Traffic};
 
 /// Figure 7: mu before each revolution's consumption in a twin disc, mass
 /// starting at `m0_kg`, fp = fc = 1, no cap, no transfer (model.md).
@@ -103,22 +106,12 @@ impl WaysideScenario {
         }
     }
 
-    /// The events: before pass k (1-based) a pulse when `(k - 1) % every == 0`.
-    pub fn events(&self) -> impl Iterator<Item = Event> + '_ {
-        (1..=self.passes).flat_map(move |k| {
-            let t = ORIGIN_NS + k as u64 * PASS_INTERVAL_NS;
-            let pulse = ((k - 1) % self.every.max(1) == 0).then(|| Event {
-                log_time_ns: t - PASS_INTERVAL_NS / 2,
-                index_in_file: 0,
-                kind: EventKind::Pulse(Pulse {
-                    applicator: 0,
-                    rail: 0,
-                    mass_kg: self.dose_kg,
-                }),
-            });
-            let passage = Event {
-                log_time_ns: t,
-                index_in_file: 0,
+    /// The traffic: pass k (1-based) is a one-axle train at k × 100 s.
+    pub fn traffic(&self) -> Traffic {
+        let events = (1..=self.passes)
+            .map(|k| Event {
+                log_time_ns: ORIGIN_NS + k as u64 * PASS_INTERVAL_NS,
+                index_in_file: k as u64,
                 kind: EventKind::Passage(Passage {
                     train_id: format!("pass-{k}"),
                     train_seq: k - 1,
@@ -136,15 +129,36 @@ impl WaysideScenario {
                         }],
                     }],
                 }),
-            };
-            pulse.into_iter().chain(std::iter::once(passage))
-        })
+            })
+            .collect();
+        let span_s = self.passes as f64 * PASS_INTERVAL_NS as f64 * 1e-9;
+        Traffic::new(
+            "paper section 4 scenario".into(),
+            self.section(),
+            ORIGIN_NS as i64,
+            events,
+            span_s,
+        )
     }
 
-    /// Runs the scenario and returns the field after each pass in `passes`.
+    /// The application: `dose` before passes 1, 1 + every, 1 + 2 every, ...
+    /// (an axle counter at the applicator, d = 0).
+    pub fn strategy(&self) -> Strategy {
+        Strategy {
+            pulse_kg: self.dose_kg,
+            every_axles: self.every.max(1) as u32,
+            positions_m: vec![0.0],
+            rails: vec![0],
+        }
+    }
+
+    /// Runs the scenario and returns the field after each pass in `passes`:
+    /// the strategy machinery ([`crate::strategy::drive`]) over the engine.
     pub fn run(&self, cfg: &ModelConfig, passes: &[usize]) -> Result<Vec<PassField>> {
+        let traffic = self.traffic();
+        let strategy = self.strategy();
         let mut engine = Engine::new(
-            self.section(),
+            strategy.section(&traffic.section),
             *cfg,
             EngineOptions::default(),
             ORIGIN_NS as i64,
@@ -154,9 +168,7 @@ impl WaysideScenario {
             pass: 0,
             fields: Vec::new(),
         };
-        for event in self.events() {
-            engine.push(event, &mut sink)?;
-        }
+        strategy::drive(&mut engine, &traffic, &Plan::Strategy(strategy), &mut sink)?;
         engine.finish(&mut sink, 0)?;
         Ok(sink.fields)
     }

@@ -5,6 +5,7 @@
 pub mod discover;
 pub mod paper;
 pub mod replay;
+pub mod strategy;
 pub mod summary;
 pub mod synth;
 
@@ -40,6 +41,12 @@ pub enum Command {
     /// excess over the noise, cross-validation by day and by site); writes
     /// report.json, report.md with plots, model.toml and residuals.rrd.
     Discover(discover::DiscoverArgs),
+    /// Evaluate application strategies (pulse mass, interval, applicator
+    /// positions, rails) over a section's traffic: share of the section in
+    /// the target band, carry-on distance, over-application, product per
+    /// day; search, Pareto front, recommendation; writes strategy.json,
+    /// report.md with plots and recommended.rrd.
+    Strategy(strategy::StrategyArgs),
 }
 
 pub fn run(cli: Cli) -> Result<()> {
@@ -48,6 +55,7 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Paper(args) => paper::main(args),
         Command::Synth(args) => synth::main(args),
         Command::Discover(args) => discover::main(args),
+        Command::Strategy(args) => strategy::main(args),
     }
 }
 
