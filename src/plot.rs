@@ -742,6 +742,8 @@ pub struct Heatmap {
     pub cell_text: fn(f64) -> String,
     /// `(row, col)` of the cell outlined in black.
     pub highlight: Option<(usize, usize)>,
+    /// What a grey (NaN) cell means, beside its swatch under the colour bar.
+    pub missing_label: String,
     pub width_px: u32,
     pub height_px: u32,
 }
@@ -797,6 +799,7 @@ impl Heatmap {
             range: None,
             cell_text: |v| format!("{v:.2}"),
             highlight: None,
+            missing_label: NOT_EVALUATED_TEXT.to_string(),
             width_px: 900,
             height_px: 600,
         }
@@ -825,6 +828,12 @@ impl Heatmap {
 
     /// Outline one cell (row, col) with a thick black border, e.g. the
     /// recommended strategy.
+    /// What the grey (NaN) cells mean (default "not evaluated").
+    pub fn missing_label(mut self, label: impl Into<String>) -> Self {
+        self.missing_label = label.into();
+        self
+    }
+
     pub fn highlight(mut self, row: usize, col: usize) -> Self {
         self.highlight = Some((row, col));
         self
@@ -1012,7 +1021,7 @@ impl Heatmap {
                     NOT_EVALUATED.rgb().filled(),
                 ))?;
                 root.draw(&Text::new(
-                    NOT_EVALUATED_TEXT,
+                    self.missing_label.as_str(),
                     (bar_x1 + 9, grid_bottom - grid.swatch_h / 2),
                     TextStyle::from((FONT, LABEL_PX).into_font())
                         .pos(Pos::new(HPos::Left, VPos::Center)),
@@ -1116,7 +1125,7 @@ impl Heatmap {
             .max()
             .unwrap_or(0);
         let not_evaluated_w = if any_not_evaluated {
-            text_width_px(NOT_EVALUATED_TEXT, LABEL_PX)
+            text_width_px(&self.missing_label, LABEL_PX)
         } else {
             0
         };

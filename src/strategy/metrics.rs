@@ -44,8 +44,8 @@ pub struct Target {
     pub band: Band,
     /// Rails whose coverage counts (names); empty: every rail.
     pub rails: Vec<String>,
-    /// A point belongs to the carry-on stretch when at least this share of
-    /// the wheel passes saw mu inside the band there.
+    /// Carry-on reaches the farthest point downstream of an applicator
+    /// where at least this share of the wheel passes saw mu inside the band.
     pub carry_on_pass_share: f64,
     /// A point is at braking risk when at least this share of the wheel
     /// passes saw mu below the band there.
@@ -283,7 +283,7 @@ impl Stats {
                         Direction::Up => "up",
                         Direction::Down => "down",
                     },
-                    distance_m: self.carry_on_m(c, *point, dir),
+                    distance_m: self.carry_on_m(c, *point, dir, r),
                 });
             }
         }
@@ -330,35 +330,34 @@ impl Stats {
         }
     }
 
-    /// Walking downstream from the applicator's point: first a stretch
-    /// where more passes saw mu below the band than above it (too much
-    /// product near the applicator), then the stretch where at least
-    /// `carry_on_pass_share` of the passes saw mu inside the band. The
-    /// carry-on distance is from the applicator to the end of that stretch.
-    fn carry_on_m(&self, c: &Counts, start: usize, dir: Direction) -> f64 {
+    /// From the applicator's point downstream (in the direction of travel)
+    /// to the next applicator on this rail or the end of the section: the
+    /// distance to the farthest point where at least `carry_on_pass_share`
+    /// of the passes saw mu inside the band (0 if there is none). Right at
+    /// an applicator many passes see fresh product (mu below the band) or
+    /// a rail just picked clean; the reach is what counts.
+    fn carry_on_m(&self, c: &Counts, start: usize, dir: Direction, rail: usize) -> f64 {
         let w = c.wheels as f64;
-        let steps = match dir {
-            Direction::Up => self.d_m.len() - start,
-            Direction::Down => start + 1,
+        let downstream = |i: usize| match dir {
+            Direction::Up => i > start,
+            Direction::Down => i < start,
         };
-        let mut end = None;
-        for k in 0..steps {
-            let i = match dir {
-                Direction::Up => start + k,
-                Direction::Down => start - k,
-            };
-            let inside = f64::from(c.in_band[i]) / w;
-            let below = f64::from(c.below[i]) / w;
-            let above = 1.0 - inside - below;
-            if inside >= self.target.carry_on_pass_share {
-                end = Some(i);
-            } else if end.is_none() && below > above {
-                continue;
-            } else {
-                break;
-            }
-        }
-        end.map_or(0.0, |i| (self.d_m[i] - self.d_m[start]).abs())
+        let end = self
+            .applicators
+            .iter()
+            .filter(|(_, p, rails)| rails.contains(&rail) && downstream(*p))
+            .map(|(_, p, _)| *p)
+            .min_by_key(|&p| p.abs_diff(start));
+        let range = match (dir, end) {
+            (Direction::Up, Some(e)) => start..e,
+            (Direction::Up, None) => start..self.d_m.len(),
+            (Direction::Down, Some(e)) => e + 1..start + 1,
+            (Direction::Down, None) => 0..start + 1,
+        };
+        range
+            .filter(|&i| f64::from(c.in_band[i]) / w >= self.target.carry_on_pass_share)
+            .map(|i| (self.d_m[i] - self.d_m[start]).abs())
+            .fold(0.0, f64::max)
     }
 }
 

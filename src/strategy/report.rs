@@ -301,12 +301,12 @@ pub fn recommendation_reasons(traffic: &Traffic, target: &Target, study: &Study)
         } else {
             let saving = 1.0 - f.product_g_per_day / b.figures.product_g_per_day;
             out.push(format!(
-                "The best coverage found, {} ({}), needs {:.1} g/day; this one is within {} \
-                 of it for {:.0} % less product.",
+                "The best coverage found, {} ({}), needs {:.1} g/day; this one is within {:.1} \
+                 points of it for {:.0} % less product.",
                 pct(b.figures.coverage),
                 b.strategy.describe(section),
                 b.figures.product_g_per_day,
-                pct(target.coverage_tolerance),
+                100.0 * target.coverage_tolerance,
                 100.0 * saving
             ));
         }
@@ -386,7 +386,8 @@ fn heatmap_plot(
         every,
         values,
     )
-    .value_label("contacts with mu in band [%] (blank: too many below the band)")
+    .value_label("contacts with mu in band [%]")
+    .missing_label("below-band limit exceeded")
     .range(0.0, 1.0)
     .cell_text(|v| format!("{:.0}", 100.0 * v));
     if let Some(r) = &study.recommended {
@@ -440,10 +441,24 @@ fn pareto_plot(study: &Study) -> LinePlot {
     let xy = |v: &mut dyn Iterator<Item = &Figures>| -> (Vec<f64>, Vec<f64>) {
         v.map(|f| (f.product_g_per_day, 100.0 * f.coverage)).unzip()
     };
-    let (ex, ey) = xy(&mut study.evaluated.iter().map(|e| &e.figures));
+    let (ex, ey) = xy(&mut study
+        .evaluated
+        .iter()
+        .filter(|e| e.figures.admissible)
+        .map(|e| &e.figures));
+    let (nx, ny) = xy(&mut study
+        .evaluated
+        .iter()
+        .filter(|e| !e.figures.admissible)
+        .map(|e| &e.figures));
     let (px, py) = xy(&mut study.pareto.iter().map(|e| &e.figures));
     let mut panel = Panel::new("contacts with mu in band [%]")
         .series(Series::new("evaluated", ex, ey).colour(Colour::GREY).dots())
+        .series(
+            Series::new("below-band limit exceeded", nx, ny)
+                .colour(Colour::ORANGE)
+                .dots(),
+        )
         .series(Series::new("Pareto front", px, py).colour(Colour::BLUE));
     let (tx, ty) = xy(&mut std::iter::once(&study.today));
     panel = panel.series(Series::new("today", tx, ty).colour(Colour::RED).dots());
@@ -528,8 +543,8 @@ fn markdown(
     let _ = writeln!(
         out,
         "Coverage: share of the wheel contacts (every wheel pass at every grid point) with mu \
-         in the band. Carry-on: from the applicator downstream, past any over-applied stretch, \
-         to the end of the stretch where at least {} of the passes see mu in the band. \
+         in the band. Carry-on: from the applicator downstream (up to the next applicator) to \
+         the farthest point where at least {} of the passes see mu in the band. \
          Braking risk: track length where at least {} of the passes see mu below the band.\n",
         pct(target.carry_on_pass_share),
         pct(target.braking_risk_pass_share)

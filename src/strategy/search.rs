@@ -14,7 +14,7 @@
 //! the admissible strategies (at most `max_below_share` of the contacts
 //! below the band), the least product whose coverage is within
 //! `coverage_tolerance` of the best admissible coverage. The Pareto front
-//! is the set of evaluated strategies no other beats on both product and
+//! is the set of admissible strategies no other beats on both product and
 //! coverage.
 
 use std::collections::HashMap;
@@ -720,10 +720,15 @@ pub fn best_coverage(evaluated: &[Arc<Evaluated>]) -> Option<&Evaluated> {
         .map(|e| e.as_ref())
 }
 
-/// The evaluated strategies no other beats on both product per day (less)
-/// and coverage (more), by ascending product.
+/// The admissible strategies no other admissible one beats on both product
+/// per day (less) and coverage (more), by ascending product: the choices
+/// an engineer trades between (over-applying ones are not choices).
 pub fn pareto_front(evaluated: &[Arc<Evaluated>]) -> Vec<&Evaluated> {
-    let mut v: Vec<&Evaluated> = evaluated.iter().map(|e| e.as_ref()).collect();
+    let mut v: Vec<&Evaluated> = evaluated
+        .iter()
+        .filter(|e| e.figures.admissible)
+        .map(|e| e.as_ref())
+        .collect();
     v.sort_by(|a, b| {
         a.figures
             .product_g_per_day
