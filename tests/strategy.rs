@@ -26,6 +26,17 @@ fn tortwin() -> Command {
     Command::new(env!("CARGO_BIN_EXE_tortwin"))
 }
 
+/// Runs the command, which must succeed.
+fn run_ok(cmd: &mut Command) -> std::process::Output {
+    let run = cmd.output().unwrap();
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    run
+}
+
 /// Figure 17 of the paper: 0.02 g before every pass against 0.20 g before
 /// every 10th pass (the same product), as two strategies through the
 /// strategy machinery. The paper: near the applicator the two differ
@@ -483,17 +494,12 @@ fn the_command_writes_a_result_that_reads_back() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("out");
     let space = write_space(dir.path(), SMALL_SPACE);
-    let run = tortwin()
-        .args(["strategy", tortwin::app::DEFAULT_RECORDING, "--out"])
-        .arg(&out)
-        .arg("--space")
-        .arg(&space)
-        .output()
-        .unwrap();
-    assert!(
-        run.status.success(),
-        "{}",
-        String::from_utf8_lossy(&run.stderr)
+    let run = run_ok(
+        tortwin()
+            .args(["strategy", tortwin::app::DEFAULT_RECORDING, "--out"])
+            .arg(&out)
+            .arg("--space")
+            .arg(&space),
     );
     let stdout = String::from_utf8_lossy(&run.stdout);
     assert!(stdout.contains("recommended:"), "{stdout}");
@@ -591,26 +597,21 @@ fn synthetic_traffic_from_synth_parameters() {
         dir.path(),
         "[space]\npulse_g = [0.2]\nevery_axles = [2, 4]\npositions_m = [10.0]\napplicators = [1]\n",
     );
-    let run = tortwin()
-        .args([
-            "strategy",
-            "--synth",
-            "--synth-trains-per-day",
-            "8",
-            "--synth-seed",
-            "5",
-            "-q",
-            "--out",
-        ])
-        .arg(&out)
-        .arg("--space")
-        .arg(&space)
-        .output()
-        .unwrap();
-    assert!(
-        run.status.success(),
-        "{}",
-        String::from_utf8_lossy(&run.stderr)
+    run_ok(
+        tortwin()
+            .args([
+                "strategy",
+                "--synth",
+                "--synth-trains-per-day",
+                "8",
+                "--synth-seed",
+                "5",
+                "-q",
+                "--out",
+            ])
+            .arg(&out)
+            .arg("--space")
+            .arg(&space),
     );
     let traffic = Traffic::read(&out.join("traffic.mcap")).unwrap();
     assert_eq!(traffic.trains, 8);

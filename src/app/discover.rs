@@ -3,10 +3,10 @@
 
 use std::fmt::Write as _;
 use std::path::PathBuf;
-use std::time::{Duration, Instant};
+use std::time::Instant;
 
 use anyhow::{Context, Result};
-use indicatif::{ProgressBar, ProgressStyle};
+use indicatif::ProgressBar;
 
 use crate::discover::{self, data::Dataset, Discovery, Options, Progress};
 use crate::error::UsageError;
@@ -101,28 +101,13 @@ pub fn run(args: &DiscoverArgs) -> Result<Discovery> {
         unexplained_ratio: args.unexplained_ratio,
         ..Options::default()
     };
-    let bar = ProgressBar::new_spinner();
-    if args.quiet {
-        bar.set_draw_target(indicatif::ProgressDrawTarget::hidden());
-    }
-    bar.set_style(
-        ProgressStyle::with_template("{spinner} {elapsed} {pos} engine runs  {msg}")
-            .unwrap_or_else(|_| ProgressStyle::default_spinner()),
-    );
-    bar.enable_steady_tick(Duration::from_millis(120));
+    let bar = super::spinner(args.quiet, "{spinner} {elapsed} {pos} engine runs  {msg}");
     bar.set_message(format!("reading {}", args.recording.display()));
     let data = Dataset::read(&args.recording)?;
 
     let work = || discover::discover(&data, &start, &options, &Bar(bar.clone()));
-    let discovery = match args.threads {
-        Some(threads) => rayon::ThreadPoolBuilder::new()
-            .num_threads(threads.max(1))
-            .build()
-            .context("cannot start the worker threads")?
-            .install(work),
-        None => work(),
-    }
-    .with_context(|| format!("discover on {}", args.recording.display()))?;
+    let discovery = super::with_threads(args.threads, work)
+        .with_context(|| format!("discover on {}", args.recording.display()))?;
     bar.set_message("writing the report");
     discover::report::write(&args.report, &data, &discovery)?;
     bar.finish_and_clear();

@@ -9,8 +9,11 @@ pub mod strategy;
 pub mod summary;
 pub mod synth;
 
-use anyhow::Result;
+use std::time::Duration;
+
+use anyhow::{Context, Result};
 use clap::{Parser, Subcommand};
+use indicatif::{ProgressBar, ProgressStyle};
 
 /// The recording the main job replays when none is given.
 pub const DEFAULT_RECORDING: &str =
@@ -60,3 +63,34 @@ pub fn run(cli: Cli) -> Result<()> {
 }
 
 pub use crate::output::write_atomically;
+
+/// A spinner on stderr for a long command (indicatif hides it when stderr
+/// is not a terminal; `quiet` hides it always). `template` is indicatif's,
+/// e.g. `"{spinner} {elapsed} {pos} engine runs  {msg}"`.
+pub(crate) fn spinner(quiet: bool, template: &str) -> ProgressBar {
+    let bar = ProgressBar::new_spinner();
+    if quiet {
+        bar.set_draw_target(indicatif::ProgressDrawTarget::hidden());
+    }
+    bar.set_style(
+        ProgressStyle::with_template(template).unwrap_or_else(|_| ProgressStyle::default_spinner()),
+    );
+    bar.enable_steady_tick(Duration::from_millis(120));
+    bar
+}
+
+/// Runs `work` on a pool of `threads` workers, or on rayon's global pool
+/// (one per core) when `None`.
+pub(crate) fn with_threads<T: Send>(
+    threads: Option<usize>,
+    work: impl FnOnce() -> Result<T> + Send,
+) -> Result<T> {
+    match threads {
+        Some(threads) => rayon::ThreadPoolBuilder::new()
+            .num_threads(threads.max(1))
+            .build()
+            .context("cannot start the worker threads")?
+            .install(work),
+        None => work(),
+    }
+}

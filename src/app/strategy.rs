@@ -4,10 +4,9 @@
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
-use std::time::{Duration, Instant};
+use std::time::Instant;
 
 use anyhow::{Context, Result};
-use indicatif::{ProgressBar, ProgressStyle};
 use serde::Deserialize;
 
 use crate::error::UsageError;
@@ -147,20 +146,6 @@ impl StrategyFile {
     }
 }
 
-/// The progress display on stderr (hidden when not a terminal).
-fn spinner(quiet: bool) -> ProgressBar {
-    let bar = ProgressBar::new_spinner();
-    if quiet {
-        bar.set_draw_target(indicatif::ProgressDrawTarget::hidden());
-    }
-    bar.set_style(
-        ProgressStyle::with_template("{spinner} {elapsed} {pos} strategies  {msg}")
-            .unwrap_or_else(|_| ProgressStyle::default_spinner()),
-    );
-    bar.enable_steady_tick(Duration::from_millis(120));
-    bar
-}
-
 pub fn main(args: StrategyArgs) -> Result<()> {
     let t0 = Instant::now();
     let (traffic, study) = run(&args)?;
@@ -190,7 +175,7 @@ pub fn run(args: &StrategyArgs) -> Result<(Traffic, Study)> {
         Some(path) => StrategyFile::read(path)?,
         None => StrategyFile::default(),
     };
-    let bar = spinner(args.quiet);
+    let bar = super::spinner(args.quiet, "{spinner} {elapsed} {pos} strategies  {msg}");
     let traffic = if args.synth {
         let mut p = SynthParams::new(args.synth_preset, args.synth_length_m);
         p.days = args.synth_days;
@@ -230,15 +215,8 @@ pub fn run(args: &StrategyArgs) -> Result<(Traffic, Study)> {
             &progress,
         )
     };
-    let study = match args.threads {
-        Some(threads) => rayon::ThreadPoolBuilder::new()
-            .num_threads(threads.max(1))
-            .build()
-            .context("cannot start the worker threads")?
-            .install(work),
-        None => work(),
-    }
-    .with_context(|| format!("strategy study on {}", traffic.source))?;
+    let study = super::with_threads(args.threads, work)
+        .with_context(|| format!("strategy study on {}", traffic.source))?;
     bar.set_message("writing the report");
     strategy::report::write(&args.out, &traffic, &cfg, &target, &space, &study)?;
     bar.finish_and_clear();
