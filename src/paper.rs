@@ -159,7 +159,7 @@ impl WaysideScenario {
         let strategy = self.strategy();
         let mut engine = Engine::new(
             strategy.section(&traffic.section),
-            *cfg,
+            cfg.clone(),
             EngineOptions::default(),
             ORIGIN_NS as i64,
         );

@@ -178,6 +178,24 @@ pub struct SynthParams {
     pub tribometer_per_day: u32,
     pub rail_mu_at_end: bool,
     pub noise_sigma: f64,
+    /// Share of the measurements given a gross error (a sensor glitch):
+    /// measured = truth + noise ± U(0.1, 0.3).
+    pub outlier_share: f64,
+    /// Friction changed at one site for a while, outside every model term.
+    pub local_friction: Vec<LocalFriction>,
+}
+
+/// Friction at one measurement site changed by `delta` for `hours` from
+/// `start_h` hours after the start: a local contamination (leaves, a spill)
+/// that no effect or generic term of the model describes. Every value
+/// measured there in that window (mu, adhesion, rail_mu) is the truth plus
+/// `delta`.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct LocalFriction {
+    pub site: String,
+    pub start_h: f64,
+    pub hours: f64,
+    pub delta: f64,
 }
 
 /// 2024-04-08T00:00:00Z, the default start.
@@ -241,6 +259,8 @@ impl SynthParams {
             tribometer_per_day: 3,
             rail_mu_at_end: true,
             noise_sigma: 0.01,
+            outlier_share: 0.0,
+            local_friction: Vec::new(),
         }
     }
 
@@ -345,6 +365,28 @@ impl SynthParams {
                 "in [0, 100]",
             );
         }
+        if !(0.0..=1.0).contains(&self.outlier_share) {
+            return bad("--outlier-share", &self.outlier_share, "in [0, 1]");
+        }
+        for l in &self.local_friction {
+            if !self.sites.iter().any(|s| s.id == l.site) {
+                return bad("--local-friction site", &l.site, "one of the sites");
+            }
+            if !(l.start_h.is_finite()
+                && l.hours.is_finite()
+                && l.hours > 0.0
+                && l.delta.is_finite())
+            {
+                return bad(
+                    "--local-friction",
+                    &format!(
+                        "start_h={}, hours={}, delta={}",
+                        l.start_h, l.hours, l.delta
+                    ),
+                    "finite numbers with hours > 0",
+                );
+            }
+        }
         if !(self.noise_sigma.is_finite() && self.noise_sigma >= 0.0) {
             return bad("--noise-sigma", &self.noise_sigma, "finite and >= 0");
         }
@@ -395,7 +437,9 @@ pub fn truth_config(truth_config: Option<&Path>, hidden: &[String]) -> Result<Mo
 }
 
 /// `NAME:param=value[,param=value]` (or a bare `NAME`) as the TOML table
-/// `[effects.NAME]` that switches the effect on.
+/// `[effects.NAME]` that switches the effect on; `generic:key=value,...` as
+/// one `[[effects.generic]]` table (e.g.
+/// `generic:acts_on=pulse_mass,applicator=A1,driver=time,form=step,t0_utc=2024-04-09T12:00:00Z,f=0.6`).
 pub fn hidden_effect_toml(spec: &str) -> Result<String, UsageError> {
     let bare_key = |s: &str| {
         !s.is_empty()
@@ -412,7 +456,14 @@ pub fn hidden_effect_toml(spec: &str) -> Result<String, UsageError> {
              NAME:param=value[,param=value], e.g. rail_ageing:tau_s=7200"
         )));
     }
-    let mut toml = format!("[effects.{name}]\n");
+    // `generic:acts_on=...,driver=...,form=...,param=value`: one more
+    // `[[effects.generic]]` table, whose names are strings.
+    let generic = name == "generic";
+    let mut toml = if generic {
+        "[[effects.generic]]\n".to_string()
+    } else {
+        format!("[effects.{name}]\n")
+    };
     for pair in params.split(',').map(str::trim).filter(|p| !p.is_empty()) {
         let Some((key, value)) = pair.split_once('=') else {
             return Err(UsageError(format!(
@@ -424,6 +475,13 @@ pub fn hidden_effect_toml(spec: &str) -> Result<String, UsageError> {
             return Err(UsageError(format!(
                 "--hidden {spec}: `{key}` is not a parameter name"
             )));
+        }
+        if generic && value.parse::<f64>().is_err() {
+            toml.push_str(&format!(
+                "{key} = {}\n",
+                toml::Value::String(value.to_string())
+            ));
+            continue;
         }
         let number: f64 = value.parse().map_err(|_| {
             UsageError(format!(
@@ -465,6 +523,11 @@ pub struct SynthReport {
     pub rmse_measured_vs_truth: Option<f64>,
     pub rmse_measured_vs_baseline: Option<f64>,
     pub counts: Counts,
+    /// 0-based position among all messages of the file of every measurement
+    /// given a gross error (`--outlier-share`).
+    pub outliers_index_in_file: Vec<u64>,
+    /// Local friction changes outside the model (`--local-friction`).
+    pub local_friction: Vec<LocalFriction>,
     pub rain_events_h_from_start: Vec<RainKey>,
     pub grid_points: usize,
     pub applicator_grid_index: usize,
@@ -560,8 +623,13 @@ pub fn generate(params: &SynthParams, truth: &ModelConfig, out: &Path) -> Result
     params.validate()?;
     let section = params.section();
     let origin_ns = params.start_ns as i64;
-    let mut truth_engine =
-        Engine::new(section.clone(), *truth, EngineOptions::default(), origin_ns);
+    crate::config::check_terms_against(&truth.effects.generic, &section, "truth configuration")?;
+    let mut truth_engine = Engine::new(
+        section.clone(),
+        truth.clone(),
+        EngineOptions::default(),
+        origin_ns,
+    );
     let mut baseline_engine = Engine::new(
         section.clone(),
         ModelConfig::default(),
@@ -577,8 +645,11 @@ pub fn generate(params: &SynthParams, truth: &ModelConfig, out: &Path) -> Result
     let noise = Normal::new(0.0, params.noise_sigma)
         .map_err(|e| anyhow!("noise sigma {}: {e}", params.noise_sigma))?;
     let mut noise_rng = stream(params.seed, Stream::Noise);
-    // Tribometer readings kept for the end of the file: (log_time, json).
-    let mut at_end: Vec<(u64, Vec<u8>)> = Vec::new();
+    let mut outlier_rng = stream(params.seed, Stream::Outliers);
+    let mut outliers = Vec::new();
+    // Tribometer readings kept for the end of the file: (log_time, json,
+    // an outlier).
+    let mut at_end: Vec<(u64, Vec<u8>, bool)> = Vec::new();
 
     writer.section(params.start_ns, &section, params)?;
     for day in planner.days() {
@@ -629,7 +700,7 @@ pub fn generate(params: &SynthParams, truth: &ModelConfig, out: &Path) -> Result
                     writer.weather(item.log_time_ns, w)?;
                 }
                 EventKind::Measurement(m) => {
-                    let (truth, baseline) = (truth_values[i], baseline_values[i]);
+                    let (mut truth, baseline) = (truth_values[i], baseline_values[i]);
                     if truth.is_nan() || baseline.is_nan() {
                         return Err(anyhow!(
                             "the engine gave no value for the measurement at log_time {} ns",
@@ -641,21 +712,49 @@ pub fn generate(params: &SynthParams, truth: &ModelConfig, out: &Path) -> Result
                     } else {
                         0.0
                     };
-                    let measured = round_dp(truth + noise, 1e5);
+                    let site_id = &section.sites[m.site].id;
+                    for l in &params.local_friction {
+                        let from_ns = params.start_ns as f64 + l.start_h * 3600e9;
+                        let to_ns = from_ns + l.hours * 3600e9;
+                        let t = item.log_time_ns as f64;
+                        if &l.site == site_id && t >= from_ns && t < to_ns {
+                            truth += l.delta;
+                        }
+                    }
+                    // A draw for every measurement, so that the share does
+                    // not move which ones are hit.
+                    let u: f64 = outlier_rng.random();
+                    let gross = if u < params.outlier_share {
+                        let size = outlier_rng.random_range(0.1..0.3);
+                        if outlier_rng.random::<bool>() {
+                            size
+                        } else {
+                            -size
+                        }
+                    } else {
+                        0.0
+                    };
+                    let measured = round_dp(truth + noise + gross, 1e5);
                     stats.add(m.quantity, truth, baseline, measured);
                     counts.measurements += 1;
                     *counts.by_quantity.get_mut(m.quantity) += 1;
                     let json = measurement_json(&section, m, measured)?;
                     if item.at_end {
-                        at_end.push((item.log_time_ns, json));
+                        at_end.push((item.log_time_ns, json, gross != 0.0));
                     } else {
+                        if gross != 0.0 {
+                            outliers.push(writer.messages);
+                        }
                         writer.raw(Topic::Measurement, item.log_time_ns, &json)?;
                     }
                 }
             }
         }
     }
-    for (log_time_ns, json) in &at_end {
+    for (log_time_ns, json, gross) in &at_end {
+        if *gross {
+            outliers.push(writer.messages);
+        }
         writer.raw(Topic::Measurement, *log_time_ns, json)?;
     }
     counts.messages = writer.messages;
@@ -693,7 +792,7 @@ pub fn generate(params: &SynthParams, truth: &ModelConfig, out: &Path) -> Result
         start_utc: utc(params.start_ns),
         start_ns: params.start_ns,
         end_ns: params.end_ns(),
-        effects: serde_json::to_value(truth.effects).context("serializing the effects")?,
+        effects: serde_json::to_value(&truth.effects).context("serializing the effects")?,
         truth_config_toml: truth.to_toml(),
         noise: NoiseKey {
             distribution: "gaussian",
@@ -712,6 +811,8 @@ pub fn generate(params: &SynthParams, truth: &ModelConfig, out: &Path) -> Result
         rmse_measured_vs_truth: rmse(sum(&stats.measured_truth), n_all),
         rmse_measured_vs_baseline: rmse(sum(&stats.measured_baseline), n_all),
         counts,
+        outliers_index_in_file: outliers,
+        local_friction: params.local_friction.clone(),
         rain_events_h_from_start: planner
             .climate
             .rain
@@ -806,6 +907,7 @@ enum Stream {
     Weather = 2,
     Tribometer = 3,
     Noise = 4,
+    Outliers = 5,
 }
 
 fn stream(seed: u64, which: Stream) -> ChaCha8Rng {

@@ -14,7 +14,7 @@ fn tortwin() -> Command {
 
 fn reference(name: &str) -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("../shared/reference/recordings")
+        .join("tests/reference/recordings")
         .join(name)
 }
 

@@ -1,4 +1,4 @@
-//! Every row of ../shared/reference/contact_golden.csv, the values of an
+//! Every row of tests/reference/contact_golden.csv, the values of an
 //! independent implementation of ../shared/spec/contact.md, must be matched
 //! to 1e-6 relative (contact.md, first paragraph).
 //!
@@ -43,8 +43,7 @@ impl Row {
 }
 
 fn golden_rows() -> Vec<Row> {
-    let path =
-        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/reference/contact_golden.csv");
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/reference/contact_golden.csv");
     let text = std::fs::read_to_string(&path)
         .unwrap_or_else(|e| panic!("cannot read {}: {e}", path.display()));
     let mut lines = text.lines().filter(|l| !l.trim().is_empty());

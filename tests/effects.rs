@@ -371,7 +371,7 @@ impl Sink for Collect {
 }
 
 fn curve_2day() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/reference/recordings/curve_2day.mcap")
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/reference/recordings/curve_2day.mcap")
 }
 
 fn replay_with(config: &str) -> Collect {

@@ -1,6 +1,6 @@
 //! `tortwin paper`: every figure is written, the pictures carry their axis
 //! labels, the CSVs of Figures 7 and 13 are the reference implementation's
-//! (../shared/reference/paper_fig7.csv and paper_fig13.csv), and Figures
+//! (tests/reference/paper_fig7.csv and paper_fig13.csv), and Figures
 //! 14–17 show what the paper's section 4 says about them.
 //!
 //! The thresholds of the section 4 checks are set from what the model gives
@@ -124,7 +124,7 @@ fn every_figure_is_written_with_labelled_axes() {
 #[test]
 fn figures_7_and_13_csv_are_the_reference() {
     let (_dir, report) = run();
-    let reference = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/reference");
+    let reference = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/reference");
     for (name, reference_csv, cols) in [
         (
             "fig07",

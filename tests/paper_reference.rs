@@ -1,5 +1,5 @@
 //! The paper's Figures 7 and 13 against an independent implementation of
-//! ../shared/spec/model.md (../shared/reference/paper_fig7.csv and
+//! ../shared/spec/model.md (tests/reference/paper_fig7.csv and
 //! paper_fig13.csv), to 1e-9 relative; and model.md's check of the Figure 13
 //! numbers that the paper states in its text.
 
@@ -10,7 +10,7 @@ use tortwin::paper::{twin_disc, WaysideScenario};
 
 fn reference(name: &str) -> Vec<Vec<f64>> {
     let path = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("../shared/reference")
+        .join("tests/reference")
         .join(name);
     let text = std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
     text.lines()

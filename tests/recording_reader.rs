@@ -511,7 +511,7 @@ proptest! {
 
 fn reference(name: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../shared/reference/recordings")
+        .join("tests/reference/recordings")
         .join(name)
 }
 

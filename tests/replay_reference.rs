@@ -1,7 +1,8 @@
-//! Replaying the reference recordings of ../shared/reference/recordings
+//! Replaying the reference recordings of tests/reference/recordings
 //! (written by an independent implementation) gives, for every measurement,
 //! the `simulated` value of NAME.expected.csv to 1e-9 relative, in the same
-//! replay order.
+//! replay order. generic_day is replayed with generic_day.config.toml: every
+//! acts_on and form of the generic terms, several drivers and scopes at once.
 
 use std::path::PathBuf;
 
@@ -44,7 +45,7 @@ impl Sink for Collect {
 }
 
 pub fn reference_dir() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/reference/recordings")
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/reference/recordings")
 }
 
 pub fn args(recording: PathBuf) -> ReplayArgs {
@@ -52,12 +53,14 @@ pub fn args(recording: PathBuf) -> ReplayArgs {
 }
 
 fn check(name: &str) {
+    check_with(name, None);
+}
+
+fn check_with(name: &str, config: Option<&str>) {
     let mut collect = Collect::default();
-    let summary = replay(
-        &args(reference_dir().join(format!("{name}.mcap"))),
-        &mut [&mut collect],
-    )
-    .unwrap();
+    let mut a = args(reference_dir().join(format!("{name}.mcap")));
+    a.config = config.map(|c| reference_dir().join(c));
+    let summary = replay(&a, &mut [&mut collect]).unwrap();
     let expected =
         std::fs::read_to_string(reference_dir().join(format!("{name}.expected.csv"))).unwrap();
     let rows: Vec<&str> = expected.lines().skip(1).filter(|l| !l.is_empty()).collect();
@@ -116,4 +119,9 @@ fn tangent_day_matches_the_reference() {
 #[test]
 fn curve_2day_matches_the_reference() {
     check("curve_2day");
+}
+
+#[test]
+fn generic_day_matches_the_reference() {
+    check_with("generic_day", Some("generic_day.config.toml"));
 }

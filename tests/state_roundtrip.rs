@@ -13,7 +13,7 @@ use tortwin::sink::{FieldSnapshot, MeasurementOutput, Sink, TrainEvent};
 
 fn reference(name: &str) -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("../shared/reference/recordings")
+        .join("tests/reference/recordings")
         .join(name)
 }
 

@@ -221,7 +221,7 @@ pub fn paper(args: &PaperArgs) -> Result<PaperReport> {
         let fields = variations
             .iter()
             .map(|v| {
-                let mut c = cfg;
+                let mut c = cfg.clone();
                 (v.apply)(&mut c, v.factor);
                 after_pass_100(&c)
             })

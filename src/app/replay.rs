@@ -136,6 +136,11 @@ pub fn replay(args: &ReplayArgs, extra: &mut [&mut dyn Sink]) -> Result<RunSumma
         ..EngineOptions::default()
     };
     let section = reader.section().clone();
+    let source = args.config.as_deref().map_or_else(
+        || "built-in defaults".to_string(),
+        |p| p.display().to_string(),
+    );
+    crate::config::check_terms_against(&cfg.effects.generic, &section, &source)?;
     let mut engine = match (&saved, &args.state_in) {
         (Some(s), Some(path)) => Engine::from_state(section, cfg, opts, s)
             .map_err(|e| InputError::file(path, e.to_string()))?,

@@ -86,6 +86,15 @@ pub struct SynthArgs {
     /// Standard deviation of the Gaussian noise on every measured value.
     #[arg(long, default_value_t = 0.01)]
     pub noise_sigma: f64,
+    /// Share of the measurements given a gross error (a sensor glitch of
+    /// ±0.1 to 0.3); their indices go into the key.
+    #[arg(long, default_value_t = 0.0)]
+    pub outlier_share: f64,
+    /// Friction at one site changed outside every model term, e.g.
+    /// `M2:start_h=30,hours=12,delta=-0.05` (every value measured there in
+    /// that window is the truth plus delta); repeatable.
+    #[arg(long, value_name = "SITE:start_h=H,hours=H,delta=D")]
+    pub local_friction: Vec<String>,
     /// Seed of every random draw: the same arguments give the same bytes.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
@@ -164,6 +173,12 @@ pub fn prepare(args: &SynthArgs) -> Result<(SynthParams, ModelConfig)> {
     p.tribometer_per_day = args.tribometer_per_day;
     p.rail_mu_at_end = args.rail_mu_at_end;
     p.noise_sigma = args.noise_sigma;
+    p.outlier_share = args.outlier_share;
+    p.local_friction = args
+        .local_friction
+        .iter()
+        .map(|spec| parse_local_friction(spec))
+        .collect::<Result<_, _>>()?;
     p.validate()?;
     let truth = synth::truth_config(args.truth_config.as_deref(), &args.hidden)?;
     Ok((p, truth))
@@ -299,4 +314,31 @@ fn describe_effects(effects: &serde_json::Value) -> String {
         })
         .collect();
     format!("hidden effects {}", list.join(", "))
+}
+
+/// `SITE:start_h=H,hours=H,delta=D` (every key required).
+fn parse_local_friction(spec: &str) -> Result<synth::LocalFriction, UsageError> {
+    let usage = || {
+        UsageError(format!(
+            "--local-friction {spec}: expected SITE:start_h=H,hours=H,delta=D, e.g. M2:start_h=30,hours=12,delta=-0.05"
+        ))
+    };
+    let (site, rest) = spec.split_once(':').ok_or_else(usage)?;
+    let (mut start_h, mut hours, mut delta) = (None, None, None);
+    for pair in rest.split(',') {
+        let (key, value) = pair.split_once('=').ok_or_else(usage)?;
+        let v: f64 = value.trim().parse().map_err(|_| usage())?;
+        match key.trim() {
+            "start_h" => start_h = Some(v),
+            "hours" => hours = Some(v),
+            "delta" => delta = Some(v),
+            _ => return Err(usage()),
+        }
+    }
+    Ok(synth::LocalFriction {
+        site: site.trim().to_string(),
+        start_h: start_h.ok_or_else(usage)?,
+        hours: hours.ok_or_else(usage)?,
+        delta: delta.ok_or_else(usage)?,
+    })
 }

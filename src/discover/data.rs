@@ -185,7 +185,7 @@ impl Dataset {
     pub fn simulate(&self, cfg: &ModelConfig) -> Result<Vec<f64>> {
         let mut engine = Engine::new(
             self.section.clone(),
-            *cfg,
+            cfg.clone(),
             EngineOptions::default(),
             self.origin_ns,
         );

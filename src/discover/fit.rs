@@ -233,7 +233,7 @@ impl Space {
     }
 
     pub fn config(&self, u: &[f64]) -> ModelConfig {
-        let mut cfg = self.base;
+        let mut cfg = self.base.clone();
         for (c, p) in self.slots.iter().zip(self.params(u)) {
             c.set(&mut cfg.effects, &p);
         }

@@ -233,7 +233,7 @@ pub fn discover(
     let noise_estimate = diagnose::noise_estimate(data, &residual_before);
     let covariates_before = diagnose::rank(data, &residual_before);
 
-    let mut current = *start;
+    let mut current = start.clone();
     let mut sse = eval_before.sse;
     let mut accepted: Vec<Candidate> = Candidate::ALL
         .into_iter()
@@ -246,7 +246,7 @@ pub fn discover(
     if accepted.iter().any(|c| c.dims() > 0) {
         progress.stage("step 0: refitting the starting model's effects");
         let space = Space {
-            base: current,
+            base: current.clone(),
             slots: accepted.clone(),
         };
         let fit = fit::fit(&ev, &space, Start::Warm(space.units_of(&current)), None)?;
@@ -280,7 +280,7 @@ pub fn discover(
             .par_iter()
             .map(|&c| {
                 let space = Space {
-                    base: current,
+                    base: current.clone(),
                     slots: vec![c],
                 };
                 let start = warm
@@ -390,7 +390,7 @@ pub fn discover(
         // Refit every effect of the model together: the one just added was
         // fitted with the others held at values that had to make up for it.
         let joint = Space {
-            base: current,
+            base: current.clone(),
             slots: accepted.clone(),
         };
         if joint.dims() > c.dims() {
@@ -458,7 +458,7 @@ pub fn discover(
         options: *options,
         engine_runs: ev.runs(),
         elapsed_s: t0.elapsed().as_secs_f64(),
-        start: *start,
+        start: start.clone(),
         model: current,
         residual_before,
         residual_after,

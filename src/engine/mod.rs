@@ -15,11 +15,13 @@
 //! Everything that simulates (replay, paper scenarios, synthetic truth runs,
 //! fits, strategies) drives this one engine with [`Engine::push`].
 
+mod generic;
 mod roll;
 pub mod state;
 pub mod weather;
 
 use std::collections::VecDeque;
+use std::sync::Arc;
 
 use anyhow::Result;
 
@@ -28,6 +30,7 @@ use crate::model::contact::{
     self, HertzContact, HertzShape, KalkerCoefficients, PolachInput, Steel,
 };
 use crate::model::effects::TimeEffects;
+use crate::model::generic::ActsOn;
 use crate::model::product;
 use crate::recording::{
     BogiePosition, Creepage, Direction, Event, EventKind, Measurement, Passage, Quantity, Section,
@@ -37,6 +40,7 @@ use crate::sink::{
     TrackInfo, TrainEvent,
 };
 
+use generic::{GenericSet, WheelDrivers};
 pub use state::EngineState;
 use weather::{WeatherState, WeatherTimeline};
 
@@ -116,6 +120,8 @@ pub(crate) struct WheelOnRail {
     pub creepage: Creepage,
     /// fp · fc, eq. (2) and (3).
     pub fp_fc: f64,
+    /// What generic terms driven by the wheel see.
+    pub drivers: WheelDrivers,
 }
 
 /// A train being rolled, or kept for late measurements.
@@ -131,6 +137,9 @@ struct TrainRecord {
     /// Total mass at step 2 of each contact at a measurement site:
     /// [(axle * rails + rail) * sites + site].
     site_mass_kg: Vec<f64>,
+    /// muD and muC of eq. (4) at those contacts, where friction terms make
+    /// them differ from the configuration's (else empty).
+    site_levels: Vec<(f64, f64)>,
 }
 
 /// An event inside a train's occupation, waiting for the train to be rolled.
@@ -208,6 +217,9 @@ pub struct Engine {
     /// `exp(-(N - 1) / cN)` for N - 1 = 0 ..= i_last.
     revolution: Vec<f64>,
     time_effects: TimeEffects,
+    /// The generic terms, compiled for this section (shared with the
+    /// rolling wheel).
+    generic: Arc<GenericSet>,
     weather: WeatherState,
     occupied_until_s: f64,
     origin_ns: i64,
@@ -310,6 +322,11 @@ impl Engine {
             rain_k_per_mm: cfg.effects.rain_washoff.map(|e| e.k_per_mm),
         };
         let n_tracks = track_info.len();
+        let generic = Arc::new(GenericSet::compile(
+            &cfg.effects.generic,
+            &section,
+            origin_ns,
+        ));
         Self {
             steel: Steel {
                 e_pa: cfg.contact.e_pa,
@@ -345,6 +362,7 @@ impl Engine {
             sites_at,
             revolution,
             time_effects,
+            generic,
             weather: WeatherState::default(),
             occupied_until_s: f64::NEG_INFINITY,
             origin_ns,
@@ -557,6 +575,7 @@ impl Engine {
             end_ns,
             wheels: Vec::new(),
             site_mass_kg: Vec::new(),
+            site_levels: Vec::new(),
         });
         drop(passage);
         record.log_time_ns = log_time_ns;
@@ -584,6 +603,11 @@ impl Engine {
                     kalker,
                     creepage,
                     fp_fc,
+                    drivers: WheelDrivers {
+                        speed_mps: record.passage.speed_mps,
+                        wheel_load_kn: q_n / 1000.0,
+                        creepage: (creepage.cx * creepage.cx + creepage.cy * creepage.cy).sqrt(),
+                    },
                 });
             }
         }
@@ -592,6 +616,12 @@ impl Engine {
             record.passage.axles.len() * rails * self.section.sites.len(),
             f64::NAN,
         );
+        record.site_levels.clear();
+        if self.generic.any_friction() {
+            record
+                .site_levels
+                .resize(record.site_mass_kg.len(), (f64::NAN, f64::NAN));
+        }
         sink.train(&TrainEvent {
             log_time_ns,
             end_ns,
@@ -743,8 +773,12 @@ impl Engine {
         };
         let rails = self.section.rails.len();
         let sites = self.section.sites.len();
-        let mass = record.site_mass_kg[(axle.axle_index * rails + m.rail) * sites + m.site];
-        let mu = product::friction(&self.cfg.product, mass);
+        let k = (axle.axle_index * rails + m.rail) * sites + m.site;
+        let mass = record.site_mass_kg[k];
+        let mu = match record.site_levels.get(k) {
+            Some(&levels) => self.friction_at(levels, mass),
+            None => product::friction(&self.cfg.product, mass),
+        };
         match m.quantity {
             Quantity::Mu => mu,
             _ => {
@@ -752,6 +786,16 @@ impl Engine {
                 self.adhesion(wheel, record.passage.speed_mps, mu)
             }
         }
+    }
+
+    /// Eq. (4) with muD and muC as the friction terms make them.
+    pub(crate) fn friction_at(&self, (mu_d, mu_c): (f64, f64), mass_kg: f64) -> f64 {
+        let params = product::ProductParams {
+            mu_d,
+            mu_c,
+            ..self.cfg.product
+        };
+        product::friction(&params, mass_kg)
     }
 
     /// T/N by Polach with mu0 = mu (contact.md).
@@ -787,6 +831,20 @@ impl Engine {
         pulse_mass_kg: f64,
         weather: &WeatherState,
     ) {
+        let (mut mass_kg, mut pulse_mass_kg) = (mass_kg, pulse_mass_kg);
+        if self.generic.any(ActsOn::PulseMass) {
+            let g = self.generic.factor(
+                ActsOn::PulseMass,
+                generic::Which::All,
+                Some(applicator),
+                self.track_info[track].rail,
+                time_s,
+                &weather.current,
+                None,
+            );
+            mass_kg *= g;
+            pulse_mass_kg *= g;
+        }
         let effects = self.time_effects;
         let t = &mut self.tracks[track];
         let precip = weather.precip_mm_at(time_s);
@@ -821,6 +879,18 @@ impl Engine {
         if self.time_effects.any() && !last.is_nan() {
             let rain = weather.precip_mm_at(time_s) - t.precip_at_touch_mm[point];
             m = self.time_effects.apply(m, time_s - last, rain);
+        }
+        if self.generic.any_friction() {
+            let p = &self.cfg.product;
+            let levels = self.generic.friction_levels(
+                p.mu_d,
+                p.mu_c,
+                self.track_info[track].rail,
+                time_s,
+                &weather.current,
+                None,
+            );
+            return self.friction_at(levels, m);
         }
         product::friction(&self.cfg.product, m)
     }
@@ -876,6 +946,7 @@ impl Engine {
         simulated: f64,
         sink: &mut dyn Sink,
     ) -> Result<()> {
+        let simulated = self.generic.measured(simulated, m.site, m.rail, m.quantity);
         let q = match m.quantity {
             Quantity::Mu => 0,
             Quantity::Adhesion => 1,

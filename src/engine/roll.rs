@@ -2,11 +2,15 @@
 //! order of model.md "One contact". This is the hot path: no allocation,
 //! everything that depends only on the wheel computed once before the loop.
 
+use std::sync::Arc;
+
 use anyhow::Result;
 
+use super::generic::{GenericSet, Which};
 use super::weather::WeatherTimeline;
 use super::{enters_at_zero, Engine, SnapshotKind, TrackState, TrainRecord, NO_APPLICATOR};
 use crate::model::effects::{self, TimeEffects};
+use crate::model::generic::ActsOn;
 use crate::model::product::{self, ContactConditions, ProductParams};
 use crate::sink::{FieldSnapshot, Sink, WheelContacts};
 
@@ -51,8 +55,17 @@ struct Roller {
     speed_mps: f64,
     d_entry_m: f64,
     fp_fc: f64,
-    /// speed_transfer's factor (1 when off).
+    /// speed_transfer's factor times the generic transfer terms driven by
+    /// the wheel (1 when there are none).
     transfer_factor: f64,
+    /// The generic consumption terms driven by the wheel (1 when none).
+    consumption_generic: f64,
+    /// Generic terms on transfer / consumption that change along the path
+    /// (time, weather): evaluated at every contact.
+    transfer_varies: bool,
+    consumption_varies: bool,
+    generic: Arc<GenericSet>,
+    rail: usize,
     temperature_beta: Option<f64>,
     /// The temperature factor when the weather does not change while the
     /// train is in the section (the usual case): computed once.
@@ -67,7 +80,13 @@ impl Roller {
     /// (model.md, computed in that form).
     #[inline(always)]
     fn time_at(&self, d_m: &[f64], i: usize) -> f64 {
-        self.t_passage_s + ((d_m[i] - self.d_entry_m).abs() + self.offset_m) / self.speed_mps
+        wheel_time_s(
+            self.t_passage_s,
+            d_m[i],
+            self.d_entry_m,
+            self.offset_m,
+            self.speed_mps,
+        )
     }
 
     /// One contact at point i, steps 1 to 6 of model.md. Returns the total
@@ -103,20 +122,29 @@ impl Roller {
         // Step 2: what a measurement of this contact sees.
         let m_kg = st.wheel_kg + rail_kg;
 
-        // Steps 3 to 5: transfer, consumption, cap.
+        // Steps 3 to 5: transfer, consumption, cap. Effect factors: the
+        // named effect's first, then the generic terms'.
+        let mut transfer_factor = self.transfer_factor;
+        if self.transfer_varies {
+            transfer_factor *= self.event_factor(ActsOn::Transfer, t, weather);
+        }
+        let mut consumption_factor = match (self.temperature_factor, self.temperature_beta) {
+            (Some(constant), _) => constant,
+            (None, Some(beta)) => {
+                effects::temperature_factor(weather.current.air_temperature_c, beta)
+            }
+            (None, None) => 1.0,
+        } * self.consumption_generic;
+        if self.consumption_varies {
+            consumption_factor *= self.event_factor(ActsOn::Consumption, t, weather);
+        }
         let conditions = ContactConditions {
             m0_kg: st.m0_kg,
             fp_fc: self.fp_fc,
             transfer_revolution: st
                 .applicator_point
-                .map(|ia| revolution[i.abs_diff(ia)] * self.transfer_factor),
-            consumption_factor: match (self.temperature_factor, self.temperature_beta) {
-                (Some(constant), _) => constant,
-                (None, Some(beta)) => {
-                    effects::temperature_factor(weather.current.air_temperature_c, beta)
-                }
-                (None, None) => 1.0,
-            },
+                .map(|ia| revolution[i.abs_diff(ia)] * transfer_factor),
+            consumption_factor,
         };
         let losses = product::roll(&self.params, &mut st.wheel_kg, &mut rail_kg, &conditions);
         st.consumed_kg += losses.consumed_kg;
@@ -137,10 +165,41 @@ impl Roller {
     }
 }
 
+impl Roller {
+    /// The generic terms on `acts_on` driven by time or weather, at a
+    /// contact at `t_s`.
+    #[inline(never)]
+    fn event_factor(
+        &self,
+        acts_on: ActsOn,
+        t_s: f64,
+        weather: &super::weather::WeatherState,
+    ) -> f64 {
+        self.generic.factor(
+            acts_on,
+            Which::Event,
+            None,
+            self.rail,
+            t_s,
+            &weather.current,
+            None,
+        )
+    }
+}
+
+/// A wheel's time at a point: `t_passage + (|d - d_entry| + offset) / v`
+/// (model.md, computed in that form).
+#[inline(always)]
+fn wheel_time_s(t_passage_s: f64, d_m: f64, d_entry_m: f64, offset_m: f64, speed_mps: f64) -> f64 {
+    t_passage_s + ((d_m - d_entry_m).abs() + offset_m) / speed_mps
+}
+
 /// Reused buffers for the field snapshots.
 #[derive(Debug, Default)]
 pub(crate) struct SnapshotBuffers {
     mu: Vec<f64>,
+    /// mu of every contact of one wheel, for [`WheelContacts::mu`].
+    contact_mu: Vec<f64>,
     adhesion: Vec<f64>,
     wheel_mass_kg: Vec<f64>,
 }
@@ -168,14 +227,23 @@ impl Engine {
                     || self.last_axle[track] == a;
                 self.roll_wheel(record, a, r, observe);
                 if self.opts.every_wheel_contacts {
-                    sink.wheel_contacts(&WheelContacts {
+                    // With friction terms mu is not eq. (4) of the mass alone.
+                    let mut mu = std::mem::take(&mut self.snapshot.contact_mu);
+                    let with_terms = self.generic.any_friction();
+                    if with_terms {
+                        self.fill_mu(record, track, a, &mut mu);
+                    }
+                    let result = sink.wheel_contacts(&WheelContacts {
                         track,
                         rail: r,
                         direction: record.passage.direction,
                         train_seq: record.passage.train_seq,
                         axle: a,
                         seen_mass_kg: &self.observed[track].mass_kg,
-                    })?;
+                        mu: with_terms.then_some(mu.as_slice()),
+                    });
+                    self.snapshot.contact_mu = mu;
+                    result?;
                 }
                 if self.opts.snapshot_every_wheel {
                     let end_s = self.wheel_exit_s(record, a);
@@ -226,6 +294,20 @@ impl Engine {
             capped_kg: 0.0,
             lost_kg: 0.0,
         };
+        let generic = &self.generic;
+        let wheel_generic = |acts_on| {
+            generic.factor(
+                acts_on,
+                Which::Wheel,
+                None,
+                r,
+                0.0,
+                &crate::recording::Weather::default(),
+                Some(&wheel.drivers),
+            )
+        };
+        let transfer_generic = wheel_generic(ActsOn::Transfer);
+        let consumption_generic = wheel_generic(ActsOn::Consumption);
         let roller = Roller {
             params: self.cfg.product,
             time_effects: self.time_effects,
@@ -238,7 +320,13 @@ impl Engine {
                 .cfg
                 .effects
                 .speed_transfer
-                .map_or(1.0, |e| effects::speed_transfer_factor(speed_mps, e.n)),
+                .map_or(1.0, |e| effects::speed_transfer_factor(speed_mps, e.n))
+                * transfer_generic,
+            consumption_generic,
+            transfer_varies: generic.varies(ActsOn::Transfer, r),
+            consumption_varies: generic.varies(ActsOn::Consumption, r),
+            generic: Arc::clone(generic),
+            rail: r,
             temperature_beta: self
                 .cfg
                 .effects
@@ -338,6 +426,20 @@ impl Engine {
             for &s in &self.sites_at[i] {
                 record.site_mass_kg[(a * rails + r) * sites + s] = m_kg;
             }
+            if !record.site_levels.is_empty() {
+                let p = &self.cfg.product;
+                let levels = self.generic.friction_levels(
+                    p.mu_d,
+                    p.mu_c,
+                    r,
+                    t,
+                    &self.timeline.at(t).current,
+                    Some(&wheel.drivers),
+                );
+                for &s in &self.sites_at[i] {
+                    record.site_levels[(a * rails + r) * sites + s] = levels;
+                }
+            }
             step = special_step + 1;
             if up {
                 next_special += 1;
@@ -375,6 +477,49 @@ impl Engine {
         Ok(())
     }
 
+    /// mu of every contact axle `a` made on `track` (its step-2 masses in
+    /// `observed`): eq. (4), with muD and muC as the friction terms make
+    /// them at each contact's time and weather.
+    fn fill_mu(&self, record: &TrainRecord, track: usize, a: usize, out: &mut Vec<f64>) {
+        out.clear();
+        let observed = &self.observed[track];
+        if !self.generic.any_friction() {
+            out.extend(
+                observed
+                    .mass_kg
+                    .iter()
+                    .map(|&m| product::friction(&self.cfg.product, m)),
+            );
+            return;
+        }
+        let rails = self.section.rails.len();
+        let rail = self.track_info[track].rail;
+        let wheel = record.wheels[a * rails + rail];
+        let up = enters_at_zero(record.passage.direction);
+        let d_entry_m = if up { 0.0 } else { self.section.length_m };
+        let t_passage_s = self.time_s(record.log_time_ns);
+        let offset_m = record.passage.axles.get(a).map_or(0.0, |x| x.offset_m);
+        let p = &self.cfg.product;
+        for (&d_m, &m) in self.grid.d_m.iter().zip(&observed.mass_kg) {
+            let t = wheel_time_s(
+                t_passage_s,
+                d_m,
+                d_entry_m,
+                offset_m,
+                record.passage.speed_mps,
+            );
+            let levels = self.generic.friction_levels(
+                p.mu_d,
+                p.mu_c,
+                rail,
+                t,
+                &self.timeline.at(t).current,
+                Some(&wheel.drivers),
+            );
+            out.push(self.friction_at(levels, m));
+        }
+    }
+
     fn emit_field(
         &mut self,
         record: &TrainRecord,
@@ -388,13 +533,11 @@ impl Engine {
         let rail = self.track_info[track].rail;
         let wheel = record.wheels[a * rails + rail];
         let mut buf = std::mem::take(&mut self.snapshot);
-        buf.mu.clear();
         buf.adhesion.clear();
         buf.wheel_mass_kg.clear();
+        self.fill_mu(record, track, a, &mut buf.mu);
         let observed = &self.observed[track];
-        for (&mass_kg, &wheel_mass_kg) in observed.mass_kg.iter().zip(&observed.wheel_mass_kg) {
-            let mu = product::friction(&self.cfg.product, mass_kg);
-            buf.mu.push(mu);
+        for (&mu, &wheel_mass_kg) in buf.mu.iter().zip(&observed.wheel_mass_kg) {
             buf.adhesion
                 .push(self.adhesion(&wheel, record.passage.speed_mps, mu));
             buf.wheel_mass_kg.push(wheel_mass_kg);

@@ -107,7 +107,7 @@ pub(super) fn capture(engine: &Engine) -> EngineState {
             .occupied_until_s
             .is_finite()
             .then_some(engine.occupied_until_s),
-        effects: engine.cfg.effects,
+        effects: engine.cfg.effects.clone(),
     }
 }
 

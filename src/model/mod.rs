@@ -8,4 +8,5 @@
 
 pub mod contact;
 pub mod effects;
+pub mod generic;
 pub mod product;

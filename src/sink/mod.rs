@@ -123,6 +123,9 @@ pub struct WheelContacts<'a> {
     /// The total mass `m = m_w + m_r` of step 2 at each grid point, in grid
     /// order (d ascending): mu of the contact is eq. (4) of it.
     pub seen_mass_kg: &'a [f64],
+    /// mu of each contact, given where generic friction terms make it more
+    /// than eq. (4) of the mass (`None`: eq. (4) of `seen_mass_kg`).
+    pub mu: Option<&'a [f64]>,
 }
 
 /// The end-of-run figures.

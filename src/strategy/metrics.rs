@@ -372,6 +372,23 @@ impl Sink for Stats {
         let dir = usize::from(w.direction == Direction::Down);
         let c = &mut self.counts[w.rail][dir];
         c.wheels += 1;
+        if let Some(mu) = w.mu {
+            // Generic friction terms: mu is given, compared with the band.
+            let band = self.target.band;
+            for ((&mu, inside), below) in
+                mu.iter().zip(c.in_band.iter_mut()).zip(c.below.iter_mut())
+            {
+                let is_below = mu < band.lower_mu;
+                *below += u32::from(is_below);
+                *inside += u32::from(!is_below && mu <= band.upper_mu);
+            }
+            if let Some(sum) = &mut self.mu_sum {
+                for (s, &mu) in sum[w.rail].iter_mut().zip(mu) {
+                    *s += mu;
+                }
+            }
+            return Ok(());
+        }
         let band = self.mass_band;
         for ((&m, inside), below) in w
             .seen_mass_kg

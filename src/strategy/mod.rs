@@ -344,7 +344,7 @@ pub fn evaluate(
         every_wheel_contacts: true,
         ..EngineOptions::default()
     };
-    let mut engine = Engine::new(section.clone(), *cfg, opts, traffic.origin_ns);
+    let mut engine = Engine::new(section.clone(), cfg.clone(), opts, traffic.origin_ns);
     let mut stats = metrics::Stats::new(&section, engine.grid(), cfg, target, detail)?;
     let mut fanout = Fanout::default();
     fanout.sinks.push(&mut stats);

@@ -240,7 +240,7 @@ pub fn write(
             admissible: h.admissible.clone(),
         }),
         evaluated: study.evaluated.iter().map(|e| choice(e, section)).collect(),
-        model: *cfg,
+        model: cfg.clone(),
     };
     let mut json = serde_json::to_string_pretty(&result).context("serializing the result")?;
     json.push('\n');

@@ -9,6 +9,8 @@
 //! Ranges are checked once, after merging, by [`ModelConfig::validate`], which
 //! names the dotted key of the first bad value.
 
+mod generic;
+
 use std::path::Path;
 
 use serde::{Deserialize, Serialize};
@@ -17,8 +19,10 @@ use crate::error::ConfigError;
 use crate::model::contact::PolachParams;
 use crate::model::product::ProductParams;
 
+pub use generic::{check_terms_against, format_utc, GenericTerm, TermEffect};
+
 /// The text of `config/default.toml`, compiled in.
-pub const DEFAULT_TOML: &str = include_str!("../config/default.toml");
+pub const DEFAULT_TOML: &str = include_str!("../../config/default.toml");
 
 /// Steel and wheel profile (contact.md, "Hertz").
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -92,8 +96,9 @@ pub struct WheelEdgeReservoir {
 #[serde(deny_unknown_fields)]
 pub struct BogieBands {}
 
-/// The candidate effects of effects.md; `None` = off (the default).
-#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+/// The candidate effects of effects.md; `None` = off (the default), and
+/// the generic terms (none by default).
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Effects {
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -108,6 +113,10 @@ pub struct Effects {
     pub wheel_edge_reservoir: Option<WheelEdgeReservoir>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub bogie_bands: Option<BogieBands>,
+    /// `[[effects.generic]]`: factors outside the catalogue (effects.md,
+    /// "Generic terms"), in the order they were given.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub generic: Vec<GenericTerm>,
 }
 
 impl Effects {
@@ -137,7 +146,7 @@ impl Effects {
 }
 
 /// Everything the engine needs to know about the physics.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ModelConfig {
     pub product: ProductParams,
@@ -158,7 +167,22 @@ struct Overlay {
     #[serde(default)]
     polach: PolachOverlay,
     #[serde(default)]
-    effects: Effects,
+    effects: EffectsOverlay,
+}
+
+/// The effects of an overlay: the named ones as in [`Effects`]; the generic
+/// terms as raw tables, parsed one by one so that an error names the term.
+#[derive(Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct EffectsOverlay {
+    rail_ageing: Option<RailAgeing>,
+    rain_washoff: Option<RainWashoff>,
+    temperature_consumption: Option<TemperatureConsumption>,
+    speed_transfer: Option<SpeedTransfer>,
+    wheel_edge_reservoir: Option<WheelEdgeReservoir>,
+    bogie_bands: Option<BogieBands>,
+    #[serde(default)]
+    generic: Vec<toml::Value>,
 }
 
 /// Declares an overlay struct of optional fields and its merge into the full one.
@@ -222,7 +246,8 @@ impl ModelConfig {
     }
 
     /// Overlays `text` on `self`: keys it sets replace ours; effects it
-    /// switches on replace ours (an effect it does not name stays as it is).
+    /// switches on replace ours (an effect it does not name stays as it is);
+    /// its generic terms are added after ours.
     pub fn overlay_str(&mut self, text: &str, source_name: &str) -> Result<(), ConfigError> {
         let overlay: Overlay = toml::from_str(text).map_err(|e| ConfigError {
             source_name: source_name.into(),
@@ -233,6 +258,15 @@ impl ModelConfig {
         overlay.contact.merge_into(&mut self.contact);
         overlay.polach.merge_into(&mut self.polach);
         let e = overlay.effects;
+        let first = self.effects.generic.len();
+        for (k, value) in e.generic.into_iter().enumerate() {
+            let term = GenericTerm::from_toml(value).map_err(|(key, message)| ConfigError {
+                source_name: source_name.into(),
+                key: format!("effects.generic[{}].{key}", first + k),
+                message,
+            })?;
+            self.effects.generic.push(term);
+        }
         let mine = &mut self.effects;
         mine.rail_ageing = e.rail_ageing.or(mine.rail_ageing);
         mine.rain_washoff = e.rain_washoff.or(mine.rain_washoff);
@@ -420,6 +454,10 @@ impl ModelConfig {
                 (0.0..=1.0).contains(&x.r),
                 "in [0, 1]",
             )?;
+        }
+        for (k, term) in e.generic.iter().enumerate() {
+            term.check()
+                .map_err(|(key, message)| bad(&format!("effects.generic[{k}].{key}"), message))?;
         }
         Ok(())
     }
