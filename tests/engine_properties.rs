@@ -215,7 +215,7 @@ proptest! {
     #[test]
     fn random_traffic_keeps_the_state_physical(trains in prop::collection::vec(train_spec(), 1..8), config in effects()) {
         let cfg = ModelConfig::from_overlay_str(&config, "prop").unwrap();
-        let mut engine = Engine::new(section(), cfg, EngineOptions::default(), 0);
+        let mut engine = Engine::new(section(), cfg.clone(), EngineOptions::default(), 0);
         let mut check = Check { mu_c: cfg.product.mu_c, mu_d: cfg.product.mu_d, m_max: cfg.product.m_max_kg };
         for e in events(&trains) {
             engine.push(e, &mut check).map_err(|e| TestCaseError::fail(format!("{e:#}")))?;

@@ -76,6 +76,8 @@ pub struct Dataset {
     row_of_index: HashMap<u64, usize>,
     pub passages: Vec<PassageFacts>,
     pub covariates: Vec<Covariate>,
+    /// The weather in effect at any time.
+    weather: WeatherAt,
     /// Days with at least one measurement, ascending (values of [`Row::day`]).
     pub days: Vec<usize>,
     /// UTC midnight of day 0, ns.
@@ -94,6 +96,8 @@ pub struct PassageFacts {
     pub axle_offsets_m: Vec<f64>,
     /// [axle][rail], N.
     pub wheel_load_n: Vec<Vec<f64>>,
+    /// [axle][rail]: `sqrt(cx² + cy²)`.
+    pub creepage: Vec<Vec<f64>>,
 }
 
 impl Dataset {
@@ -165,6 +169,7 @@ impl Dataset {
             origin_ns,
         };
         let covariates = covariates(&section, &rows, &passages, &weather, day0_ns);
+        let weather = weather;
         Ok(Self {
             path: path.to_path_buf(),
             section,
@@ -174,6 +179,7 @@ impl Dataset {
             row_of_index,
             passages,
             covariates,
+            weather,
             days,
             day0_ns,
             unknown_topic_messages,
@@ -207,6 +213,12 @@ impl Dataset {
             );
         }
         Ok(sink.simulated)
+    }
+
+    /// The weather in effect at `log_time_ns` (the defaults before the first
+    /// message).
+    pub fn weather_at(&self, log_time_ns: u64) -> crate::recording::Weather {
+        self.weather.state(log_time_ns).current
     }
 
     /// The section's name of a rail.
@@ -248,6 +260,16 @@ fn passage_facts(log_time_ns: u64, p: &Passage) -> PassageFacts {
         bogies: p.axles.iter().map(|a| a.bogie_position).collect(),
         axle_offsets_m: p.axles.iter().map(|a| a.offset_m).collect(),
         wheel_load_n: p.axles.iter().map(|a| a.wheel_load_n.clone()).collect(),
+        creepage: p
+            .axles
+            .iter()
+            .map(|a| {
+                a.creepage
+                    .iter()
+                    .map(|c| (c.cx * c.cx + c.cy * c.cy).sqrt())
+                    .collect()
+            })
+            .collect(),
     }
 }
 

@@ -163,17 +163,25 @@ fn short(v: f64) -> String {
 }
 
 /// eta² of `residual` over the bins of `c`.
+///
+/// Rows whose residual is not finite (gross outliers) are left out.
 pub fn score(c: &Covariate, residual: &[f64]) -> CovariateScore {
     let b = bins(c);
     let k = b.labels.len();
-    let n = residual.len();
-    let mean = residual.iter().sum::<f64>() / n.max(1) as f64;
-    let total: f64 = residual.iter().map(|r| (r - mean).powi(2)).sum();
+    let n = residual.iter().filter(|r| r.is_finite()).count();
+    let mean = residual.iter().filter(|r| r.is_finite()).sum::<f64>() / n.max(1) as f64;
+    let total: f64 = residual
+        .iter()
+        .filter(|r| r.is_finite())
+        .map(|r| (r - mean).powi(2))
+        .sum();
     let mut sum = vec![0.0; k];
     let mut count = vec![0usize; k];
     for (&i, &r) in b.index.iter().zip(residual) {
-        sum[i] += r;
-        count[i] += 1;
+        if r.is_finite() {
+            sum[i] += r;
+            count[i] += 1;
+        }
     }
     let between: f64 = (0..k)
         .filter(|&i| count[i] > 0)
@@ -228,6 +236,9 @@ pub fn noise_estimate(data: &Dataset, residual: &[f64]) -> Option<f64> {
         let (Some(train), Some(axle)) = (row.train_seq, row.axle_index) else {
             continue;
         };
+        if !r.is_finite() {
+            continue;
+        }
         let bogie = data
             .passages
             .get(train)

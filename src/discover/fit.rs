@@ -41,13 +41,15 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 use super::data::Dataset;
+use super::space::GenericSlot;
 use crate::config::{
     BogieBands, Effects, ModelConfig, RailAgeing, RainWashoff, SpeedTransfer,
     TemperatureConsumption, WheelEdgeReservoir,
 };
 
-/// The effects discover knows: those of effects.md.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize)]
+/// The effects discover knows: the named ones of effects.md, and any
+/// generic term of its space ([`GenericSlot`]).
+#[derive(Debug, Clone, PartialEq, Eq, Hash, Serialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Candidate {
     RailAgeing,
@@ -56,6 +58,7 @@ pub enum Candidate {
     SpeedTransfer,
     WheelEdgeReservoir,
     BogieBands,
+    Generic(GenericSlot),
 }
 
 /// `tau_s` between 60 s and 1e6 s.
@@ -80,8 +83,8 @@ impl Candidate {
         Candidate::BogieBands,
     ];
 
-    /// The effect's name in effects.md.
-    pub fn name(self) -> &'static str {
+    /// The effect's name in effects.md (`generic` for a generic term).
+    pub fn name(&self) -> &'static str {
         match self {
             Candidate::RailAgeing => "rail_ageing",
             Candidate::RainWashoff => "rain_washoff",
@@ -89,10 +92,23 @@ impl Candidate {
             Candidate::SpeedTransfer => "speed_transfer",
             Candidate::WheelEdgeReservoir => "wheel_edge_reservoir",
             Candidate::BogieBands => "bogie_bands",
+            Candidate::Generic(_) => "generic",
         }
     }
 
-    pub fn param_names(self) -> &'static [&'static str] {
+    /// The name, or a generic term's label.
+    pub fn label(&self) -> String {
+        match self {
+            Candidate::Generic(g) => g.label(),
+            c => c.name().to_string(),
+        }
+    }
+
+    pub fn is_generic(&self) -> bool {
+        matches!(self, Candidate::Generic(_))
+    }
+
+    pub fn param_names(&self) -> &'static [&'static str] {
         match self {
             Candidate::RailAgeing => &["tau_s"],
             Candidate::RainWashoff => &["k_per_mm"],
@@ -100,15 +116,22 @@ impl Candidate {
             Candidate::SpeedTransfer => &["n"],
             Candidate::WheelEdgeReservoir => &["alpha", "r"],
             Candidate::BogieBands => &[],
+            Candidate::Generic(g) => match g.param_name() {
+                "beta" => &["beta"],
+                "n" => &["n"],
+                "gamma" => &["gamma"],
+                "f" => &["f"],
+                _ => &["offset"],
+            },
         }
     }
 
-    pub fn dims(self) -> usize {
+    pub fn dims(&self) -> usize {
         self.param_names().len()
     }
 
     /// The searched range of each parameter, for the report.
-    pub fn bounds(self) -> Vec<(f64, f64, &'static str)> {
+    pub fn bounds(&self) -> Vec<(f64, f64, &'static str)> {
         match self {
             Candidate::RailAgeing => vec![(TAU_MIN_S, TAU_MAX_S, "log")],
             Candidate::RainWashoff => vec![(0.0, RAIN_K_MAX, "log-like from 0")],
@@ -118,11 +141,15 @@ impl Candidate {
                 vec![(0.0, 1.0, "log-like from 0"), (0.0, 1.0, "log-like from 0")]
             }
             Candidate::BogieBands => vec![],
+            Candidate::Generic(g) => {
+                let (lo, hi) = g.bounds();
+                vec![(lo, hi, "linear")]
+            }
         }
     }
 
     /// Parameter `i` at the search coordinate `u` in [0, 1].
-    pub fn param(self, i: usize, u: f64) -> f64 {
+    pub fn param(&self, i: usize, u: f64) -> f64 {
         let u = u.clamp(0.0, 1.0);
         let loglike = |base: f64| (base.powf(u) - 1.0) / (base - 1.0);
         match (self, i) {
@@ -134,11 +161,15 @@ impl Candidate {
             (Candidate::SpeedTransfer, _) => -SPEED_N_MAX + 2.0 * SPEED_N_MAX * u,
             (Candidate::WheelEdgeReservoir, _) => loglike(LOGLIKE_BASE_RESERVOIR),
             (Candidate::BogieBands, _) => f64::NAN,
+            (Candidate::Generic(g), _) => {
+                let (lo, hi) = g.bounds();
+                lo + (hi - lo) * u
+            }
         }
     }
 
     /// The inverse of [`Candidate::param`] (clamped into [0, 1]).
-    pub fn unit(self, i: usize, p: f64) -> f64 {
+    pub fn unit(&self, i: usize, p: f64) -> f64 {
         let inv_loglike = |base: f64, y: f64| (1.0 + y * (base - 1.0)).ln() / base.ln();
         let u = match (self, i) {
             (Candidate::RailAgeing, _) => {
@@ -149,6 +180,10 @@ impl Candidate {
             (Candidate::SpeedTransfer, _) => (p + SPEED_N_MAX) / (2.0 * SPEED_N_MAX),
             (Candidate::WheelEdgeReservoir, _) => inv_loglike(LOGLIKE_BASE_RESERVOIR, p.max(0.0)),
             (Candidate::BogieBands, _) => 0.0,
+            (Candidate::Generic(g), _) => {
+                let (lo, hi) = g.bounds();
+                (p - lo) / (hi - lo)
+            }
         };
         if u.is_finite() {
             u.clamp(0.0, 1.0)
@@ -158,7 +193,7 @@ impl Candidate {
     }
 
     /// Switches the effect on in `effects` with `params`.
-    pub fn set(self, effects: &mut Effects, params: &[f64]) {
+    pub fn set(&self, effects: &mut Effects, params: &[f64]) {
         let p = |i: usize| params.get(i).copied().unwrap_or(f64::NAN);
         match self {
             Candidate::RailAgeing => effects.rail_ageing = Some(RailAgeing { tau_s: p(0) }),
@@ -174,11 +209,12 @@ impl Candidate {
                 })
             }
             Candidate::BogieBands => effects.bogie_bands = Some(BogieBands {}),
+            Candidate::Generic(g) => g.set(effects, p(0)),
         }
     }
 
     /// The effect's parameters in `effects`, `None` when it is off.
-    pub fn get(self, effects: &Effects) -> Option<Vec<f64>> {
+    pub fn get(&self, effects: &Effects) -> Option<Vec<f64>> {
         match self {
             Candidate::RailAgeing => effects.rail_ageing.map(|e| vec![e.tau_s]),
             Candidate::RainWashoff => effects.rain_washoff.map(|e| vec![e.k_per_mm]),
@@ -190,11 +226,12 @@ impl Candidate {
                 effects.wheel_edge_reservoir.map(|e| vec![e.alpha, e.r])
             }
             Candidate::BogieBands => effects.bogie_bands.map(|_| vec![]),
+            Candidate::Generic(g) => g.get(effects).map(|p| vec![p]),
         }
     }
 
     /// Parameters as name -> value, for the report.
-    pub fn named(self, params: &[f64]) -> std::collections::BTreeMap<String, f64> {
+    pub fn named(&self, params: &[f64]) -> std::collections::BTreeMap<String, f64> {
         self.param_names()
             .iter()
             .zip(params)
@@ -303,6 +340,8 @@ pub struct Evaluator<'a> {
     pub sites: Vec<usize>,
     /// Row -> index into `sites`.
     site_slot: Vec<usize>,
+    /// Rows that count in the SSE (false: treated as a gross outlier).
+    pub active: Vec<bool>,
     cache: Mutex<HashMap<Vec<u64>, Arc<Evaluation>>>,
     runs: AtomicUsize,
     /// Called after every engine run with the number of runs so far.
@@ -310,7 +349,17 @@ pub struct Evaluator<'a> {
 }
 
 impl<'a> Evaluator<'a> {
-    pub fn new(data: &'a Dataset, on_run: impl Fn(usize) + Send + Sync + 'a) -> Self {
+    /// `active`: the rows that count (every row when empty).
+    pub fn new(
+        data: &'a Dataset,
+        active: Vec<bool>,
+        on_run: impl Fn(usize) + Send + Sync + 'a,
+    ) -> Self {
+        let active = if active.len() == data.rows.len() {
+            active
+        } else {
+            vec![true; data.rows.len()]
+        };
         let day_slot = data
             .rows
             .iter()
@@ -329,6 +378,7 @@ impl<'a> Evaluator<'a> {
             day_slot,
             sites,
             site_slot,
+            active,
             cache: Mutex::new(HashMap::new()),
             runs: AtomicUsize::new(0),
             on_run: Box::new(on_run),
@@ -352,12 +402,23 @@ impl<'a> Evaluator<'a> {
         self.runs.load(Ordering::Relaxed)
     }
 
-    /// Residuals (measured − simulated) of `cfg` by one engine run, and
-    /// their SSE (cached for [`Evaluator::evaluate`]).
-    pub fn residuals(&self, cfg: &ModelConfig) -> Result<(Vec<f64>, Arc<Evaluation>)> {
+    /// The rows that count.
+    pub fn n_active(&self) -> usize {
+        self.active.iter().filter(|a| **a).count()
+    }
+
+    /// The simulated value of every row with `cfg`: one engine run, counted.
+    pub fn simulate(&self, cfg: &ModelConfig) -> Result<Vec<f64>> {
         let simulated = self.data.simulate(cfg)?;
         let n = self.runs.fetch_add(1, Ordering::Relaxed) + 1;
         (self.on_run)(n);
+        Ok(simulated)
+    }
+
+    /// Residuals (measured − simulated) of `cfg` by one engine run, and
+    /// their SSE over the active rows (cached for [`Evaluator::evaluate`]).
+    pub fn residuals(&self, cfg: &ModelConfig) -> Result<(Vec<f64>, Arc<Evaluation>)> {
+        let simulated = self.simulate(cfg)?;
         let residual: Vec<f64> = self
             .data
             .rows
@@ -367,7 +428,13 @@ impl<'a> Evaluator<'a> {
             .collect();
         let mut sse_by_day = vec![0.0; self.data.days.len()];
         let mut sse_by_site = vec![0.0; self.sites.len()];
-        for ((r, &d), &s) in residual.iter().zip(&self.day_slot).zip(&self.site_slot) {
+        for (((r, &d), &s), _) in residual
+            .iter()
+            .zip(&self.day_slot)
+            .zip(&self.site_slot)
+            .zip(&self.active)
+            .filter(|(_, &a)| a)
+        {
             sse_by_day[d] += r * r;
             sse_by_site[s] += r * r;
         }
@@ -415,6 +482,13 @@ fn cache_key(cfg: &ModelConfig) -> Vec<u64> {
                 key.extend(p.iter().map(|v| v.to_bits()));
             }
         }
+    }
+    // Generic terms: their whole text (Debug prints every f64 exactly).
+    for term in &cfg.effects.generic {
+        use std::hash::{Hash, Hasher};
+        let mut h = std::collections::hash_map::DefaultHasher::new();
+        format!("{term:?}").hash(&mut h);
+        key.push(h.finish());
     }
     key
 }

@@ -36,9 +36,12 @@
 //! first (step 0).
 
 pub mod data;
+pub mod describe;
 pub mod diagnose;
 pub mod fit;
 pub mod report;
+pub mod screen;
+pub mod space;
 
 use std::collections::{BTreeMap, HashMap};
 use std::time::Instant;
@@ -47,10 +50,12 @@ use anyhow::Result;
 use rayon::prelude::*;
 use serde::Serialize;
 
-use crate::config::ModelConfig;
+use crate::config::{ModelConfig, TermEffect};
+use crate::model::generic::{ActsOn, FormKind};
 use data::Dataset;
 use diagnose::CovariateScore;
 use fit::{Blocking, Candidate, CrossValidation, Evaluator, Space, Start};
+use space::Drivers;
 
 /// The thresholds of the selection.
 #[derive(Debug, Clone, Copy, Serialize)]
@@ -92,17 +97,86 @@ pub trait Progress: Sync {
 pub struct Silent;
 impl Progress for Silent {}
 
-/// An effect switched on, with its parameters by name.
+/// An effect switched on, with its parameters by name (interfaces.md,
+/// report.json): a named effect, or a generic term with its acts_on,
+/// driver, form, scope and a sentence for an engineer.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct EffectParams {
     pub name: String,
-    pub params: BTreeMap<String, f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub acts_on: Option<String>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub driver: Option<String>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub form: Option<String>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub scope: Option<BTreeMap<String, String>>,
+    pub params: BTreeMap<String, serde_json::Value>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub description: Option<String>,
+    /// `physics` or `data quality` (a term on `measurement`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub kind: Option<String>,
+}
+
+impl EffectParams {
+    /// Whether two entries are the same effect (whatever their parameters).
+    pub fn same_effect(&self, other: &EffectParams) -> bool {
+        self.name == other.name
+            && self.acts_on == other.acts_on
+            && self.driver == other.driver
+            && self.form == other.form
+            && self.scope == other.scope
+            && (self.name != "generic"
+                || self.params.get("t0_utc") == other.params.get("t0_utc")
+                    && self.params.get("x0") == other.params.get("x0"))
+    }
+
+    /// `name (p = v, ...)` for people.
+    pub fn text(&self) -> String {
+        let params: Vec<String> = self
+            .params
+            .iter()
+            .map(|(k, v)| match v.as_f64() {
+                Some(x) => format!("{k} = {}", fmt_param(x)),
+                None => format!("{k} = {}", v.as_str().unwrap_or("?")),
+            })
+            .collect();
+        let head = match (&self.acts_on, &self.driver, &self.form) {
+            (Some(a), Some(d), Some(f)) => format!("generic {a} × {d} ({f}{})", self.scope_text()),
+            (Some(a), _, _) => format!(
+                "generic {a} offset ({})",
+                self.scope_text().trim_start_matches("; ")
+            ),
+            _ => self.name.clone(),
+        };
+        if params.is_empty() {
+            head
+        } else {
+            format!("{head} ({})", params.join(", "))
+        }
+    }
+
+    fn scope_text(&self) -> String {
+        match &self.scope {
+            Some(s) if !s.is_empty() => format!(
+                "; {}",
+                s.iter()
+                    .map(|(k, v)| format!("{k} {v}"))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ),
+            _ => String::new(),
+        }
+    }
 }
 
 /// One candidate at one step.
 #[derive(Debug, Clone, Serialize)]
 pub struct CandidateResult {
     pub name: String,
+    /// The name, or a generic term's acts_on, driver, form and scope.
+    pub label: String,
     /// Fitted on every day.
     pub params: BTreeMap<String, f64>,
     pub sse: f64,
@@ -141,6 +215,8 @@ pub struct Step {
     /// The current model's SSE per day and per measured site.
     pub sse_by_day: Vec<f64>,
     pub sse_by_site: Vec<f64>,
+    /// What the screening of the generic terms saw.
+    pub screening: screen::Screening,
     /// Best BIC drop first.
     pub candidates: Vec<CandidateResult>,
     pub accepted: Option<String>,
@@ -159,6 +235,10 @@ pub struct Unexplained {
     pub covariate: String,
     pub description: String,
     pub eta2: f64,
+    /// The three covariates it follows most closely, with eta².
+    pub follows: Vec<(String, f64)>,
+    /// Where it lives: site, rail, time window, distance.
+    pub location: Option<describe::Location>,
 }
 
 /// Everything a run of the workflow found (report.json is this, in order).
@@ -166,6 +246,8 @@ pub struct Unexplained {
 pub struct Discovery {
     /// Effects the workflow added (not those of the starting model).
     pub effects_found: Vec<EffectParams>,
+    /// RMSE over the measurements used (all but gross outliers), before
+    /// and after: what a replay with model.toml gives when there are none.
     pub rmse_before: f64,
     pub rmse_after: f64,
     /// sigma of the measurements, from axle-to-axle residual differences.
@@ -174,6 +256,13 @@ pub struct Discovery {
     pub verdict: String,
     pub recording: String,
     pub measurements: usize,
+    /// Measurements the fits use (all but the gross outliers).
+    pub measurements_used: usize,
+    /// The measurements treated as gross errors, and where.
+    pub outliers: screen::Outliers,
+    /// RMSE of the final model over every measurement, outliers included
+    /// (`rmse_after` leaves them out).
+    pub rmse_after_all_rows: f64,
     pub days: usize,
     /// The starting model's effects (from --config), and the final model's.
     pub start_effects: Vec<EffectParams>,
@@ -199,21 +288,81 @@ pub struct Discovery {
     pub residual_after: Vec<f64>,
 }
 
-/// The effects on in `cfg`, with their parameters.
+/// The effects on in `cfg`, with their parameters: the named ones in the
+/// order of effects.md, then the generic terms in their order.
 pub fn effects_of(cfg: &ModelConfig) -> Vec<EffectParams> {
-    Candidate::ALL
+    let mut list: Vec<EffectParams> = Candidate::ALL
         .iter()
         .filter_map(|c| {
             c.get(&cfg.effects).map(|p| EffectParams {
                 name: c.name().to_string(),
-                params: c.named(&p),
+                acts_on: None,
+                driver: None,
+                form: None,
+                scope: None,
+                params: c
+                    .named(&p)
+                    .into_iter()
+                    .map(|(k, v)| (k, serde_json::Value::from(v)))
+                    .collect(),
+                description: None,
+                kind: None,
             })
         })
-        .collect()
+        .collect();
+    for term in &cfg.effects.generic {
+        let mut params: BTreeMap<String, serde_json::Value> = term
+            .params()
+            .into_iter()
+            .map(|(k, v)| (k.to_string(), serde_json::Value::from(v)))
+            .collect();
+        if let Some(t0) = term.t0_utc() {
+            params.insert("t0_utc".into(), serde_json::Value::from(t0));
+        }
+        let (driver, form) = match term.effect {
+            TermEffect::Factor { driver, form } => (
+                Some(driver.name().to_string()),
+                Some(form.kind().name().to_string()),
+            ),
+            TermEffect::Offset { .. } => (None, None),
+        };
+        list.push(EffectParams {
+            name: "generic".into(),
+            acts_on: Some(term.acts_on.name().to_string()),
+            driver,
+            form,
+            scope: Some(
+                term.scope()
+                    .into_iter()
+                    .map(|(k, v)| (k.to_string(), v))
+                    .collect(),
+            ),
+            params,
+            description: None,
+            kind: Some(
+                if term.acts_on == ActsOn::Measurement {
+                    "data quality"
+                } else {
+                    "physics"
+                }
+                .into(),
+            ),
+        });
+    }
+    list
 }
 
 fn rmse(sse: f64, n: usize) -> f64 {
     (sse / n.max(1) as f64).sqrt()
+}
+
+/// Residuals with the outliers' set to NaN (left out of the diagnosis).
+fn screened(residual: &[f64], active: &[bool]) -> Vec<f64> {
+    residual
+        .iter()
+        .zip(active)
+        .map(|(&r, &a)| if a { r } else { f64::NAN })
+        .collect()
 }
 
 /// Runs the workflow on `data` from the model `start`.
@@ -224,14 +373,27 @@ pub fn discover(
     progress: &dyn Progress,
 ) -> Result<Discovery> {
     let t0 = Instant::now();
-    let n = data.rows.len();
-    let ev = Evaluator::new(data, |runs| progress.runs(runs));
+    crate::config::check_terms_against(&start.effects.generic, &data.section, "--config")?;
 
     progress.stage("replaying with the starting model");
+    // Gross outliers first: nothing after this sees them.
+    let simulated_start = data.simulate(start)?;
+    let raw_residual: Vec<f64> = data
+        .rows
+        .iter()
+        .zip(&simulated_start)
+        .map(|(r, s)| r.measured - s)
+        .collect();
+    let outliers = screen::outliers(data, &raw_residual);
+    let ev = Evaluator::new(data, outliers.active.clone(), |runs| progress.runs(runs));
+    let n = ev.n_active();
+    let drivers = Drivers::of(data);
+
     let (residual_before, eval_before) = ev.residuals(start)?;
     let rmse_before = rmse(eval_before.sse, n);
-    let noise_estimate = diagnose::noise_estimate(data, &residual_before);
-    let covariates_before = diagnose::rank(data, &residual_before);
+    let clean_before = screened(&residual_before, &ev.active);
+    let noise_estimate = diagnose::noise_estimate(data, &clean_before);
+    let covariates_before = diagnose::rank(data, &clean_before);
 
     let mut current = start.clone();
     let mut sse = eval_before.sse;
@@ -260,40 +422,73 @@ pub fn discover(
 
     let has_high_rail = data.section.rails.iter().any(|r| r == "high");
     let mut warm: HashMap<Candidate, Vec<f64>> = HashMap::new();
+    let mut responses = screen::ResponseCache::default();
+    // Named effects that did not pass the BIC at a step are not tried again.
+    let mut hopeless: Vec<Candidate> = Vec::new();
     let mut steps = Vec::new();
     let ln_n = (n as f64).ln();
+    let mut simulated_current = if current == *start {
+        simulated_start
+    } else {
+        ev.simulate(&current)?
+    };
     for step in 1..=options.max_steps {
-        let candidates: Vec<Candidate> = Candidate::ALL
+        let mut candidates: Vec<(Candidate, Start)> = Candidate::ALL
             .into_iter()
             .filter(|c| !accepted.contains(c))
             // Without a rail named `high` the effect does nothing.
             .filter(|c| *c != Candidate::BogieBands || has_high_rail)
+            .filter(|c| !hopeless.contains(c))
+            .map(|c| {
+                let start = warm
+                    .get(&c)
+                    .map_or(Start::Fresh, |u| Start::Warm(u.clone()));
+                (c, start)
+            })
             .collect();
+        progress.stage(&format!("step {step}: screening the generic terms"));
+        let (generic, screening) = screen::propose(
+            &ev,
+            &drivers,
+            &current,
+            &simulated_current,
+            noise_estimate,
+            // ΔBIC < threshold needs n ln(SSE1/SSE0) < threshold − k ln n,
+            // about a reduction of (|threshold| + k ln n) σ² for k = 1.
+            noise_estimate.map_or(0.0, |s| (options.bic_threshold.abs() + ln_n) * s * s),
+            &mut responses,
+        )?;
+        candidates.extend(generic.into_iter().filter(|(c, _)| !accepted.contains(c)));
         if candidates.is_empty() {
             break;
         }
         progress.stage(&format!(
-            "step {step}: fitting {} candidate effects",
+            "step {step}: fitting {} candidates",
             candidates.len()
         ));
         let fits: Vec<(Candidate, Space, fit::Fit)> = candidates
             .par_iter()
-            .map(|&c| {
+            .map(|(c, start)| {
                 let space = Space {
                     base: current.clone(),
-                    slots: vec![c],
+                    slots: vec![c.clone()],
                 };
-                let start = warm
-                    .get(&c)
-                    .map_or(Start::Fresh, |u| Start::Warm(u.clone()));
-                fit::fit(&ev, &space, start, None).map(|f| (c, space, f))
+                fit::fit(&ev, &space, start.clone(), None).map(|f| (c.clone(), space, f))
             })
             .collect::<Result<_>>()?;
         let mut results: Vec<(CandidateResult, Space, Vec<f64>)> = fits
             .into_iter()
             .map(|(c, space, f)| {
-                warm.insert(c, f.u.clone());
-                let k = c.dims();
+                if !c.is_generic() {
+                    warm.insert(c.clone(), f.u.clone());
+                    // A named effect that could not pass the BIC while the
+                    // residual was larger will not pass on a smaller one.
+                    let bic = n as f64 * (f.eval.sse / sse).ln() + c.dims() as f64 * ln_n;
+                    if bic >= options.bic_threshold {
+                        hopeless.push(c.clone());
+                    }
+                }
+                let k = c.dims() + usize::from(is_step(&c));
                 let delta_bic = n as f64 * (f.eval.sse / sse).ln() + k as f64 * ln_n;
                 let excess = noise_estimate
                     .map(|s| sse - n as f64 * s * s)
@@ -303,6 +498,7 @@ pub fn discover(
                 (
                     CandidateResult {
                         name: c.name().to_string(),
+                        label: c.label(),
                         params: c.named(&params),
                         sse: f.eval.sse,
                         rmse: rmse(f.eval.sse, n),
@@ -323,8 +519,38 @@ pub fn discover(
             })
             .collect();
         results.sort_by(|a, b| a.0.delta_bic.total_cmp(&b.0.delta_bic));
+        // The change point of the residual lags a cause with memory (less
+        // product on the rail shows only as it runs out): the best time
+        // step's t0 is searched among the gaps between trains before it.
+        if let Some(k) = results.iter().position(|r| is_time_step(&r.1)) {
+            progress.stage(&format!("step {step}: placing the time step"));
+            if let Some(better) = refine_t0(&ev, data, &results[k].1, &results[k].2)? {
+                let (space, u, eval) = better;
+                let r = &mut results[k].0;
+                let Some(c) = space.slots.first() else {
+                    unreachable!("a refined space has its slot")
+                };
+                r.label = c.label();
+                r.params = c.named(&space.params(&u).pop().unwrap_or_default());
+                r.sse = eval.sse;
+                r.rmse = rmse(eval.sse, n);
+                r.delta_bic = n as f64 * (eval.sse / sse).ln() + r.k as f64 * ln_n;
+                r.passes_bic = r.delta_bic < options.bic_threshold;
+                let excess = noise_estimate
+                    .map(|s| sse - n as f64 * s * s)
+                    .filter(|e| *e > 0.0);
+                r.excess_share = excess.map(|e| (sse - eval.sse) / e);
+                r.passes_share = r.excess_share.is_none_or(|x| x >= options.min_excess_share);
+                results[k].1 = space;
+                results[k].2 = u;
+                results.sort_by(|a, b| a.0.delta_bic.total_cmp(&b.0.delta_bic));
+            }
+        }
+        // A named effect that describes the data (nearly) as well as the
+        // best generic term is the better statement: it goes first.
+        prefer_named(&mut results, sse);
 
-        // The current model's held-out SSE: every day predicted as it is.
+        // The current model's held-out SSE: every block predicted as it is.
         let cv_current = sse;
         let mut chosen = None;
         for (k, (result, space, u)) in results.iter_mut().enumerate() {
@@ -333,7 +559,7 @@ pub fn discover(
             }
             progress.stage(&format!(
                 "step {step}: cross-validating {} by day",
-                result.name
+                result.label
             ));
             let cv = fit::cross_validate(&ev, space, u, Blocking::Day)?;
             let passes = cv.held_out_sse < cv_current;
@@ -343,10 +569,15 @@ pub fn discover(
             if !passes {
                 continue;
             }
-            if ev.sites.len() >= 2 {
+            // A sensor's offset belongs to its site: other sites cannot
+            // predict it, and need not.
+            let site_bound = space.slots.first().is_some_and(|c| {
+                matches!(c, Candidate::Generic(g) if g.acts_on == ActsOn::Measurement && g.site.is_some())
+            });
+            if ev.sites.len() >= 2 && !site_bound {
                 progress.stage(&format!(
                     "step {step}: cross-validating {} by site",
-                    result.name
+                    result.label
                 ));
                 let cv = fit::cross_validate(&ev, space, u, Blocking::Site)?;
                 let passes = cv.held_out_sse < cv_current;
@@ -369,6 +600,7 @@ pub fn discover(
             cv_sse: cv_current,
             sse_by_day: now.sse_by_day.clone(),
             sse_by_site: now.sse_by_site.clone(),
+            screening,
             candidates: results.iter().map(|r| r.0.clone()).collect(),
             accepted: None,
             rmse_after: rmse(sse, n),
@@ -379,13 +611,13 @@ pub fn discover(
             break;
         };
         let (result, space, u) = &results[k];
-        let Some(&c) = space.slots.first() else {
+        let Some(c) = space.slots.first().cloned() else {
             break;
         };
         current = space.config(u);
         sse = result.sse;
-        accepted.push(c);
-        record.accepted = Some(c.name().to_string());
+        accepted.push(c.clone());
+        record.accepted = Some(c.label());
 
         // Refit every effect of the model together: the one just added was
         // fitted with the others held at values that had to make up for it.
@@ -401,16 +633,18 @@ pub fn discover(
                 sse = fit.eval.sse;
             }
         }
+        simulated_current = ev.simulate(&current)?;
         record.rmse_after = rmse(sse, n);
         record.effects_after = effects_of(&current);
-        rmse_by_step.push((format!("+ {}", c.name()), rmse(sse, n)));
+        rmse_by_step.push((format!("+ {}", c.label()), rmse(sse, n)));
         steps.push(record);
     }
 
     progress.stage("replaying with the final model");
     let (residual_after, eval_after) = ev.residuals(&current)?;
     let rmse_after = rmse(eval_after.sse, n);
-    let covariates_after = diagnose::rank(data, &residual_after);
+    let clean_after = screened(&residual_after, &ev.active);
+    let covariates_after = diagnose::rank(data, &clean_after);
     let unexplained = match (noise_estimate, covariates_after.first()) {
         (Some(noise), Some(top)) if rmse_after > options.unexplained_ratio * noise => {
             Some(Unexplained {
@@ -420,15 +654,28 @@ pub fn discover(
                 covariate: top.name.clone(),
                 description: top.description.clone(),
                 eta2: top.eta2,
+                follows: covariates_after
+                    .iter()
+                    .take(3)
+                    .map(|c| (c.name.clone(), c.eta2))
+                    .collect(),
+                location: describe::locate(data, &clean_after, noise),
             })
         }
         _ => None,
     };
     let start_effects = effects_of(start);
-    let model_effects = effects_of(&current);
+    let mut model_effects = effects_of(&current);
+    for (e, term) in model_effects
+        .iter_mut()
+        .filter(|e| e.name == "generic")
+        .zip(&current.effects.generic)
+    {
+        e.description = Some(describe::term(term, data, &drivers));
+    }
     let effects_found: Vec<EffectParams> = model_effects
         .iter()
-        .filter(|e| !start_effects.iter().any(|s| s.name == e.name))
+        .filter(|e| !start_effects.iter().any(|s| s.same_effect(e)))
         .cloned()
         .collect();
     let verdict = verdict(
@@ -438,6 +685,10 @@ pub fn discover(
         noise_estimate,
         unexplained.as_ref(),
     );
+    let rmse_after_all_rows = {
+        let all: f64 = residual_after.iter().map(|r| r * r).sum();
+        rmse(all, residual_after.len())
+    };
     Ok(Discovery {
         effects_found,
         rmse_before,
@@ -445,7 +696,10 @@ pub fn discover(
         noise_estimate,
         verdict,
         recording: data.path.display().to_string(),
-        measurements: n,
+        measurements: data.rows.len(),
+        measurements_used: n,
+        outliers,
+        rmse_after_all_rows,
         days: data.days.len(),
         start_effects,
         model_effects,
@@ -456,7 +710,7 @@ pub fn discover(
         covariates_after,
         unexplained,
         options: *options,
-        engine_runs: ev.runs(),
+        engine_runs: ev.runs() + 1,
         elapsed_s: t0.elapsed().as_secs_f64(),
         start: start.clone(),
         model: current,
@@ -464,6 +718,103 @@ pub fn discover(
         residual_after,
     })
 }
+
+fn is_time_step(space: &Space) -> bool {
+    matches!(space.slots.first(), Some(Candidate::Generic(g)) if g.driver == Some(crate::model::generic::Driver::Time))
+}
+
+/// The time step of `space` (fitted at `u`) moved to the best gap between
+/// trains within six hours before its t0 (or one after), its factor held;
+/// then the factor refitted there. `None` when no gap does better.
+fn refine_t0(
+    ev: &Evaluator<'_>,
+    data: &Dataset,
+    space: &Space,
+    u: &[f64],
+) -> Result<Option<(Space, Vec<f64>, std::sync::Arc<fit::Evaluation>)>> {
+    let Some(Candidate::Generic(slot)) = space.slots.first() else {
+        return Ok(None);
+    };
+    let Some(t0) = slot.x0() else {
+        return Ok(None);
+    };
+    let f = space
+        .params(u)
+        .pop()
+        .and_then(|p| p.first().copied())
+        .unwrap_or(1.0);
+    let times: Vec<f64> = data
+        .passages
+        .iter()
+        .map(|p| p.log_time_ns as f64 * 1e-9)
+        .collect();
+    let gaps: Vec<f64> = times
+        .windows(2)
+        .map(|w| (0.5 * (w[0] + w[1])).round())
+        .filter(|&g| g >= t0 - 6.0 * 3600.0 && g <= t0 + 3600.0)
+        .collect();
+    let with_t0 = |t: f64| -> Space {
+        let moved = space::GenericSlot::factor(
+            slot.acts_on,
+            slot.driver.unwrap_or(crate::model::generic::Driver::Time),
+            FormKind::Step,
+            slot.scope(),
+            Some(t),
+            (0.0, 1.0),
+        );
+        Space {
+            base: space.base.clone(),
+            slots: vec![Candidate::Generic(moved)],
+        }
+    };
+    let base_sse = ev.evaluate(&space.config(u))?.sse;
+    let tried: Vec<(f64, f64)> = gaps
+        .par_iter()
+        .map(|&t| {
+            let s = with_t0(t);
+            let cfg = s.config(&[s.slots[0].unit(0, f)]);
+            Ok((t, ev.evaluate(&cfg)?.sse))
+        })
+        .collect::<Result<_>>()?;
+    let Some(&(best_t, best_sse)) = tried.iter().min_by(|a, b| a.1.total_cmp(&b.1)) else {
+        return Ok(None);
+    };
+    if best_sse >= base_sse {
+        return Ok(None);
+    }
+    let s = with_t0(best_t);
+    let start = Start::Warm(vec![s.slots[0].unit(0, f)]);
+    let fitted = fit::fit(ev, &s, start, None)?;
+    Ok(Some((s, fitted.u, fitted.eval)))
+}
+
+/// Whether a candidate is a step whose threshold the data chose (one more
+/// parameter for the BIC).
+fn is_step(c: &Candidate) -> bool {
+    matches!(c, Candidate::Generic(g) if g.form == Some(FormKind::Step))
+}
+
+/// Moves the best passing named effect in front of the generic terms when
+/// it removes at least [`NAMED_SHARE`] of what the best candidate removes:
+/// effects.md's named effects are the model's own vocabulary.
+fn prefer_named(results: &mut [(CandidateResult, Space, Vec<f64>)], sse: f64) {
+    let passing = |r: &CandidateResult| r.passes_bic && r.passes_share;
+    let Some(best) = results.iter().position(|r| passing(&r.0)) else {
+        return;
+    };
+    if results[best].0.name != "generic" {
+        return;
+    }
+    let best_gain = sse - results[best].0.sse;
+    if let Some(named) = results.iter().position(|r| {
+        r.0.name != "generic" && passing(&r.0) && sse - r.0.sse >= NAMED_SHARE * best_gain
+    }) {
+        results[best..=named].rotate_right(1);
+    }
+}
+
+/// See [`prefer_named`].
+const NAMED_SHARE: f64 = 0.95;
 
 fn verdict(
     found: &[EffectParams],
@@ -488,21 +839,7 @@ fn verdict(
             ),
         }
     } else {
-        let names: Vec<String> = found
-            .iter()
-            .map(|e| {
-                let params: Vec<String> = e
-                    .params
-                    .iter()
-                    .map(|(k, v)| format!("{k} = {}", fmt_param(*v)))
-                    .collect();
-                if params.is_empty() {
-                    e.name.clone()
-                } else {
-                    format!("{} ({})", e.name, params.join(", "))
-                }
-            })
-            .collect();
+        let names: Vec<String> = found.iter().map(EffectParams::text).collect();
         format!(
             "Found {}: RMSE {rmse_before:.5} -> {rmse_after:.5}; {noise_text}.",
             names.join(", ")
@@ -513,6 +850,9 @@ fn verdict(
             " The effects found explain part of the residual; what is left may have a cause \
              they only stand in for.",
         );
+    }
+    for e in found.iter().filter(|e| e.description.is_some()) {
+        text.push_str(&format!(" {}", e.description.as_deref().unwrap_or("")));
     }
     if let Some(u) = unexplained {
         text.push_str(&format!(

@@ -351,19 +351,7 @@ fn mu_vs_distance_plot(data: &Dataset, d: &Discovery) -> Result<Option<(String, 
 }
 
 fn effect_text(e: &EffectParams) -> String {
-    if e.params.is_empty() {
-        format!("`{}`", e.name)
-    } else {
-        format!(
-            "`{}` ({})",
-            e.name,
-            e.params
-                .iter()
-                .map(|(k, v)| format!("{k} = {}", fmt_param(*v)))
-                .collect::<Vec<_>>()
-                .join(", ")
-        )
-    }
+    format!("`{}`", e.text())
 }
 
 fn effects_text(list: &[EffectParams]) -> String {
