@@ -29,6 +29,15 @@ impl PartialFile {
             Some(dir) if !dir.as_os_str().is_empty() => dir,
             _ => Path::new("."),
         };
+        // An output folder that does not exist yet is made, as a user of
+        // `--out-rrd out/demo.rrd` expects; one that cannot be made is an
+        // error that names it.
+        std::fs::create_dir_all(dir).map_err(|e| {
+            crate::error::UsageError(format!(
+                "cannot create the output folder {}: {e}",
+                dir.display()
+            ))
+        })?;
         let mut temp_name = std::ffi::OsString::from(".");
         temp_name.push(file_name);
         temp_name.push(format!(".partial-{}", std::process::id()));
