@@ -219,6 +219,12 @@ fn rain_washoff_follows_accumulated_precipitation() {
 /// applicator, N = 1) with 0.1 g on the rail, by hand from eq. (1)–(6);
 /// `transfer_factor` and `consumption_factor` are the effects' factors.
 fn wheel_after_first_contact(transfer_factor: f64, consumption_factor: f64) -> f64 {
+    wheel_after(1e-4, 1e-4, transfer_factor, consumption_factor)
+}
+
+/// [`wheel_after_first_contact`] with `m_kg` on the rail and `m0_kg` the
+/// latest pulse.
+fn wheel_after(m_kg: f64, m0_kg: f64, transfer_factor: f64, consumption_factor: f64) -> f64 {
     let p = table2();
     let steel = contact::Steel {
         e_pa: 210e9,
@@ -227,10 +233,10 @@ fn wheel_after_first_contact(transfer_factor: f64, consumption_factor: f64) -> f
     let pm = contact::hertz(100e3, 0.46, f64::INFINITY, 0.3, &steel).pm_pa;
     // cx = 1 %, the reference creepage of eq. (3): fc = 1.
     let fp_fc = 1.0 + p.kp * (pm / 1178e6 - 1.0);
-    let m = 1e-4;
+    let m = m_kg;
     let t = (p.kt * (1.0 - (-m / p.cm_kg).exp()) * transfer_factor).min(0.5);
     let wheel = t * m;
-    let c = ((p.k0_kg + p.km1_kg * (1.0 - (-m / (1e-4 * p.km2)).exp()) * fp_fc)
+    let c = ((p.k0_kg + p.km1_kg * (1.0 - (-m / (m0_kg * p.km2)).exp()) * fp_fc)
         * consumption_factor)
         .min(m);
     wheel * (m - c) / m
@@ -329,6 +335,278 @@ fn bogie_bands_split_the_high_rail() {
         run(tiny_section(&["left", "right"]), cfg, tangent.clone()),
         run(tiny_section(&["left", "right"]), "", tangent)
     );
+}
+
+// ------------------------------------------------------- generic terms
+
+/// A `[[effects.generic]]` table from `key = value` pairs (strings quoted).
+fn term(pairs: &[(&str, &str)]) -> String {
+    let mut t = "[[effects.generic]]\n".to_string();
+    for (k, v) in pairs {
+        if v.parse::<f64>().is_ok() {
+            t.push_str(&format!("{k} = {v}\n"));
+        } else {
+            t.push_str(&format!("{k} = \"{v}\"\n"));
+        }
+    }
+    t
+}
+
+#[test]
+fn generic_pulse_mass_scales_the_landing_mass_and_m0() {
+    // A time step at 1800 s: the pulse at 10 s lands whole, the one at
+    // 3610 s at f = 0.5; the reading at 3700 s sees 0.1 + 0.05 g.
+    let step = term(&[
+        ("acts_on", "pulse_mass"),
+        ("applicator", "A"),
+        ("driver", "time"),
+        ("form", "step"),
+        ("t0_utc", "1970-01-01T00:30:00Z"),
+        ("f", "0.5"),
+    ]);
+    let events = vec![
+        pulse(10, 0, 1e-4),
+        pulse(3610, 0, 1e-4),
+        reading(3700, 0, 0),
+    ];
+    close(run(tiny_section(&["r"]), &step, events)[0], mu(1.5e-4));
+    // Linear in air temperature: 30 °C with gamma 0.1 doubles the pulse and
+    // its m0, which the consumption of the first contact sees.
+    let linear = term(&[
+        ("acts_on", "pulse_mass"),
+        ("driver", "air_temperature_c"),
+        ("form", "linear"),
+        ("gamma", "0.1"),
+    ]);
+    let e = vec![
+        weather(0, 30.0, 0.0),
+        pulse(10, 0, 0.5e-4),
+        train(100, 1, 20.0, &[BogiePosition::Leading]),
+        mu_of(101, 100, 1, 0, 0),
+    ];
+    let got = run(tiny_section(&["r"]), &linear, e)[0];
+    assert!(
+        (got - mu(wheel_after(1e-4, 1e-4, 1.0, 1.0))).abs() < 1e-12,
+        "{got}"
+    );
+    // A term scoped to another applicator or rail does nothing.
+    let elsewhere = term(&[
+        ("acts_on", "pulse_mass"),
+        ("rail", "s"),
+        ("driver", "air_temperature_c"),
+        ("form", "linear"),
+        ("gamma", "0.1"),
+    ]);
+    let e = vec![weather(0, 30.0, 0.0), pulse(10, 0, 1e-4), reading(20, 0, 0)];
+    assert_eq!(
+        run(tiny_section(&["r", "s"]), &elsewhere, e.clone()),
+        run(tiny_section(&["r", "s"]), "", e)
+    );
+}
+
+#[test]
+fn generic_transfer_and_consumption_act_at_steps_3_and_4() {
+    let at = |speed: f64, cfg: &str| {
+        let e = vec![
+            weather(0, 30.0, 0.0),
+            pulse(10, 0, 1e-4),
+            train(100, 1, speed, &[BogiePosition::Leading]),
+            mu_of(101, 100, 1, 0, 0),
+        ];
+        run(tiny_section(&["r"]), cfg, e)[0]
+    };
+    // Transfer × linear in speed: 30 m/s, gamma -0.02: t × 0.8.
+    let linear = term(&[
+        ("acts_on", "transfer"),
+        ("driver", "speed_mps"),
+        ("form", "linear"),
+        ("gamma", "-0.02"),
+    ]);
+    close(at(30.0, &linear), mu(wheel_after(1e-4, 1e-4, 0.8, 1.0)));
+    // After speed_transfer's factor (n = 1 at 40 m/s: 0.5) and before the
+    // clamp: 0.5 × 0.6.
+    let both = format!("[effects.speed_transfer]\nn = 1.0\n{linear}");
+    close(at(40.0, &both), mu(wheel_after(1e-4, 1e-4, 0.3, 1.0)));
+    // speed_transfer is transfer × power of speed with n negated.
+    let power = term(&[
+        ("acts_on", "transfer"),
+        ("driver", "speed_mps"),
+        ("form", "power"),
+        ("n", "-1.0"),
+    ]);
+    close(
+        at(40.0, &power),
+        at(40.0, "[effects.speed_transfer]\nn = 1.0\n"),
+    );
+    // temperature_consumption is consumption × exp of air temperature.
+    let exp = term(&[
+        ("acts_on", "consumption"),
+        ("driver", "air_temperature_c"),
+        ("form", "exp"),
+        ("beta", "0.05"),
+    ]);
+    close(
+        at(20.0, &exp),
+        mu(wheel_after(1e-4, 1e-4, 1.0, 0.5f64.exp())),
+    );
+    close(
+        at(20.0, &exp),
+        at(
+            20.0,
+            "[effects.temperature_consumption]\nbeta_per_k = 0.05\n",
+        ),
+    );
+    // Two terms on one quantity multiply: a step in humidity (0.5 >= 0.4:
+    // f = 2) on top of the exp.
+    let step = term(&[
+        ("acts_on", "consumption"),
+        ("driver", "relative_humidity"),
+        ("form", "step"),
+        ("x0", "0.4"),
+        ("f", "2.0"),
+    ]);
+    close(
+        at(20.0, &format!("{exp}{step}")),
+        mu(wheel_after(1e-4, 1e-4, 1.0, 2.0 * 0.5f64.exp())),
+    );
+}
+
+#[test]
+fn generic_friction_levels_and_measurement_offsets() {
+    let p = table2();
+    let mu_with =
+        |gd: f64, gc: f64, m: f64| p.mu_c * gc + (p.mu_d * gd - p.mu_c * gc) * (-m / p.km_kg).exp();
+    // muD × step in time from 1000 s (f 0.9); muC × step in rain >= 1 mm/h (f 0.8).
+    let cfg = format!(
+        "{}{}",
+        term(&[
+            ("acts_on", "friction_dry"),
+            ("driver", "time"),
+            ("form", "step"),
+            ("t0_utc", "1970-01-01T00:16:40Z"),
+            ("f", "0.9"),
+        ]),
+        term(&[
+            ("acts_on", "friction_boundary"),
+            ("driver", "precipitation_mm_h"),
+            ("form", "step"),
+            ("x0", "1.0"),
+            ("f", "0.8"),
+        ])
+    );
+    let e = vec![
+        pulse(10, 0, 1e-4),
+        reading(500, 0, 0),
+        reading(1500, 0, 0),
+        weather(1600, 15.0, 2.0),
+        reading(1700, 0, 0),
+    ];
+    let got = run(tiny_section(&["r"]), &cfg, e);
+    close(got[0], mu_with(1.0, 1.0, 1e-4));
+    close(got[1], mu_with(0.9, 1.0, 1e-4));
+    close(got[2], mu_with(0.9, 0.8, 1e-4));
+    // A wheel driver has no value at a reading: g = 1 there.
+    let load = term(&[
+        ("acts_on", "friction_dry"),
+        ("driver", "wheel_load_kN"),
+        ("form", "power"),
+        ("n", "-0.2"),
+    ]);
+    let e = vec![pulse(10, 0, 1e-4), reading(500, 0, 0)];
+    close(run(tiny_section(&["r"]), &load, e)[0], mu(1e-4));
+    // At a contact it acts (100 kN = x_ref: g = 1; a heavier wheel: lower muD).
+    // Offsets: what site M1 measures of mu, plus 0.02; rail_mu untouched.
+    let offset = term(&[
+        ("acts_on", "measurement"),
+        ("site", "M1"),
+        ("quantity", "mu"),
+        ("offset", "0.02"),
+    ]);
+    let e = vec![
+        pulse(10, 0, 1e-4),
+        reading(20, 1, 0),
+        train(100, 1, 20.0, &[BogiePosition::Leading]),
+        mu_of(101, 100, 1, 0, 0),
+    ];
+    let with = run(tiny_section(&["r"]), &offset, e.clone());
+    let without = run(tiny_section(&["r"]), "", e);
+    assert_eq!(with[0], without[0], "rail_mu is not in the scope");
+    assert_eq!(with[1], without[1] + 0.02);
+}
+
+#[test]
+fn generic_terms_with_g_one_change_nothing_bit_for_bit() {
+    let dir = tempfile::tempdir().unwrap();
+    let neutral = [
+        term(&[
+            ("acts_on", "pulse_mass"),
+            ("driver", "time"),
+            ("form", "step"),
+            ("t0_utc", "2020-01-01T00:00:00Z"),
+            ("f", "1.0"),
+        ]),
+        term(&[
+            ("acts_on", "pulse_mass"),
+            ("driver", "relative_humidity"),
+            ("form", "exp"),
+            ("beta", "0.0"),
+        ]),
+        term(&[
+            ("acts_on", "transfer"),
+            ("driver", "speed_mps"),
+            ("form", "power"),
+            ("n", "0.0"),
+        ]),
+        term(&[
+            ("acts_on", "transfer"),
+            ("driver", "air_temperature_c"),
+            ("form", "linear"),
+            ("gamma", "0.0"),
+        ]),
+        term(&[
+            ("acts_on", "consumption"),
+            ("driver", "creepage"),
+            ("form", "power"),
+            ("n", "0.0"),
+        ]),
+        term(&[
+            ("acts_on", "consumption"),
+            ("driver", "precipitation_mm_h"),
+            ("form", "step"),
+            ("x0", "0.5"),
+            ("f", "1.0"),
+        ]),
+        term(&[
+            ("acts_on", "friction_dry"),
+            ("driver", "wheel_load_kN"),
+            ("form", "exp"),
+            ("beta", "0.0"),
+        ]),
+        term(&[
+            ("acts_on", "friction_boundary"),
+            ("rail", "low"),
+            ("driver", "time"),
+            ("form", "step"),
+            ("t0_utc", "2020-01-01T00:00:00Z"),
+            ("f", "1.0"),
+        ]),
+        term(&[("acts_on", "measurement"), ("offset", "0.0")]),
+    ]
+    .concat();
+    let cfg = dir.path().join("neutral.toml");
+    std::fs::write(&cfg, neutral).unwrap();
+    let rec = curve_2day();
+    let collect = |config: Option<PathBuf>| {
+        let mut c = Collect::default();
+        let mut args = ReplayArgs::new(rec.clone());
+        args.config = config;
+        replay(&args, &mut [&mut c]).unwrap();
+        c.rows
+            .iter()
+            .map(|r| r.simulated.to_bits())
+            .collect::<Vec<u64>>()
+    };
+    assert_eq!(collect(Some(cfg)), collect(None));
 }
 
 // ---------------------------------------------------------------- direction
