@@ -144,6 +144,27 @@ fn replaying_in_two_parts_gives_the_same_bits_with_every_effect_on() {
     ));
 }
 
+#[test]
+fn replaying_in_two_parts_gives_the_same_bits_with_generic_terms() {
+    // Every acts_on, time and weather and wheel drivers; a time step on
+    // each side of the cuts.
+    split_and_compare(Some(
+        "[effects.bogie_bands]\n\
+         [[effects.generic]]\nacts_on = \"pulse_mass\"\ndriver = \"time\"\nform = \"step\"\n\
+         t0_utc = \"2024-04-09T10:00:00Z\"\nf = 0.6\n\
+         [[effects.generic]]\nacts_on = \"pulse_mass\"\nrail = \"high\"\ndriver = \"air_temperature_c\"\n\
+         form = \"linear\"\ngamma = 0.02\n\
+         [[effects.generic]]\nacts_on = \"transfer\"\ndriver = \"relative_humidity\"\nform = \"exp\"\nbeta = 0.7\n\
+         [[effects.generic]]\nacts_on = \"consumption\"\nrail = \"low\"\ndriver = \"creepage\"\n\
+         form = \"power\"\nn = 0.4\n\
+         [[effects.generic]]\nacts_on = \"friction_dry\"\ndriver = \"time\"\nform = \"step\"\n\
+         t0_utc = \"2024-04-10T12:00:00Z\"\nf = 0.9\n\
+         [[effects.generic]]\nacts_on = \"friction_boundary\"\ndriver = \"precipitation_mm_h\"\n\
+         form = \"step\"\nx0 = 0.5\nf = 0.8\n\
+         [[effects.generic]]\nacts_on = \"measurement\"\nquantity = \"adhesion\"\noffset = 0.01\n",
+    ));
+}
+
 fn split_and_compare(config: Option<&str>) {
     let whole_path = reference("curve_2day.mcap");
     let mut whole = Outputs::default();

@@ -157,7 +157,10 @@ pub fn locate(data: &Dataset, residual: &[f64], noise: f64) -> Option<Location> 
         .map(|(row, &r)| (row.log_time_ns, r))
         .collect();
     rows.sort_by_key(|x| x.0);
-    // Kadane's maximum-sum run, on r and on −r.
+    // Kadane's maximum-sum run, on r and on −r, each term less a drift of
+    // two noise sigmas so that noise around the run does not extend it
+    // (CUSUM's reference value: shifts above 2 σ are found whole).
+    let drift = 2.0 * noise;
     let mut found: Option<(f64, usize, usize)> = None;
     for sign in [1.0, -1.0] {
         let (mut sum, mut from) = (0.0, 0);
@@ -166,15 +169,16 @@ pub fn locate(data: &Dataset, residual: &[f64], noise: f64) -> Option<Location> 
                 sum = 0.0;
                 from = k;
             }
-            sum += sign * r;
+            sum += sign * r - drift;
             if found.is_none_or(|f| sum > f.0) {
                 found = Some((sum, from, k));
             }
         }
     }
-    let (sum, from, to) = found?;
+    let (_, from, to) = found?;
     let n = to + 1 - from;
-    let mean = rows[from..=to].iter().map(|x| x.1).sum::<f64>() / n as f64;
+    let sum = rows[from..=to].iter().map(|x| x.1).sum::<f64>();
+    let mean = sum / n as f64;
     let position = data.section.sites.get(site).map(|s| s.position_m);
     let distance = position.and_then(|x| {
         data.section

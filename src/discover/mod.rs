@@ -860,6 +860,22 @@ fn verdict(
              {} most closely (eta² = {:.3}). No known effect explains it.",
             u.rmse, u.ratio, u.covariate, u.eta2
         ));
+        if let Some(at) = &u.location {
+            let distance = at
+                .distance_from_applicator_m
+                .map_or_else(String::new, |d| format!(", {d:.0} m from the applicator"));
+            text.push_str(&format!(
+                " It lives at site {} on the {} rail{distance}, from {} to {} ({} measurements, \
+                 mean residual {:+.4}, {:.0} % of the excess over the noise): look there.",
+                at.site,
+                at.rail,
+                at.from_utc,
+                at.to_utc,
+                at.measurements,
+                at.mean_residual,
+                100.0 * at.share_of_excess
+            ));
+        }
     }
     text
 }

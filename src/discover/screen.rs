@@ -92,33 +92,50 @@ pub fn outliers(data: &Dataset, residual: &[f64]) -> Outliers {
             .or_default()
             .push((axle, k));
     }
+    // Two passes: a neighbourhood with two outliers of one sign moves its
+    // median, so the second pass leaves the first pass's outliers out of
+    // every neighbourhood.
+    let mut flagged = vec![false; data.rows.len()];
     let mut deviation: Vec<(usize, f64)> = Vec::new();
-    for list in groups.values_mut() {
-        if list.len() < 3 {
-            continue;
+    let mut threshold = f64::INFINITY;
+    let mut robust_sigma = 0.0;
+    for _pass in 0..2 {
+        deviation.clear();
+        for list in groups.values_mut() {
+            list.sort_unstable();
+            let clean: Vec<(usize, usize)> =
+                list.iter().copied().filter(|&(_, k)| !flagged[k]).collect();
+            for &(axle, k) in list.iter() {
+                // The two nearest clean axles on each side.
+                let at = clean.partition_point(|&(a, _)| a < axle);
+                let mut others: Vec<f64> = clean[at.saturating_sub(2)..at]
+                    .iter()
+                    .chain(clean[at..].iter().filter(|&&(a, _)| a != axle).take(2))
+                    .map(|&(_, i)| residual[i])
+                    .collect();
+                if others.len() < 2 {
+                    continue;
+                }
+                others.sort_unstable_by(f64::total_cmp);
+                deviation.push((k, residual[k] - median(&others)));
+            }
         }
-        list.sort_unstable();
-        for (j, &(_, k)) in list.iter().enumerate() {
-            let lo = j.saturating_sub(2);
-            let hi = (j + 3).min(list.len());
-            let mut others: Vec<f64> = (lo..hi)
-                .filter(|&i| i != j)
-                .map(|i| residual[list[i].1])
-                .collect();
-            others.sort_unstable_by(f64::total_cmp);
-            deviation.push((k, residual[k] - median(&others)));
+        let mut abs: Vec<f64> = deviation.iter().map(|(_, d)| d.abs()).collect();
+        abs.sort_unstable_by(f64::total_cmp);
+        robust_sigma = 1.4826 * median(&abs);
+        threshold = OUTLIER_Z * robust_sigma;
+        if robust_sigma > 0.0 {
+            for &(k, d) in &deviation {
+                flagged[k] = d.abs() > threshold;
+            }
         }
     }
-    let mut abs: Vec<f64> = deviation.iter().map(|(_, d)| d.abs()).collect();
-    abs.sort_unstable_by(f64::total_cmp);
-    let robust_sigma = 1.4826 * median(&abs);
-    let threshold = OUTLIER_Z * robust_sigma;
     let mut active = vec![true; data.rows.len()];
     let mut by_place = BTreeMap::new();
     let mut index_in_file = Vec::new();
     if robust_sigma > 0.0 {
         for &(k, d) in &deviation {
-            if d.abs() > threshold {
+            if d.abs() > threshold && flagged[k] {
                 active[k] = false;
                 let row = &data.rows[k];
                 *by_place
