@@ -213,6 +213,19 @@ impl Candidate {
         }
     }
 
+    /// Switches the effect off in `effects`.
+    pub fn unset(&self, effects: &mut Effects) {
+        match self {
+            Candidate::RailAgeing => effects.rail_ageing = None,
+            Candidate::RainWashoff => effects.rain_washoff = None,
+            Candidate::TemperatureConsumption => effects.temperature_consumption = None,
+            Candidate::SpeedTransfer => effects.speed_transfer = None,
+            Candidate::WheelEdgeReservoir => effects.wheel_edge_reservoir = None,
+            Candidate::BogieBands => effects.bogie_bands = None,
+            Candidate::Generic(g) => effects.generic.retain(|t| !g.is(t)),
+        }
+    }
+
     /// The effect's parameters in `effects`, `None` when it is off.
     pub fn get(&self, effects: &Effects) -> Option<Vec<f64>> {
         match self {

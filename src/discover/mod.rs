@@ -220,6 +220,8 @@ pub struct Step {
     /// Best BIC drop first.
     pub candidates: Vec<CandidateResult>,
     pub accepted: Option<String>,
+    /// An effect taken out again after the step: the model no longer needs it.
+    pub removed: Option<String>,
     /// The model after the step (after the joint refit).
     pub rmse_after: f64,
     pub effects_after: Vec<EffectParams>,
@@ -397,6 +399,10 @@ pub fn discover(
 
     let mut current = start.clone();
     let mut sse = eval_before.sse;
+    // The noise estimate of the selection: an effect that varies from axle
+    // to axle (a load-driven one) inflates the first estimate, so it is
+    // estimated again as the model grows, the smallest kept.
+    let mut noise_now = noise_estimate;
     let mut accepted: Vec<Candidate> = Candidate::ALL
         .into_iter()
         .filter(|c| c.get(&start.effects).is_some())
@@ -446,19 +452,40 @@ pub fn discover(
                 (c, start)
             })
             .collect();
+        // After a step: a named effect whose earlier optimum no longer
+        // lowers the SSE at all was standing in for what was just added.
+        let stale: Vec<bool> = candidates
+            .par_iter()
+            .map(|(c, start)| match start {
+                Start::Warm(u) if !c.is_generic() => {
+                    let space = Space {
+                        base: current.clone(),
+                        slots: vec![c.clone()],
+                    };
+                    Ok(ev.evaluate(&space.config(u))?.sse >= sse)
+                }
+                _ => Ok(false),
+            })
+            .collect::<Result<_>>()?;
+        let mut stale = stale.into_iter();
+        candidates.retain(|_| !stale.next().unwrap_or(false));
         progress.stage(&format!("step {step}: screening the generic terms"));
         let (generic, screening) = screen::propose(
             &ev,
             &drivers,
             &current,
             &simulated_current,
-            noise_estimate,
+            noise_now,
             // ΔBIC < threshold needs n ln(SSE1/SSE0) < threshold − k ln n,
             // about a reduction of (|threshold| + k ln n) σ² for k = 1.
-            noise_estimate.map_or(0.0, |s| (options.bic_threshold.abs() + ln_n) * s * s),
+            noise_now.map_or(0.0, |s| (options.bic_threshold.abs() + ln_n) * s * s),
             &mut responses,
         )?;
-        candidates.extend(generic.into_iter().filter(|(c, _)| !accepted.contains(c)));
+        candidates.extend(
+            generic
+                .into_iter()
+                .filter(|(c, _)| !accepted.contains(c) && !hopeless.contains(c)),
+        );
         if candidates.is_empty() {
             break;
         }
@@ -476,6 +503,52 @@ pub fn discover(
                 fit::fit(&ev, &space, start.clone(), None).map(|f| (c.clone(), space, f))
             })
             .collect::<Result<_>>()?;
+        // The best exp terms in their other forms (linear, power, a step).
+        let mut exp_fits: Vec<&(Candidate, Space, fit::Fit)> = fits
+            .iter()
+            .filter(|(c, _, _)| matches!(c, Candidate::Generic(g) if g.form == Some(FormKind::Exp)))
+            .collect();
+        exp_fits.sort_by(|a, b| a.2.eval.sse.total_cmp(&b.2.eval.sse));
+        let residual_now: Vec<f64> = data
+            .rows
+            .iter()
+            .zip(&simulated_current)
+            .map(|(r, s)| r.measured - s)
+            .collect();
+        let more: Vec<(Candidate, Start)> = exp_fits
+            .iter()
+            .take(FORMS_FOR)
+            .filter(|(_, _, f)| f.eval.sse < sse)
+            .flat_map(|(c, space, f)| match c {
+                Candidate::Generic(g) => {
+                    let beta = space.params(&f.u).pop().and_then(|p| p.first().copied());
+                    screen::other_forms(
+                        data,
+                        &drivers,
+                        &ev.active,
+                        &residual_now,
+                        g,
+                        beta.unwrap_or(0.0),
+                    )
+                }
+                _ => Vec::new(),
+            })
+            .collect();
+        let mut fits = fits;
+        if !more.is_empty() {
+            progress.stage(&format!("step {step}: fitting {} more forms", more.len()));
+            let extra: Vec<(Candidate, Space, fit::Fit)> = more
+                .par_iter()
+                .map(|(c, start)| {
+                    let space = Space {
+                        base: current.clone(),
+                        slots: vec![c.clone()],
+                    };
+                    fit::fit(&ev, &space, start.clone(), None).map(|f| (c.clone(), space, f))
+                })
+                .collect::<Result<_>>()?;
+            fits.extend(extra);
+        }
         let mut results: Vec<(CandidateResult, Space, Vec<f64>)> = fits
             .into_iter()
             .map(|(c, space, f)| {
@@ -490,10 +563,8 @@ pub fn discover(
                 }
                 let k = c.dims() + usize::from(is_step(&c));
                 let delta_bic = n as f64 * (f.eval.sse / sse).ln() + k as f64 * ln_n;
-                let excess = noise_estimate
-                    .map(|s| sse - n as f64 * s * s)
-                    .filter(|e| *e > 0.0);
-                let excess_share = excess.map(|e| (sse - f.eval.sse) / e);
+                let (excess_share, passes_share) =
+                    judge_share(sse, f.eval.sse, n, noise_now, options);
                 let params = space.params(&f.u).pop().unwrap_or_default();
                 (
                     CandidateResult {
@@ -506,7 +577,7 @@ pub fn discover(
                         delta_bic,
                         passes_bic: delta_bic < options.bic_threshold,
                         excess_share,
-                        passes_share: excess_share.is_none_or(|x| x >= options.min_excess_share),
+                        passes_share,
                         cv: None,
                         passes_cv: None,
                         cv_site: None,
@@ -536,11 +607,8 @@ pub fn discover(
                 r.rmse = rmse(eval.sse, n);
                 r.delta_bic = n as f64 * (eval.sse / sse).ln() + r.k as f64 * ln_n;
                 r.passes_bic = r.delta_bic < options.bic_threshold;
-                let excess = noise_estimate
-                    .map(|s| sse - n as f64 * s * s)
-                    .filter(|e| *e > 0.0);
-                r.excess_share = excess.map(|e| (sse - eval.sse) / e);
-                r.passes_share = r.excess_share.is_none_or(|x| x >= options.min_excess_share);
+                (r.excess_share, r.passes_share) =
+                    judge_share(sse, eval.sse, n, noise_now, options);
                 results[k].1 = space;
                 results[k].2 = u;
                 results.sort_by(|a, b| a.0.delta_bic.total_cmp(&b.0.delta_bic));
@@ -603,6 +671,7 @@ pub fn discover(
             screening,
             candidates: results.iter().map(|r| r.0.clone()).collect(),
             accepted: None,
+            removed: None,
             rmse_after: rmse(sse, n),
             effects_after: effects_of(&current),
         };
@@ -633,7 +702,59 @@ pub fn discover(
                 sse = fit.eval.sse;
             }
         }
+        // Backward: an effect added earlier that the model no longer needs
+        // (it stood in for what came later) is taken out again.
+        if accepted.len() > 1 {
+            let starting = Candidate::ALL
+                .iter()
+                .filter(|c| c.get(&start.effects).is_some())
+                .count();
+            let without: Vec<f64> = accepted[starting..]
+                .par_iter()
+                .map(|c| {
+                    let mut cfg = current.clone();
+                    c.unset(&mut cfg.effects);
+                    Ok(ev.evaluate(&cfg)?.sse)
+                })
+                .collect::<Result<_>>()?;
+            let weakest = without
+                .iter()
+                .enumerate()
+                .map(|(i, &w)| {
+                    let c = &accepted[starting + i];
+                    let k = c.dims() + usize::from(is_step(c));
+                    let keep_bic = n as f64 * (sse / w).ln() + k as f64 * ln_n;
+                    let (_, big) = judge_share(w, sse, n, noise_now, options);
+                    (starting + i, keep_bic, big)
+                })
+                .filter(|(_, keep_bic, big)| *keep_bic >= options.bic_threshold || !big)
+                .max_by(|a, b| a.1.total_cmp(&b.1));
+            if let Some((i, _, _)) = weakest {
+                let c = accepted.remove(i);
+                progress.stage(&format!("step {step}: {} is no longer needed", c.label()));
+                c.unset(&mut current.effects);
+                let joint = Space {
+                    base: current.clone(),
+                    slots: accepted.clone(),
+                };
+                let fit = fit::fit(&ev, &joint, Start::Warm(joint.units_of(&current)), None)?;
+                current = joint.config(&fit.u);
+                sse = fit.eval.sse;
+                record.removed = Some(c.label());
+                hopeless.push(c);
+            }
+        }
         simulated_current = ev.simulate(&current)?;
+        let residual_now: Vec<f64> = data
+            .rows
+            .iter()
+            .zip(&simulated_current)
+            .zip(&ev.active)
+            .map(|((r, s), &a)| if a { r.measured - s } else { f64::NAN })
+            .collect();
+        if let Some(again) = diagnose::noise_estimate(data, &residual_now) {
+            noise_now = Some(noise_now.map_or(again, |s| s.min(again)));
+        }
         record.rmse_after = rmse(sse, n);
         record.effects_after = effects_of(&current);
         rmse_by_step.push((format!("+ {}", c.label()), rmse(sse, n)));
@@ -645,6 +766,7 @@ pub fn discover(
     let rmse_after = rmse(eval_after.sse, n);
     let clean_after = screened(&residual_after, &ev.active);
     let covariates_after = diagnose::rank(data, &clean_after);
+    let noise_estimate = noise_now;
     let unexplained = match (noise_estimate, covariates_after.first()) {
         (Some(noise), Some(top)) if rmse_after > options.unexplained_ratio * noise => {
             Some(Unexplained {
@@ -805,6 +927,16 @@ fn prefer_named(results: &mut [(CandidateResult, Space, Vec<f64>)], sse: f64) {
     if results[best].0.name != "generic" {
         return;
     }
+    // A named effect acts everywhere: it describes the data only where the
+    // best generic term does too (a term scoped to one rail, applicator or
+    // site says something the named effect cannot).
+    let unscoped = matches!(
+        results[best].1.slots.first(),
+        Some(Candidate::Generic(g)) if g.scope().keys() == 0
+    );
+    if !unscoped {
+        return;
+    }
     let best_gain = sse - results[best].0.sse;
     if let Some(named) = results.iter().position(|r| {
         r.0.name != "generic" && passing(&r.0) && sse - r.0.sse >= NAMED_SHARE * best_gain
@@ -812,6 +944,36 @@ fn prefer_named(results: &mut [(CandidateResult, Space, Vec<f64>)], sse: f64) {
         results[best..=named].rotate_right(1);
     }
 }
+
+/// The share of the current excess over the noise a candidate removes, and
+/// whether that passes: at least [`Options::min_excess_share`] of it, and
+/// a drop of the mean squared residual of at least [`MIN_EFFECT`] σ² (an
+/// effect too small to matter to anyone is not added, however significant
+/// with many measurements).
+fn judge_share(
+    sse0: f64,
+    sse1: f64,
+    n: usize,
+    noise: Option<f64>,
+    options: &Options,
+) -> (Option<f64>, bool) {
+    let Some(s) = noise else {
+        return (None, true);
+    };
+    let excess = sse0 - n as f64 * s * s;
+    let share = (excess > 0.0).then(|| (sse0 - sse1) / excess);
+    let big_enough = (sse0 - sse1) / n as f64 >= MIN_EFFECT * s * s;
+    (
+        share,
+        big_enough && share.is_none_or(|x| x >= options.min_excess_share),
+    )
+}
+
+/// See [`judge_share`]: 2 % of σ², an effect of about 0.14 σ RMS.
+const MIN_EFFECT: f64 = 0.02;
+
+/// The exp terms whose other forms are fitted too, per step.
+const FORMS_FOR: usize = 2;
 
 /// See [`prefer_named`].
 const NAMED_SHARE: f64 = 0.95;

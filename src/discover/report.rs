@@ -389,6 +389,24 @@ fn markdown(data: &Dataset, d: &Discovery, residual_file: Option<&str>, distance
     let _ = writeln!(md, "| RMSE before | {:.5} |", d.rmse_before);
     let _ = writeln!(md, "| RMSE after | {:.5} |", d.rmse_after);
     let _ = writeln!(md, "| noise estimate | {noise} |");
+    let places: Vec<String> = d
+        .outliers
+        .by_place
+        .iter()
+        .map(|(place, n)| format!("{place}: {n}"))
+        .collect();
+    let _ = writeln!(
+        md,
+        "| gross outliers left out | {} of {} (more than {:.4} from their neighbours){} |",
+        d.outliers.count,
+        d.measurements,
+        d.outliers.threshold,
+        if places.is_empty() {
+            String::new()
+        } else {
+            format!("; {}", places.join(", "))
+        }
+    );
     let _ = writeln!(
         md,
         "| engine runs | {} in {:.1} s |\n",

@@ -36,8 +36,14 @@ use crate::config::ModelConfig;
 use crate::model::generic::{ActsOn, Driver, FormKind};
 use crate::recording::{BogiePosition, Quantity};
 
-/// Directions fitted per step (each in every form its driver allows).
+/// A time step is fitted when its screening reduction is at least this
+/// share of the best direction's.
+const TIME_SHARE: f64 = 0.3;
+/// Drivers whose every acts_on is fitted per step.
 const TOP_DIRECTIONS: usize = 2;
+/// The second driver is fitted when its screening reduction is at least
+/// this share of the first's.
+const SECOND_DRIVER: f64 = 0.5;
 /// Measurement offsets fitted per step.
 const TOP_OFFSETS: usize = 2;
 /// The screening factor reaches this `|ln g|` at the driver's extreme.
@@ -491,9 +497,13 @@ pub fn propose(
     // until the product runs out).
     let mut candidates: Vec<(Candidate, Start)> = Vec::new();
     let mut timed: Vec<&Screened> = Vec::new();
+    // Time steps compete with the drivers: tried when one could remove a
+    // good part of what the best direction could.
+    let best_reduction = screened.first().map_or(0.0, |s| s.reduction);
     for s in screened
         .iter()
         .filter(|s| s.t0.is_some() && worth(s.reduction))
+        .filter(|s| s.reduction >= TIME_SHARE * best_reduction)
     {
         if !timed
             .iter()
@@ -514,66 +524,48 @@ pub fn propose(
         }
     }
 
-    // The best other directions (acts_on, driver, scope), each in every form.
-    let mut taken: Vec<&Screened> = Vec::new();
+    // The strongest drivers: every acts_on with each (its best scope), in
+    // the exp form. Which quantity a driver acts on is what the fits tell
+    // apart (to first order a pulse, a transfer and a consumption term look
+    // alike); the other forms follow for the best of them
+    // ([`other_forms`]).
+    let mut top_drivers: Vec<Driver> = Vec::new();
+    let mut first = None;
     for s in screened
         .iter()
         .filter(|s| s.t0.is_none() && worth(s.reduction))
     {
-        if taken.len() >= TOP_DIRECTIONS {
-            break;
+        // A second driver only if it could remove about as much: two
+        // correlated weather covariates are one finding.
+        let best = *first.get_or_insert(s.reduction);
+        if !top_drivers.contains(&s.driver) && s.reduction >= SECOND_DRIVER * best {
+            top_drivers.push(s.driver);
         }
+    }
+    top_drivers.truncate(TOP_DIRECTIONS);
+    let mut taken: Vec<&Screened> = Vec::new();
+    for s in screened
+        .iter()
+        .filter(|s| s.t0.is_none() && top_drivers.contains(&s.driver) && worth(s.reduction))
+    {
         if taken
             .iter()
-            .any(|t| t.acts_on == s.acts_on && t.driver == s.driver && t.scope == s.scope)
+            .any(|t| t.acts_on == s.acts_on && t.driver == s.driver)
         {
             continue;
         }
         taken.push(s);
-        let range = drivers.range(s.driver);
-        let x_ref = s.driver.x_ref().unwrap_or(0.0);
-        for form in [FormKind::Exp, FormKind::Linear, FormKind::Power] {
-            if !drivers.allows(s.driver, form) {
-                continue;
-            }
-            let slot = GenericSlot::factor(s.acts_on, s.driver, form, s.scope.clone(), None, range);
-            // Near g = 1 the forms agree to first order: n ≈ beta x_ref.
-            let p0 = match form {
-                FormKind::Power => s.estimate * x_ref,
-                _ => s.estimate,
-            };
-            let c = Candidate::Generic(slot);
-            let u = c.unit(0, p0);
-            candidates.push((c, Start::Warm(vec![u])));
-        }
-        // A step where the residual splits along this driver.
-        let rail = s
-            .scope
-            .rail
-            .as_ref()
-            .and_then(|r| data.section.rails.iter().position(|x| x == r));
-        let mask: Vec<bool> = data
-            .rows
-            .iter()
-            .zip(active)
-            .map(|(row, &a)| a && rail.is_none_or(|r| r == row.rail))
-            .collect();
-        if let Some((x0, _)) = best_split(drivers.values(s.driver), &residual, &mask) {
-            let x0 = round_sig(x0, 3);
-            let slot = GenericSlot::factor(
-                s.acts_on,
-                s.driver,
-                FormKind::Step,
-                s.scope.clone(),
-                Some(x0),
-                range,
-            );
-            let c = Candidate::Generic(slot);
-            // From g = 1: the bracket around it reaches f = 0.55 to 1.45,
-            // and widens to the whole range if the optimum is beyond.
-            let u = c.unit(0, 1.0);
-            candidates.push((c, Start::Warm(vec![u])));
-        }
+        let slot = GenericSlot::factor(
+            s.acts_on,
+            s.driver,
+            FormKind::Exp,
+            s.scope.clone(),
+            None,
+            drivers.range(s.driver),
+        );
+        let c = Candidate::Generic(slot);
+        let u = c.unit(0, s.estimate);
+        candidates.push((c, Start::Warm(vec![u])));
     }
 
     // Offsets: every site scope, and each quantity everywhere.
@@ -710,4 +702,69 @@ mod tests {
         assert_eq!(round_sig(1_713_619_812.4, 3), 1_710_000_000.0);
         assert_eq!(round_sig(-12.345, 2), -12.0);
     }
+}
+
+/// The other forms of a fitted exp term (`slot` at `beta`): linear and
+/// power from the same first-order slope (`gamma ≈ beta`, `n ≈ beta x_ref`),
+/// and a step where the residual splits along the driver (over the slot's
+/// rail).
+pub fn other_forms(
+    data: &Dataset,
+    drivers: &Drivers,
+    active: &[bool],
+    residual: &[f64],
+    slot: &GenericSlot,
+    beta: f64,
+) -> Vec<(Candidate, Start)> {
+    let Some(driver) = slot.driver else {
+        return Vec::new();
+    };
+    let range = drivers.range(driver);
+    let x_ref = driver.x_ref().unwrap_or(0.0);
+    let mut out = Vec::new();
+    for form in [FormKind::Linear, FormKind::Power] {
+        if !drivers.allows(driver, form) {
+            continue;
+        }
+        let p0 = if form == FormKind::Power {
+            beta * x_ref
+        } else {
+            beta
+        };
+        let c = Candidate::Generic(GenericSlot::factor(
+            slot.acts_on,
+            driver,
+            form,
+            slot.scope(),
+            None,
+            range,
+        ));
+        let u = c.unit(0, p0);
+        out.push((c, Start::Warm(vec![u])));
+    }
+    let rail = slot
+        .rail
+        .as_ref()
+        .and_then(|r| data.section.rails.iter().position(|x| x == r));
+    let mask: Vec<bool> = data
+        .rows
+        .iter()
+        .zip(active)
+        .map(|(row, &a)| a && rail.is_none_or(|r| r == row.rail))
+        .collect();
+    if let Some((x0, _)) = best_split(drivers.values(driver), residual, &mask) {
+        let c = Candidate::Generic(GenericSlot::factor(
+            slot.acts_on,
+            driver,
+            FormKind::Step,
+            slot.scope(),
+            Some(round_sig(x0, 3)),
+            range,
+        ));
+        // From g = 1: the bracket around it reaches f = 0.55 to 1.45, and
+        // widens to the whole range if the optimum is beyond.
+        let u = c.unit(0, 1.0);
+        out.push((c, Start::Warm(vec![u])));
+    }
+    out
 }
