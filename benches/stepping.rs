@@ -103,7 +103,7 @@ fn events(rails: usize) -> Vec<Event> {
 }
 
 fn run(section: &Section, cfg: &ModelConfig, events: &[Event]) -> u64 {
-    let mut engine = Engine::new(section.clone(), *cfg, EngineOptions::default(), 0);
+    let mut engine = Engine::new(section.clone(), cfg.clone(), EngineOptions::default(), 0);
     let mut sink = Discard;
     for e in events {
         engine

@@ -186,7 +186,7 @@ fn figures_agree_with_mu_of_every_wheel_snapshot() {
         .unwrap();
         let mut engine = Engine::new(
             strategy.section(&traffic.section),
-            cfg,
+            cfg.clone(),
             EngineOptions {
                 snapshot_every_wheel: true,
                 ..EngineOptions::default()

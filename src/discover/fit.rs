@@ -974,7 +974,7 @@ mod tests {
         for c in Candidate::ALL {
             let space = Space {
                 base: ModelConfig::default(),
-                slots: vec![c],
+                slots: vec![c.clone()],
             };
             for u in [0.0, 0.5, 1.0] {
                 let cfg = space.config(&vec![u; c.dims()]);
