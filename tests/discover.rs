@@ -11,29 +11,17 @@
 //! something to show. The seeds are fixed: the recordings are the same
 //! bytes on every machine.
 
+mod common;
+
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
 
+use common::{check, tortwin};
 use tortwin::config::ModelConfig;
 use tortwin::discover::{self, data::Dataset, Options, Silent};
 use tortwin::recording::{EventKind, Quantity};
 
 const SIGMA: f64 = 0.01;
-
-fn tortwin() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_tortwin"))
-}
-
-fn check(o: &Output, what: &str) {
-    assert!(
-        o.status.success(),
-        "{what} failed ({})\n{}\n{}",
-        o.status,
-        String::from_utf8_lossy(&o.stdout),
-        String::from_utf8_lossy(&o.stderr)
-    );
-}
 
 /// A 3-day synthetic recording with `hidden` effects; returns its path and key.
 fn synth(dir: &Path, seed: u64, hidden: &[&str]) -> (PathBuf, serde_json::Value) {

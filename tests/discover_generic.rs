@@ -5,27 +5,15 @@
 //! of the truth's effect over the observed range, the RMSE within 1.2 sigma
 //! where there are no outliers, and model.toml must reproduce rmse_after.
 
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+mod common;
 
+use std::path::{Path, PathBuf};
+
+use common::{check, tortwin};
 use tortwin::config::{GenericTerm, ModelConfig, TermEffect};
 use tortwin::discover::data::Dataset;
 
 const SIGMA: f64 = 0.01;
-
-fn tortwin() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_tortwin"))
-}
-
-fn check(o: &Output, what: &str) {
-    assert!(
-        o.status.success(),
-        "{what} failed ({})\n{}\n{}",
-        o.status,
-        String::from_utf8_lossy(&o.stdout),
-        String::from_utf8_lossy(&o.stderr)
-    );
-}
 
 /// A 3-day recording; `extra` are more synth arguments.
 fn synth(dir: &Path, seed: u64, extra: &[&str]) -> (PathBuf, serde_json::Value) {

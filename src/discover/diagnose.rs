@@ -227,18 +227,32 @@ pub fn rank(data: &Dataset, residual: &[f64]) -> Vec<CovariateScore> {
 /// gets wrong changes little from one such axle to the next and mostly
 /// cancels. `None` without such pairs.
 pub fn noise_estimate(data: &Dataset, residual: &[f64]) -> Option<f64> {
-    use std::collections::HashMap;
-    /// Train, site, rail, quantity, bogie position.
-    type Group = (usize, usize, usize, u8, u8);
-    // -> (axle, residual), put in axle order below.
-    let mut groups: HashMap<Group, Vec<(usize, f64)>> = HashMap::new();
-    for (row, &r) in data.rows.iter().zip(residual) {
+    let mut groups = neighbours(data);
+    let mut sum = 0.0;
+    let mut count = 0usize;
+    for list in groups.values_mut() {
+        list.retain(|&(_, k)| residual[k].is_finite());
+        for pair in list.windows(2) {
+            sum += (residual[pair[1].1] - residual[pair[0].1]).powi(2);
+            count += 1;
+        }
+    }
+    (count > 0).then(|| (sum / count as f64 / 2.0).sqrt())
+}
+
+/// The axle measurements that see almost the same rail: one group per
+/// train, site, rail, quantity and bogie position, each a list of (axle,
+/// row) in axle order. The noise estimate and the outlier screen compare
+/// within these.
+pub fn neighbours(
+    data: &Dataset,
+) -> std::collections::HashMap<(usize, usize, usize, u8, u8), Vec<(usize, usize)>> {
+    let mut groups: std::collections::HashMap<_, Vec<(usize, usize)>> =
+        std::collections::HashMap::new();
+    for (k, row) in data.rows.iter().enumerate() {
         let (Some(train), Some(axle)) = (row.train_seq, row.axle_index) else {
             continue;
         };
-        if !r.is_finite() {
-            continue;
-        }
         let bogie = data
             .passages
             .get(train)
@@ -247,18 +261,12 @@ pub fn noise_estimate(data: &Dataset, residual: &[f64]) -> Option<f64> {
         groups
             .entry((train, row.site, row.rail, row.quantity as u8, bogie))
             .or_default()
-            .push((axle, r));
+            .push((axle, k));
     }
-    let mut sum = 0.0;
-    let mut count = 0usize;
     for list in groups.values_mut() {
-        list.sort_by_key(|(axle, _)| *axle);
-        for pair in list.windows(2) {
-            sum += (pair[1].1 - pair[0].1).powi(2);
-            count += 1;
-        }
+        list.sort_unstable();
     }
-    (count > 0).then(|| (sum / count as f64 / 2.0).sqrt())
+    groups
 }
 
 #[cfg(test)]

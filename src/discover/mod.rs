@@ -452,23 +452,6 @@ pub fn discover(
                 (c, start)
             })
             .collect();
-        // After a step: a named effect whose earlier optimum no longer
-        // lowers the SSE at all was standing in for what was just added.
-        let stale: Vec<bool> = candidates
-            .par_iter()
-            .map(|(c, start)| match start {
-                Start::Warm(u) if !c.is_generic() => {
-                    let space = Space {
-                        base: current.clone(),
-                        slots: vec![c.clone()],
-                    };
-                    Ok(ev.evaluate(&space.config(u))?.sse >= sse)
-                }
-                _ => Ok(false),
-            })
-            .collect::<Result<_>>()?;
-        let mut stale = stale.into_iter();
-        candidates.retain(|_| !stale.next().unwrap_or(false));
         progress.stage(&format!("step {step}: screening the generic terms"));
         let (generic, screening) = screen::propose(
             &ev,
@@ -481,11 +464,34 @@ pub fn discover(
             noise_now.map_or(0.0, |s| (options.bic_threshold.abs() + ln_n) * s * s),
             &mut responses,
         )?;
-        candidates.extend(
-            generic
-                .into_iter()
-                .filter(|(c, _)| !accepted.contains(c) && !hopeless.contains(c)),
-        );
+        let generic: Vec<(Candidate, Start)> = generic
+            .into_iter()
+            .filter(|(c, _)| !accepted.contains(c) && !hopeless.contains(c))
+            .collect();
+        // After a step: a named effect whose earlier optimum no longer
+        // lowers the SSE at all was standing in for what was just added
+        // (unless a generic term of its own family is a candidate: then it
+        // is the better name for what that term finds).
+        let families: Vec<Candidate> = generic
+            .iter()
+            .filter_map(|(c, _)| named_family(c))
+            .collect();
+        let stale: Vec<bool> = candidates
+            .par_iter()
+            .map(|(c, start)| match start {
+                Start::Warm(u) if !c.is_generic() && !families.contains(c) => {
+                    let space = Space {
+                        base: current.clone(),
+                        slots: vec![c.clone()],
+                    };
+                    Ok(ev.evaluate(&space.config(u))?.sse >= sse)
+                }
+                _ => Ok(false),
+            })
+            .collect::<Result<_>>()?;
+        let mut stale = stale.into_iter();
+        candidates.retain(|_| !stale.next().unwrap_or(false));
+        candidates.extend(generic);
         if candidates.is_empty() {
             break;
         }
@@ -493,16 +499,7 @@ pub fn discover(
             "step {step}: fitting {} candidates",
             candidates.len()
         ));
-        let fits: Vec<(Candidate, Space, fit::Fit)> = candidates
-            .par_iter()
-            .map(|(c, start)| {
-                let space = Space {
-                    base: current.clone(),
-                    slots: vec![c.clone()],
-                };
-                fit::fit(&ev, &space, start.clone(), None).map(|f| (c.clone(), space, f))
-            })
-            .collect::<Result<_>>()?;
+        let fits = fit_each(&ev, &current, &candidates)?;
         // The best exp terms in their other forms (linear, power, a step).
         let mut exp_fits: Vec<&(Candidate, Space, fit::Fit)> = fits
             .iter()
@@ -537,17 +534,7 @@ pub fn discover(
         let mut fits = fits;
         if !more.is_empty() {
             progress.stage(&format!("step {step}: fitting {} more forms", more.len()));
-            let extra: Vec<(Candidate, Space, fit::Fit)> = more
-                .par_iter()
-                .map(|(c, start)| {
-                    let space = Space {
-                        base: current.clone(),
-                        slots: vec![c.clone()],
-                    };
-                    fit::fit(&ev, &space, start.clone(), None).map(|f| (c.clone(), space, f))
-                })
-                .collect::<Result<_>>()?;
-            fits.extend(extra);
+            fits.extend(fit_each(&ev, &current, &more)?);
         }
         let mut results: Vec<(CandidateResult, Space, Vec<f64>)> = fits
             .into_iter()
@@ -908,6 +895,41 @@ fn refine_t0(
     let start = Start::Warm(vec![s.slots[0].unit(0, f)]);
     let fitted = fit::fit(ev, &s, start, None)?;
     Ok(Some((s, fitted.u, fitted.eval)))
+}
+
+/// The named effect a generic term is a form of (effects.md:
+/// `temperature_consumption` is consumption × exp of air temperature,
+/// `speed_transfer` transfer × power of speed), for an unscoped term.
+fn named_family(c: &Candidate) -> Option<Candidate> {
+    use crate::model::generic::Driver;
+    match c {
+        Candidate::Generic(g) if g.scope().keys() == 0 => match (g.acts_on, g.driver) {
+            (ActsOn::Consumption, Some(Driver::AirTemperatureC)) => {
+                Some(Candidate::TemperatureConsumption)
+            }
+            (ActsOn::Transfer, Some(Driver::SpeedMps)) => Some(Candidate::SpeedTransfer),
+            _ => None,
+        },
+        _ => None,
+    }
+}
+
+/// Each candidate fitted alone on top of `current`, in parallel.
+fn fit_each(
+    ev: &Evaluator<'_>,
+    current: &ModelConfig,
+    candidates: &[(Candidate, Start)],
+) -> Result<Vec<(Candidate, Space, fit::Fit)>> {
+    candidates
+        .par_iter()
+        .map(|(c, start)| {
+            let space = Space {
+                base: current.clone(),
+                slots: vec![c.clone()],
+            };
+            fit::fit(ev, &space, start.clone(), None).map(|f| (c.clone(), space, f))
+        })
+        .collect()
 }
 
 /// Whether a candidate is a step whose threshold the data chose (one more

@@ -23,7 +23,7 @@
 //! The best directions are then fitted for real, in every form, by
 //! `fit.rs`; the acceptance rules of the workflow decide.
 
-use std::collections::{BTreeMap, HashMap};
+use std::collections::BTreeMap;
 
 use anyhow::Result;
 use rayon::prelude::*;
@@ -34,7 +34,7 @@ use super::fit::{Candidate, Evaluator, Start};
 use super::space::{Drivers, GenericSlot, Scope};
 use crate::config::ModelConfig;
 use crate::model::generic::{ActsOn, Driver, FormKind};
-use crate::recording::{BogiePosition, Quantity};
+use crate::recording::Quantity;
 
 /// A time step is fitted when its screening reduction is at least this
 /// share of the best direction's.
@@ -82,22 +82,7 @@ pub struct Outliers {
 /// deviation of many sigma is the sensor's, not the track's. Measurements
 /// without such neighbours (tribometer readings) are kept.
 pub fn outliers(data: &Dataset, residual: &[f64]) -> Outliers {
-    type Group = (usize, usize, usize, u8, u8);
-    let mut groups: HashMap<Group, Vec<(usize, usize)>> = HashMap::new();
-    for (k, row) in data.rows.iter().enumerate() {
-        let (Some(train), Some(axle)) = (row.train_seq, row.axle_index) else {
-            continue;
-        };
-        let bogie = data
-            .passages
-            .get(train)
-            .and_then(|p| p.bogies.get(axle))
-            .map_or(2, |b| u8::from(*b == BogiePosition::Trailing));
-        groups
-            .entry((train, row.site, row.rail, row.quantity as u8, bogie))
-            .or_default()
-            .push((axle, k));
-    }
+    let mut groups = super::diagnose::neighbours(data);
     // Two passes: a neighbourhood with two outliers of one sign moves its
     // median, so the second pass leaves the first pass's outliers out of
     // every neighbourhood.
@@ -108,7 +93,6 @@ pub fn outliers(data: &Dataset, residual: &[f64]) -> Outliers {
     for _pass in 0..2 {
         deviation.clear();
         for list in groups.values_mut() {
-            list.sort_unstable();
             let clean: Vec<(usize, usize)> =
                 list.iter().copied().filter(|&(_, k)| !flagged[k]).collect();
             for &(axle, k) in list.iter() {
