@@ -16,7 +16,7 @@ use std::time::Duration;
 
 use criterion::{criterion_group, criterion_main, Criterion};
 
-use tortwin::app::discover::{run, DiscoverArgs};
+use tortwin_studies::jobs::discover::{run, DiscoverArgs};
 
 fn case(dir: &std::path::Path, name: &str, hidden: &str) -> DiscoverArgs {
     let recording = dir.join(format!("{name}.mcap"));

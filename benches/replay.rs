@@ -9,7 +9,7 @@ use std::path::PathBuf;
 
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 
-use tortwin::app::replay::{replay, ReplayArgs};
+use tortwin_studies::jobs::replay::{replay, ReplayArgs};
 
 fn args(recording: PathBuf, out: &std::path::Path) -> ReplayArgs {
     ReplayArgs {

@@ -8,12 +8,12 @@
 
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 
-use tortwin::config::ModelConfig;
-use tortwin::engine::{Engine, EngineOptions};
-use tortwin::recording::{
+use tortwin_engine::sink::Sink;
+use tortwin_engine::{Engine, EngineOptions};
+use tortwin_model::config::ModelConfig;
+use tortwin_recording::{
     Applicator, Axle, BogiePosition, Creepage, Direction, Event, EventKind, Passage, Pulse, Section,
 };
-use tortwin::sink::Sink;
 
 const LENGTH_M: f64 = 3000.0;
 const TRAINS: usize = 10;

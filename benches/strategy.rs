@@ -6,18 +6,17 @@
 //!
 //! `cargo bench --bench strategy`; strategies/s is the "elements" throughput.
 
-use std::path::Path;
 use std::time::Duration;
 
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 
-use tortwin::config::ModelConfig;
-use tortwin::strategy::search::{Method, Searcher, Space, SpaceConfig};
-use tortwin::strategy::{evaluate, Plan, Strategy, Target, Traffic};
+use tortwin_model::config::ModelConfig;
+use tortwin_studies::strategy::search::{Method, Searcher, Space, SpaceConfig};
+use tortwin_studies::strategy::{evaluate, Plan, Strategy, Target, Traffic};
 
 fn strategies_per_second(c: &mut Criterion) {
     let traffic =
-        Traffic::read(Path::new(tortwin::app::DEFAULT_RECORDING)).expect("the bundled recording");
+        Traffic::read(&tortwin_studies::jobs::default_recording()).expect("the bundled recording");
     let cfg = ModelConfig::default();
     let target = Target::default();
     let mut group = c.benchmark_group("strategy_demo_day");

@@ -6,25 +6,12 @@
 
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
-use std::process::Command;
 
-fn tortwin() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_tortwin"))
-}
+mod common;
+use common::{python, tortwin};
 
 fn reference(name: &str) -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("tests/reference/recordings")
-        .join(name)
-}
-
-fn python(script: &str, args: &[&std::ffi::OsStr]) -> std::process::Output {
-    let script = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("tests/python")
-        .join(script);
-    Command::new("python3").arg(script).args(args).output().unwrap_or_else(|e| {
-        panic!("cannot run python3 ({e}); install the readers: pip install -r tests/python/requirements.txt")
-    })
+    common::reference_recording(name)
 }
 
 /// The `/twin/field` and `/twin/section` messages of an output MCAP.

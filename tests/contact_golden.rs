@@ -15,7 +15,7 @@
 use std::collections::HashMap;
 use std::path::PathBuf;
 
-use tortwin::model::contact::{
+use tortwin_model::contact::{
     hertz, kalker, polach, KalkerCoefficients, PolachInput, PolachParams, Steel,
 };
 

@@ -5,10 +5,11 @@
 //! taken from the generator's key, and printed.
 
 use std::path::Path;
-use std::process::Command;
 
-use tortwin::app::replay::{replay, ReplayArgs};
-use tortwin::sink::{MeasurementOutput, Sink};
+use tortwin_studies::jobs::replay::{replay, ReplayArgs};
+
+mod common;
+use common::Recorder;
 
 const SIGMA: f64 = 0.01;
 
@@ -29,29 +30,15 @@ const CASES: &[(&str, &str)] = &[
     ("bogie_bands", "bogie_bands"),
 ];
 
-#[derive(Default)]
-struct Residuals {
-    sq: f64,
-    n: usize,
-}
-
-impl Sink for Residuals {
-    fn measurement(&mut self, m: &MeasurementOutput<'_>) -> anyhow::Result<()> {
-        self.sq += (m.measured - m.simulated).powi(2);
-        self.n += 1;
-        Ok(())
-    }
-}
-
 fn rmse_of_default_model(recording: &Path) -> f64 {
     let args = ReplayArgs::new(recording);
-    let mut r = Residuals::default();
+    let mut r = Recorder::default();
     replay(&args, &mut [&mut r]).unwrap();
-    (r.sq / r.n as f64).sqrt()
+    r.rmse()
 }
 
 fn synth(out: &Path, hidden: Option<&str>) {
-    let mut cmd = Command::new(env!("CARGO_BIN_EXE_tortwin"));
+    let mut cmd = common::tortwin();
     cmd.args([
         "synth",
         "--days",

@@ -10,8 +10,8 @@ mod common;
 use std::path::{Path, PathBuf};
 
 use common::{check, tortwin};
-use tortwin::config::{GenericTerm, ModelConfig, TermEffect};
-use tortwin::discover::data::Dataset;
+use tortwin_model::config::{GenericTerm, ModelConfig, TermEffect};
+use tortwin_studies::discover::data::Dataset;
 
 const SIGMA: f64 = 0.01;
 
@@ -191,7 +191,7 @@ fn consumption_following_humidity_is_found_on_the_tangent() {
     let data = Dataset::read(&rec).unwrap();
     let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
     for e in &data.events {
-        if let tortwin::recording::EventKind::Weather(w) = &e.kind {
+        if let tortwin_recording::EventKind::Weather(w) = &e.kind {
             lo = lo.min(w.relative_humidity);
             hi = hi.max(w.relative_humidity);
         }
@@ -284,11 +284,11 @@ fn friction_changed_at_one_site_for_half_a_day_stays_unexplained_and_located() {
 
 /// Every value `driver` takes in the recording where a term can act: the
 /// weather messages' values (and the defaults), or every wheel's.
-fn observed(data: &Dataset, driver: tortwin::model::generic::Driver) -> Vec<f64> {
-    use tortwin::model::generic::Driver as D;
-    use tortwin::recording::EventKind;
+fn observed(data: &Dataset, driver: tortwin_model::generic::Driver) -> Vec<f64> {
+    use tortwin_model::generic::Driver as D;
+    use tortwin_recording::EventKind;
     let mut xs = Vec::new();
-    let w0 = tortwin::recording::Weather::default();
+    let w0 = tortwin_recording::Weather::default();
     match driver {
         D::AirTemperatureC => xs.push(w0.air_temperature_c),
         D::RelativeHumidity => xs.push(w0.relative_humidity),

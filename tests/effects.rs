@@ -9,15 +9,17 @@
 use std::collections::HashMap;
 use std::path::PathBuf;
 
-use tortwin::app::replay::{replay, ReplayArgs};
-use tortwin::config::ModelConfig;
-use tortwin::engine::{Engine, EngineOptions};
-use tortwin::model::{contact, product};
-use tortwin::recording::{
+use tortwin_engine::{Engine, EngineOptions};
+use tortwin_model::config::ModelConfig;
+use tortwin_model::{contact, product};
+use tortwin_recording::{
     Applicator, Axle, AxleRef, BogiePosition, Creepage, Direction, Event, EventKind, Measurement,
     Passage, Pulse, Quantity, RecordingReader, Section, Site, Weather,
 };
-use tortwin::sink::{MeasurementOutput, Sink, TrainEvent};
+use tortwin_studies::jobs::replay::{replay, ReplayArgs};
+
+mod common;
+use common::{MeasurementRow, Recorder};
 
 // ---------------------------------------------------------------- wiring
 
@@ -143,24 +145,15 @@ fn mu_of(t_s: u64, train_at_s: u64, site: usize, rail: usize, axle_index: usize)
     )
 }
 
-#[derive(Default)]
-struct Simulated(Vec<f64>);
-impl Sink for Simulated {
-    fn measurement(&mut self, m: &MeasurementOutput<'_>) -> anyhow::Result<()> {
-        self.0.push(m.simulated);
-        Ok(())
-    }
-}
-
 fn run(section: Section, config: &str, events: Vec<Event>) -> Vec<f64> {
     let cfg = ModelConfig::from_overlay_str(config, "test").unwrap();
     let mut engine = Engine::new(section, cfg, EngineOptions::default(), 0);
-    let mut sink = Simulated::default();
+    let mut sink = Recorder::default();
     for e in events {
         engine.push(e, &mut sink).unwrap();
     }
     engine.finish(&mut sink, 0).unwrap();
-    sink.0
+    sink.simulated()
 }
 
 fn table2() -> product::ProductParams {
@@ -597,11 +590,11 @@ fn generic_terms_with_g_one_change_nothing_bit_for_bit() {
     std::fs::write(&cfg, neutral).unwrap();
     let rec = curve_2day();
     let collect = |config: Option<PathBuf>| {
-        let mut c = Collect::default();
+        let mut c = Recorder::default();
         let mut args = ReplayArgs::new(rec.clone());
         args.config = config;
         replay(&args, &mut [&mut c]).unwrap();
-        c.rows
+        c.measurements
             .iter()
             .map(|r| r.simulated.to_bits())
             .collect::<Vec<u64>>()
@@ -612,47 +605,13 @@ fn generic_terms_with_g_one_change_nothing_bit_for_bit() {
 // ---------------------------------------------------------------- direction
 
 /// A measurement's simulated value with what it needs for the diagnosis.
-#[derive(Clone, Debug)]
-struct Row {
-    log_time_ns: u64,
-    quantity: Quantity,
-    rail: String,
-    site: String,
-    train: Option<(String, usize)>,
-    simulated: f64,
-}
-
-#[derive(Default)]
-struct Collect {
-    rows: Vec<Row>,
-    speed: HashMap<String, f64>,
-}
-
-impl Sink for Collect {
-    fn train(&mut self, t: &TrainEvent<'_>) -> anyhow::Result<()> {
-        self.speed.insert(t.train_id.to_string(), t.speed_mps);
-        Ok(())
-    }
-    fn measurement(&mut self, m: &MeasurementOutput<'_>) -> anyhow::Result<()> {
-        self.rows.push(Row {
-            log_time_ns: m.log_time_ns,
-            quantity: m.quantity,
-            rail: m.rail_name.to_string(),
-            site: m.site_id.to_string(),
-            train: m
-                .train_id
-                .map(|t| (t.to_string(), m.axle_index.unwrap_or(0))),
-            simulated: m.simulated,
-        });
-        Ok(())
-    }
-}
+type Row = MeasurementRow;
 
 fn curve_2day() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/reference/recordings/curve_2day.mcap")
+    common::reference_recording("curve_2day.mcap")
 }
 
-fn replay_with(config: &str) -> Collect {
+fn replay_with(config: &str) -> Recorder {
     let dir = tempfile::tempdir().unwrap();
     let cfg = dir.path().join("c.toml");
     std::fs::write(&cfg, config).unwrap();
@@ -660,19 +619,19 @@ fn replay_with(config: &str) -> Collect {
         config: Some(cfg),
         ..ReplayArgs::new(curve_2day())
     };
-    let mut c = Collect::default();
+    let mut c = Recorder::default();
     replay(&args, &mut [&mut c]).unwrap();
     c
 }
 
 /// Per mu measurement: (row, simulated with the effect minus without).
-fn deltas(config: &str) -> (Collect, Vec<(Row, f64)>) {
+fn deltas(config: &str) -> (Recorder, Vec<(Row, f64)>) {
     let off = replay_with("");
     let on = replay_with(config);
     let d = on
-        .rows
+        .measurements
         .iter()
-        .zip(&off.rows)
+        .zip(&off.measurements)
         .filter(|(a, _)| a.quantity == Quantity::Mu)
         .map(|(a, b)| (a.clone(), a.simulated - b.simulated))
         .collect();
@@ -716,8 +675,8 @@ fn rail_ageing_raises_mu_most_after_long_gaps() {
     );
     // First measured train after a gap of more than 3 hours against the rest.
     let mut starts: Vec<(u64, String)> = Vec::new();
-    for r in &on.rows {
-        if let Some((t, _)) = &r.train {
+    for r in &on.measurements {
+        if let Some(t) = &r.train_id {
             if starts.last().map(|s| &s.1) != Some(t) {
                 starts.push((r.log_time_ns, t.clone()));
             }
@@ -730,7 +689,7 @@ fn rail_ageing_raises_mu_most_after_long_gaps() {
         .collect();
     let (long, short): (Vec<_>, Vec<_>) = d
         .iter()
-        .partition(|(r, _)| after_gap.contains(&&r.train.as_ref().unwrap().0));
+        .partition(|(r, _)| after_gap.contains(&r.train_id.as_ref().unwrap()));
     let (m_long, m_short) = (
         mean(long.iter().map(|x| x.1)),
         mean(short.iter().map(|x| x.1)),
@@ -794,9 +753,14 @@ fn temperature_consumption_follows_air_temperature() {
 #[test]
 fn speed_transfer_separates_fast_and_slow_trains() {
     let (on, d) = deltas("[effects.speed_transfer]\nn = 2.0\n");
+    let speed: HashMap<&String, f64> = on
+        .trains
+        .iter()
+        .map(|t| (&t.train_id, t.speed_mps))
+        .collect();
     let (fast, slow): (Vec<_>, Vec<_>) = d
         .iter()
-        .partition(|(r, _)| on.speed[&r.train.as_ref().unwrap().0] > 20.0);
+        .partition(|(r, _)| speed[r.train_id.as_ref().unwrap()] > 20.0);
     let (m_fast, m_slow) = (
         mean(fast.iter().map(|x| x.1)),
         mean(slow.iter().map(|x| x.1)),
@@ -830,12 +794,18 @@ fn bogie_bands_change_the_high_rail_only_and_split_leading_from_trailing() {
     let high: Vec<&(Row, f64)> = d.iter().filter(|(r, _)| r.rail == "high").collect();
     let lead = mean(
         high.iter()
-            .filter(|(r, _)| bogies[r.train.as_ref().unwrap()] == BogiePosition::Leading)
+            .filter(|(r, _)| {
+                bogies[&(r.train_id.clone().unwrap(), r.axle_index.unwrap_or(0))]
+                    == BogiePosition::Leading
+            })
             .map(|x| x.1),
     );
     let trail = mean(
         high.iter()
-            .filter(|(r, _)| bogies[r.train.as_ref().unwrap()] == BogiePosition::Trailing)
+            .filter(|(r, _)| {
+                bogies[&(r.train_id.clone().unwrap(), r.axle_index.unwrap_or(0))]
+                    == BogiePosition::Trailing
+            })
             .map(|x| x.1),
     );
     eprintln!("bogie_bands: mean delta on high, leading {lead:.4}, trailing {trail:.4}");

@@ -5,13 +5,13 @@
 
 use proptest::prelude::*;
 
-use tortwin::config::ModelConfig;
-use tortwin::engine::{Engine, EngineOptions};
-use tortwin::recording::{
+use tortwin_engine::sink::{FieldSnapshot, Sink};
+use tortwin_engine::{Engine, EngineOptions};
+use tortwin_model::config::ModelConfig;
+use tortwin_recording::{
     Applicator, Axle, BogiePosition, Creepage, Direction, Event, EventKind, Passage, Pulse,
     Section, Weather,
 };
-use tortwin::sink::{FieldSnapshot, Sink};
 
 #[derive(Debug, Clone)]
 struct TrainSpec {
@@ -163,7 +163,13 @@ struct Check {
 }
 
 impl Sink for Check {
-    fn field(&mut self, f: &FieldSnapshot<'_>) -> anyhow::Result<()> {
+    fn field(&mut self, f: &FieldSnapshot<'_>) -> tortwin_engine::sink::SinkResult {
+        Ok(self.check(f)?)
+    }
+}
+
+impl Check {
+    fn check(&self, f: &FieldSnapshot<'_>) -> anyhow::Result<()> {
         for i in 0..f.d_m.len() {
             anyhow::ensure!(
                 (self.mu_c..=self.mu_d).contains(&f.mu[i]),

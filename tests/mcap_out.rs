@@ -3,17 +3,18 @@
 //! Python checker (tests/python/check_mcap.py, which needs
 //! `pip install mcap jsonschema`; a missing package fails the test).
 
+mod common;
+
 use std::collections::BTreeMap;
 use std::path::Path;
-use std::process::Command;
 
 use serde_json::Value;
-use tortwin::recording::{Applicator, Direction, Quantity, Section, Site};
-use tortwin::sink::mcap_out::{McapSink, NonFiniteValue};
-use tortwin::sink::{
+use tortwin_engine::sink::{
     FieldSnapshot, MeasurementOutput, PulseEvent, RunSummary, SectionInfo, Sink, SnapshotKind,
     TrackInfo, TrainEvent,
 };
+use tortwin_outputs::mcap_out::{McapSink, NonFiniteValue};
+use tortwin_recording::{Applicator, Direction, Quantity, Section, Site};
 
 const ORIGIN_NS: u64 = 1_700_000_000_000_000_000;
 const TRAIN_NS: u64 = ORIGIN_NS + 60_000_000_000;
@@ -134,7 +135,7 @@ fn snapshot<'a>(
 
 /// The synthetic run: begin, two pulses, a train, three measurements (one
 /// `rail_mu`), two train snapshots and a wheel snapshot.
-fn write_synthetic(sink: &mut McapSink) -> anyhow::Result<()> {
+fn write_synthetic(sink: &mut McapSink) -> tortwin_engine::sink::SinkResult {
     let section = section();
     let grid = grid_d_m();
     let tracks = tracks();
@@ -203,17 +204,9 @@ fn files_in(dir: &Path) -> Vec<String> {
 /// Runs tests/python/check_mcap.py; fails (never skips) without python3 or
 /// its packages.
 fn run_checker(path: &Path, extra: &[&str]) -> std::process::Output {
-    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/python/check_mcap.py");
-    let output = Command::new("python3")
-        .arg(&script)
-        .arg(path)
-        .args(extra)
-        .output()
-        .unwrap_or_else(|e| {
-            panic!(
-                "cannot run python3 ({e}); install Python 3 and run `pip install mcap jsonschema`"
-            )
-        });
+    let mut args = vec![path.as_os_str()];
+    args.extend(extra.iter().map(std::ffi::OsStr::new));
+    let output = common::python("check_mcap.py", &args);
     assert_ne!(
         output.status.code(),
         Some(3),

@@ -11,9 +11,9 @@ use std::path::{Path, PathBuf};
 use mcap::records::MessageHeader;
 use proptest::prelude::*;
 use serde_json::{json, Value};
-use tortwin::error::InputError;
-use tortwin::recording::reader::{ReaderContext, RecordingReader};
-use tortwin::recording::{BogiePosition, Direction, Event, EventKind, Quantity};
+use tortwin_recording::error::InputError;
+use tortwin_recording::reader::{ReaderContext, RecordingReader};
+use tortwin_recording::{BogiePosition, Direction, Event, EventKind, Quantity};
 
 const T0: u64 = 1_712_534_400_000_000_000;
 const SEC: u64 = 1_000_000_000;

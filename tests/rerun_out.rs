@@ -6,17 +6,18 @@
 //! without them the test fails and says so. Set `TORTWIN_KEEP_RRD=FILE` to
 //! keep a copy of the recording for a look in the viewer (`rerun FILE`).
 
+mod common;
+
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
-use std::process::Command;
 
 use serde_json::json;
-use tortwin::recording::{Applicator, Direction, Quantity, Section, Site};
-use tortwin::sink::rerun_out::{RerunOptions, RerunSink, SERIES_CHUNK_ROWS};
-use tortwin::sink::{
+use tortwin_engine::sink::{
     FieldSnapshot, MeasurementOutput, PulseEvent, RunSummary, SectionInfo, Sink, SnapshotKind,
     TrackInfo, TrainEvent,
 };
+use tortwin_outputs::rerun_out::{RerunOptions, RerunSink, SERIES_CHUNK_ROWS};
+use tortwin_recording::{Applicator, Direction, Quantity, Section, Site};
 
 const GRID_POINTS: usize = 201;
 const SPACING_M: f64 = 0.5;
@@ -95,7 +96,7 @@ type Logged = BTreeMap<String, Vec<(u64, f64)>>;
 /// pulse before each, a measurement after each, and wheel snapshots for the
 /// second train. Returns the pulses and measurements as the rrd must hold
 /// them (pulses in g).
-fn feed(sink: &mut dyn Sink, trains: u64) -> anyhow::Result<Logged> {
+fn feed(sink: &mut dyn Sink, trains: u64) -> Result<Logged, tortwin_engine::sink::SinkError> {
     let mut logged = Logged::new();
     let section = section();
     let tracks = tracks();
@@ -206,27 +207,11 @@ fn series_json(logged: &Logged) -> serde_json::Value {
         .into()
 }
 
-fn python() -> String {
-    std::env::var("TORTWIN_PYTHON").unwrap_or_else(|_| "python3".to_owned())
-}
-
 /// Runs the checker on `rrd` with `expected`; panics with its output on failure.
 fn check_rrd(rrd: &Path, expected: serde_json::Value, dir: &Path, name: &str) {
     let expected_path = dir.join(format!("{name}.json"));
     std::fs::write(&expected_path, expected.to_string()).expect("writing expected values");
-    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/python/check_rrd.py");
-    let python = python();
-    let output = Command::new(&python)
-        .arg(&script)
-        .arg(rrd)
-        .arg(&expected_path)
-        .output()
-        .unwrap_or_else(|err| {
-            panic!(
-                "cannot run `{python}` ({err}): the rerun sink test needs Python 3 with \
-                 `pip install \"rerun-sdk[datafusion]==0.36.3\"` (or set TORTWIN_PYTHON)"
-            )
-        });
+    let output = common::python("check_rrd.py", &[rrd, &expected_path]);
     let stdout = String::from_utf8_lossy(&output.stdout);
     let stderr = String::from_utf8_lossy(&output.stderr);
     assert!(

@@ -8,13 +8,13 @@ use std::collections::BTreeMap;
 use std::io::BufWriter;
 use std::path::{Path, PathBuf};
 
-use tortwin::app::replay::{replay, ReplayArgs};
-use tortwin::sink::{FieldSnapshot, MeasurementOutput, Sink, TrainEvent};
+use tortwin_studies::jobs::replay::{replay, ReplayArgs};
+
+mod common;
+use common::Recorder;
 
 fn reference(name: &str) -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("tests/reference/recordings")
-        .join(name)
+    common::reference_recording(name)
 }
 
 fn args(recording: &Path) -> ReplayArgs {
@@ -46,35 +46,51 @@ fn bits(v: &[f64]) -> Vec<u64> {
     v.iter().map(|x| x.to_bits()).collect()
 }
 
-impl Sink for Outputs {
-    fn train(&mut self, t: &TrainEvent<'_>) -> anyhow::Result<()> {
-        self.trains.push((t.log_time_ns, t.end_ns));
-        Ok(())
+impl Outputs {
+    /// What `replay` published, as bits (without the message indices, which
+    /// differ between a recording and its parts).
+    fn of(r: &Recorder) -> Self {
+        Self {
+            trains: r.trains.iter().map(|t| (t.log_time_ns, t.end_ns)).collect(),
+            measurements: r
+                .measurements
+                .iter()
+                .map(|m| {
+                    (
+                        m.log_time_ns,
+                        m.site.clone(),
+                        m.rail.clone(),
+                        m.quantity.as_str().into(),
+                        m.measured.to_bits(),
+                        m.simulated.to_bits(),
+                    )
+                })
+                .collect(),
+            fields: r
+                .fields
+                .iter()
+                .map(|f| {
+                    (
+                        f.log_time_ns,
+                        f.train_id.clone(),
+                        f.track.clone(),
+                        f.wheel_pass,
+                        bits(&f.mu),
+                        bits(&f.adhesion),
+                        bits(&f.rail_mass_kg),
+                        bits(&f.wheel_mass_kg),
+                    )
+                })
+                .collect(),
+        }
     }
-    fn measurement(&mut self, m: &MeasurementOutput<'_>) -> anyhow::Result<()> {
-        self.measurements.push((
-            m.log_time_ns,
-            m.site_id.into(),
-            m.rail_name.into(),
-            m.quantity.as_str().into(),
-            m.measured.to_bits(),
-            m.simulated.to_bits(),
-        ));
-        Ok(())
-    }
-    fn field(&mut self, f: &FieldSnapshot<'_>) -> anyhow::Result<()> {
-        self.fields.push((
-            f.log_time_ns,
-            f.train_id.into(),
-            format!("{}/{}", f.rail_name, f.band),
-            f.wheel_pass,
-            bits(f.mu),
-            bits(f.adhesion),
-            bits(f.rail_mass_kg),
-            bits(f.wheel_mass_kg),
-        ));
-        Ok(())
-    }
+}
+
+/// Replays with `a`, recording everything it publishes.
+fn replay_outputs(a: &ReplayArgs) -> Outputs {
+    let mut r = Recorder::with_fields();
+    replay(a, &mut [&mut r]).unwrap();
+    Outputs::of(&r)
 }
 
 /// Copies the messages of `src` for which `keep(topic, log_time)` holds into
@@ -167,7 +183,6 @@ fn replaying_in_two_parts_gives_the_same_bits_with_generic_terms() {
 
 fn split_and_compare(config: Option<&str>) {
     let whole_path = reference("curve_2day.mcap");
-    let mut whole = Outputs::default();
     let dir = tempfile::tempdir().unwrap();
     let config_path = config.map(|text| {
         let p = dir.path().join("effects.toml");
@@ -180,7 +195,7 @@ fn split_and_compare(config: Option<&str>) {
     };
     let mut a = args(&whole_path);
     a.state_out = Some(dir.path().join("whole.state.json"));
-    replay(&a, &mut [&mut whole]).unwrap();
+    let whole = replay_outputs(&a);
 
     // Cut in the longest gap between two trains (no train in the section),
     // and in the gap nearest to the middle of the recording's rain event,
@@ -210,15 +225,13 @@ fn split_and_compare(config: Option<&str>) {
         rewrite(&whole_path, &part2, Some(cut), |_, t| t >= cut);
 
         let state = dir.path().join("part1.state.json");
-        let mut first = Outputs::default();
         let mut a1 = args(&part1);
         a1.state_out = Some(state.clone());
-        replay(&a1, &mut [&mut first]).unwrap();
-        let mut second = Outputs::default();
+        let first = replay_outputs(&a1);
         let mut a2 = args(&part2);
         a2.state_in = Some(state);
         a2.state_out = Some(dir.path().join("part2.state.json"));
-        replay(&a2, &mut [&mut second]).unwrap();
+        let second = replay_outputs(&a2);
 
         assert!(!first.measurements.is_empty() && !second.measurements.is_empty());
         let mut joined = first;
@@ -245,7 +258,9 @@ fn split_and_compare(config: Option<&str>) {
 fn replay_err(a: &ReplayArgs) -> String {
     let err = replay(a, &mut []).unwrap_err();
     assert!(
-        tortwin::error::is_input_error(&err),
+        err.chain().any(|e| e
+            .downcast_ref::<tortwin_recording::error::InputError>()
+            .is_some()),
         "not an input error: {err:#}"
     );
     format!("{err:#}")

@@ -6,25 +6,27 @@
 //! outputs read back (the rerun recording with the Python rerun reader) and
 //! bad input exits 2.
 
+mod common;
+
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::sync::Arc;
 
-use tortwin::config::ModelConfig;
-use tortwin::engine::{Engine, EngineOptions};
-use tortwin::paper::WaysideScenario;
-use tortwin::recording::{Direction, EventKind};
-use tortwin::sink::{FieldSnapshot, Sink, SnapshotKind};
-use tortwin::strategy::search::{self, Evaluated, Method, Searcher, Space, SpaceConfig, Values};
-use tortwin::strategy::{self, evaluate, Plan, Strategy, Target, Traffic};
+use tortwin_engine::sink::{FieldSnapshot, Sink, SnapshotKind};
+use tortwin_engine::{Engine, EngineOptions};
+use tortwin_model::config::ModelConfig;
+use tortwin_recording::{Direction, EventKind};
+use tortwin_studies::paper::WaysideScenario;
+use tortwin_studies::strategy::search::{
+    self, Evaluated, Method, Searcher, Space, SpaceConfig, Values,
+};
+use tortwin_studies::strategy::{self, evaluate, Plan, Strategy, Target, Traffic};
 
 fn demo() -> Traffic {
-    Traffic::read(Path::new(tortwin::app::DEFAULT_RECORDING)).expect("the bundled recording")
+    Traffic::read(&tortwin_studies::jobs::default_recording()).expect("the bundled recording")
 }
 
-fn tortwin() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_tortwin"))
-}
+use common::tortwin;
 
 /// Runs the command, which must succeed.
 fn run_ok(cmd: &mut Command) -> std::process::Output {
@@ -137,12 +139,15 @@ struct SnapshotCount {
 }
 
 impl Sink for SnapshotCount {
-    fn begin(&mut self, info: &tortwin::sink::SectionInfo<'_>) -> anyhow::Result<()> {
+    fn begin(
+        &mut self,
+        info: &tortwin_engine::sink::SectionInfo<'_>,
+    ) -> tortwin_engine::sink::SinkResult {
         self.rail_of_track = info.tracks.iter().map(|t| t.rail).collect();
         self.rails = vec![(0, 0, 0); info.section.rails.len()];
         Ok(())
     }
-    fn field(&mut self, f: &FieldSnapshot<'_>) -> anyhow::Result<()> {
+    fn field(&mut self, f: &FieldSnapshot<'_>) -> tortwin_engine::sink::SinkResult {
         if f.kind == SnapshotKind::Wheel {
             let r = &mut self.rails[self.rail_of_track[f.track]];
             for &mu in f.mu {
@@ -246,7 +251,7 @@ fn the_axle_counter_fires_before_every_kth_axle() {
         rails: vec![0, 1],
     };
     let section = strategy.section(&traffic.section);
-    let grid = tortwin::engine::Grid::new(section.length_m, section.nominal_wheel_diameter_m);
+    let grid = tortwin_engine::Grid::new(section.length_m, section.nominal_wheel_diameter_m);
     let mut pulses = Vec::new();
     strategy::pulse_events(
         &section,
@@ -319,7 +324,7 @@ fn small_space() -> SpaceConfig {
 /// The rule of the recommendation, written again: admissible, coverage
 /// within the tolerance of the best admissible, least product.
 fn best_by_hand<'a>(
-    all: &'a [(Strategy, tortwin::strategy::Figures)],
+    all: &'a [(Strategy, tortwin_studies::strategy::Figures)],
     target: &Target,
 ) -> &'a Strategy {
     let best = all
@@ -496,7 +501,9 @@ fn the_command_writes_a_result_that_reads_back() {
     let space = write_space(dir.path(), SMALL_SPACE);
     let run = run_ok(
         tortwin()
-            .args(["strategy", tortwin::app::DEFAULT_RECORDING, "--out"])
+            .arg("strategy")
+            .arg(tortwin_studies::jobs::default_recording())
+            .arg("--out")
             .arg(&out)
             .arg("--space")
             .arg(&space),
@@ -552,7 +559,7 @@ fn the_command_writes_a_result_that_reads_back() {
     };
     struct Last(Option<(u64, Vec<f64>, Vec<f64>)>);
     impl Sink for Last {
-        fn field(&mut self, f: &FieldSnapshot<'_>) -> anyhow::Result<()> {
+        fn field(&mut self, f: &FieldSnapshot<'_>) -> tortwin_engine::sink::SinkResult {
             if f.kind == SnapshotKind::Train && f.rail_name == "high" {
                 self.0 = Some((f.wheel_pass, f.mu.to_vec(), f.d_m.to_vec()));
             }
@@ -575,12 +582,7 @@ fn the_command_writes_a_result_that_reads_back() {
     });
     let expect_path = dir.path().join("expected.json");
     std::fs::write(&expect_path, expect.to_string()).unwrap();
-    let check = Command::new("python3")
-        .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/python/check_rrd.py"))
-        .arg(out.join("recommended.rrd"))
-        .arg(&expect_path)
-        .output()
-        .expect("python3 with tests/python/requirements.txt");
+    let check = common::python("check_rrd.py", &[out.join("recommended.rrd"), expect_path]);
     assert!(
         check.status.success(),
         "{}{}",
@@ -625,7 +627,7 @@ fn synthetic_traffic_from_synth_parameters() {
 fn bad_input_exits_2_naming_the_problem() {
     let dir = tempfile::tempdir().unwrap();
     let truncated = dir.path().join("truncated.mcap");
-    let bytes = std::fs::read(tortwin::app::DEFAULT_RECORDING).unwrap();
+    let bytes = std::fs::read(tortwin_studies::jobs::default_recording()).unwrap();
     std::fs::write(&truncated, &bytes[..bytes.len() / 2]).unwrap();
     let cases: Vec<(&str, Option<&Path>, &str)> = vec![
         ("[space]\nrails = [[\"middle\"]]\n", None, "space.rails"),
@@ -653,10 +655,8 @@ fn bad_input_exits_2_naming_the_problem() {
     for (k, (text, recording, expect)) in cases.into_iter().enumerate() {
         let out = dir.path().join(format!("out{k}"));
         let space = write_space(dir.path(), text);
-        let recording = recording.map_or_else(
-            || PathBuf::from(tortwin::app::DEFAULT_RECORDING),
-            Path::to_path_buf,
-        );
+        let recording =
+            recording.map_or_else(tortwin_studies::jobs::default_recording, Path::to_path_buf);
         let run = tortwin()
             .arg("strategy")
             .arg(&recording)

@@ -4,18 +4,16 @@
 //! truth model's values; its key tells the truth about the file.
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::Output;
 
-use clap::Parser;
-use tortwin::app::{Cli, Command as TortwinCommand};
-use tortwin::sink::{MeasurementOutput, RunSummary, Sink};
+use tortwin_engine::sink::RunSummary;
+use tortwin_studies::jobs::replay::{replay as replay_job, ReplayArgs};
 
 /// A small day: quick to write and to replay.
 const SMALL: &[&str] = &["--trains-per-day", "10"];
 
-fn tortwin() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_tortwin"))
-}
+mod common;
+use common::{tortwin, MeasurementRow, Recorder};
 
 fn run_synth(out: &Path, args: &[&str]) -> Output {
     tortwin()
@@ -42,48 +40,16 @@ fn synth(dir: &Path, name: &str, args: &[&str]) -> (PathBuf, serde_json::Value) 
     (out, key)
 }
 
-#[derive(Debug, Clone)]
-struct Row {
-    index_in_file: u64,
-    quantity: String,
-    measured: f64,
-    simulated: f64,
-}
-
-#[derive(Default)]
-struct Collect(Vec<Row>);
-
-impl Sink for Collect {
-    fn measurement(&mut self, m: &MeasurementOutput<'_>) -> anyhow::Result<()> {
-        self.0.push(Row {
-            index_in_file: m.index_in_file,
-            quantity: m.quantity.as_str().to_string(),
-            measured: m.measured,
-            simulated: m.simulated,
-        });
-        Ok(())
-    }
-}
+type Row = MeasurementRow;
 
 /// `tortwin replay REC [--config CFG] -q` through the library, with a sink
 /// that collects every measurement.
 fn replay(recording: &Path, config: Option<&Path>) -> (RunSummary, Vec<Row>) {
-    let mut argv = vec![
-        "tortwin".to_string(),
-        "replay".into(),
-        recording.display().to_string(),
-        "-q".into(),
-    ];
-    if let Some(c) = config {
-        argv.push("--config".into());
-        argv.push(c.display().to_string());
-    }
-    let TortwinCommand::Replay(args) = Cli::parse_from(argv).command else {
-        unreachable!("parsed a replay command line");
-    };
-    let mut rows = Collect::default();
-    let summary = tortwin::app::replay::replay(&args, &mut [&mut rows]).unwrap();
-    (summary, rows.0)
+    let mut args = ReplayArgs::new(recording);
+    args.config = config.map(Path::to_path_buf);
+    let mut rows = Recorder::default();
+    let summary = replay_job(&args, &mut [&mut rows]).unwrap();
+    (summary, rows.measurements)
 }
 
 struct Message {
@@ -190,7 +156,10 @@ fn noise_free_measurements_are_the_replayed_truth() {
     let (_, baseline) = replay(&rec, None);
     assert_eq!(baseline.len(), rows.len());
     for quantity in ["mu", "adhesion", "rail_mu"] {
-        let of: Vec<&Row> = baseline.iter().filter(|r| r.quantity == quantity).collect();
+        let of: Vec<&Row> = baseline
+            .iter()
+            .filter(|r| r.quantity.as_str() == quantity)
+            .collect();
         let k = &key["rmse_baseline_vs_truth_by_quantity"][quantity];
         assert_eq!(of.len() as u64, k["n"].as_u64().unwrap(), "{quantity}");
         assert!(!of.is_empty(), "{quantity}");
@@ -372,19 +341,16 @@ fn the_file_is_what_the_format_and_the_key_say() {
     assert_eq!(key["rmse_baseline_vs_truth"], 0.0);
 
     // The independent readers: every message against its channel's schema.
-    let script = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/python/check_mcap.py");
-    let mut check = Command::new("python3");
-    check.arg(script).arg(&rec);
+    let mut check_args = vec![rec.clone().into_os_string()];
     for (topic, n) in [
         ("/section", 1),
         ("/train/passage", 10),
         ("/environment/weather", 144),
     ] {
-        check.arg("--expect-count").arg(format!("{topic}={n}"));
+        check_args.push("--expect-count".into());
+        check_args.push(format!("{topic}={n}").into());
     }
-    let check = check.output().unwrap_or_else(|e| {
-        panic!("cannot run python3 ({e}); pip install -r tests/python/requirements.txt")
-    });
+    let check = common::python("check_mcap.py", &check_args);
     assert!(
         check.status.success(),
         "{}\n{}",

@@ -1,6 +1,27 @@
-//! Scaffolding shared by the integration tests that drive the binary.
+//! Scaffolding shared by the integration tests: where the reference data
+//! is, the binary, one Python runner and one sink that records what a run
+//! publishes. Each test file uses some of it.
+#![allow(dead_code)]
 
+use std::ffi::OsStr;
+use std::path::PathBuf;
 use std::process::{Command, Output};
+
+use tortwin_engine::sink::{FieldSnapshot, MeasurementOutput, Sink, SnapshotKind, TrainEvent};
+use tortwin_model::Quantity;
+
+/// `tests/reference/NAME`: values and recordings from the independent
+/// implementation (tests/reference/README.md says where each comes from).
+pub fn reference(name: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/reference")
+        .join(name)
+}
+
+/// `tests/reference/recordings/NAME`.
+pub fn reference_recording(name: &str) -> PathBuf {
+    reference("recordings").join(name)
+}
 
 /// The `tortwin` binary of this build.
 pub fn tortwin() -> Command {
@@ -16,4 +37,142 @@ pub fn check(o: &Output, what: &str) {
         String::from_utf8_lossy(&o.stdout),
         String::from_utf8_lossy(&o.stderr)
     );
+}
+
+/// Runs `tests/python/SCRIPT` with `args` under `$TORTWIN_PYTHON` (default
+/// `python3`): the independent readers, whose packages .ci/run installs from
+/// tests/python/requirements.txt. Fails, never skips, without them.
+pub fn python<S: AsRef<OsStr>>(script: &str, args: &[S]) -> Output {
+    let python = std::env::var("TORTWIN_PYTHON").unwrap_or_else(|_| "python3".to_owned());
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/python")
+        .join(script);
+    Command::new(&python)
+        .arg(&path)
+        .args(args)
+        .output()
+        .unwrap_or_else(|e| {
+            panic!(
+                "cannot run {python} {} ({e}); install Python 3 and \
+                 pip install -r tests/python/requirements.txt",
+                path.display()
+            )
+        })
+}
+
+/// One measurement as the engine published it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MeasurementRow {
+    pub index_in_file: u64,
+    pub log_time_ns: u64,
+    pub site: String,
+    pub rail: String,
+    pub quantity: Quantity,
+    pub train_id: Option<String>,
+    pub axle_index: Option<usize>,
+    pub measured: f64,
+    pub simulated: f64,
+}
+
+/// One train as the engine published it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TrainRow {
+    pub log_time_ns: u64,
+    pub end_ns: u64,
+    pub train_id: String,
+    pub speed_mps: f64,
+}
+
+/// One field snapshot, owned.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FieldRow {
+    pub kind: SnapshotKind,
+    pub log_time_ns: u64,
+    pub train_id: String,
+    /// `rail/band`.
+    pub track: String,
+    pub wheel_pass: u64,
+    pub mu: Vec<f64>,
+    pub adhesion: Vec<f64>,
+    pub rail_mass_kg: Vec<f64>,
+    pub wheel_mass_kg: Vec<f64>,
+}
+
+/// A sink that records every measurement and train, and the field
+/// snapshots when made with [`Recorder::with_fields`].
+#[derive(Debug, Default)]
+pub struct Recorder {
+    pub measurements: Vec<MeasurementRow>,
+    pub trains: Vec<TrainRow>,
+    pub fields: Vec<FieldRow>,
+    keep_fields: bool,
+}
+
+impl Recorder {
+    pub fn with_fields() -> Self {
+        Self {
+            keep_fields: true,
+            ..Self::default()
+        }
+    }
+
+    /// The simulated value of every measurement, in publication order.
+    pub fn simulated(&self) -> Vec<f64> {
+        self.measurements.iter().map(|m| m.simulated).collect()
+    }
+
+    /// Root mean square of measured − simulated.
+    pub fn rmse(&self) -> f64 {
+        let n = self.measurements.len() as f64;
+        let sq: f64 = self
+            .measurements
+            .iter()
+            .map(|m| (m.measured - m.simulated).powi(2))
+            .sum();
+        (sq / n).sqrt()
+    }
+}
+
+impl Sink for Recorder {
+    fn train(&mut self, t: &TrainEvent<'_>) -> tortwin_engine::sink::SinkResult {
+        self.trains.push(TrainRow {
+            log_time_ns: t.log_time_ns,
+            end_ns: t.end_ns,
+            train_id: t.train_id.to_string(),
+            speed_mps: t.speed_mps,
+        });
+        Ok(())
+    }
+
+    fn measurement(&mut self, m: &MeasurementOutput<'_>) -> tortwin_engine::sink::SinkResult {
+        self.measurements.push(MeasurementRow {
+            index_in_file: m.index_in_file,
+            log_time_ns: m.log_time_ns,
+            site: m.site_id.to_string(),
+            rail: m.rail_name.to_string(),
+            quantity: m.quantity,
+            train_id: m.train_id.map(str::to_string),
+            axle_index: m.axle_index,
+            measured: m.measured,
+            simulated: m.simulated,
+        });
+        Ok(())
+    }
+
+    fn field(&mut self, f: &FieldSnapshot<'_>) -> tortwin_engine::sink::SinkResult {
+        if self.keep_fields {
+            self.fields.push(FieldRow {
+                kind: f.kind,
+                log_time_ns: f.log_time_ns,
+                train_id: f.train_id.to_string(),
+                track: format!("{}/{}", f.rail_name, f.band),
+                wheel_pass: f.wheel_pass,
+                mu: f.mu.to_vec(),
+                adhesion: f.adhesion.to_vec(),
+                rail_mass_kg: f.rail_mass_kg.to_vec(),
+                wheel_mass_kg: f.wheel_mass_kg.to_vec(),
+            });
+        }
+        Ok(())
+    }
 }

@@ -1,0 +1,277 @@
+//! The generic terms of a configuration, compiled for one section: scope
+//! names resolved to indices, a time step's threshold turned into time_s
+//! from the engine's origin. The engine asks this table for the product of
+//! the terms on one quantity at one contact, pulse or reading; with no term
+//! on a quantity the answer is exactly 1 (effects.md: a term whose g is 1
+//! changes nothing, bit for bit).
+
+use tortwin_model::config::generic::{err, TermError};
+use tortwin_model::config::{GenericTerm, TermEffect};
+use tortwin_model::error::ConfigError;
+use tortwin_model::generic::{ActsOn, Driver, Form};
+use tortwin_recording::{Quantity, Section, Weather};
+
+/// When a term is asked for its factor: the time, the weather in effect
+/// and, at a contact, the wheel's drivers.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct When<'a> {
+    pub time_s: f64,
+    pub weather: &'a Weather,
+    pub wheel: Option<&'a WheelDrivers>,
+}
+
+/// A name in a scope that the section does not have: matches nothing (the
+/// commands refuse such a configuration before the engine sees it).
+const UNKNOWN: usize = usize::MAX;
+
+#[derive(Debug, Clone, Copy)]
+struct Compiled {
+    driver: Driver,
+    form: Form,
+    x_ref: f64,
+    offset: f64,
+    applicator: Option<usize>,
+    rail: Option<usize>,
+    site: Option<usize>,
+    quantity: Option<Quantity>,
+}
+
+/// What a wheel brings to a contact: the wheel drivers.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct WheelDrivers {
+    pub speed_mps: f64,
+    pub wheel_load_kn: f64,
+    /// `sqrt(cx² + cy²)`.
+    pub creepage: f64,
+}
+
+/// Which terms a product takes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Which {
+    /// Every term.
+    All,
+    /// Terms driven by the wheel (constant along its path).
+    Wheel,
+    /// Terms driven by time or weather (they change from point to point).
+    Event,
+}
+
+/// The compiled terms, per quantity they act on.
+#[derive(Debug, Clone, Default)]
+pub(crate) struct GenericSet {
+    by_acts_on: [Vec<Compiled>; 6],
+}
+
+impl GenericSet {
+    pub fn compile(terms: &[GenericTerm], section: &Section, origin_ns: i64) -> Self {
+        let mut set = Self::default();
+        fn index<'a>(
+            name: &Option<String>,
+            mut names: impl Iterator<Item = &'a String>,
+        ) -> Option<usize> {
+            name.as_ref()
+                .map(|n| names.position(|x| x == n).unwrap_or(UNKNOWN))
+        }
+        for term in terms {
+            let (driver, form, offset) = match term.effect {
+                TermEffect::Factor { driver, form } => (driver, form, 0.0),
+                TermEffect::Offset { offset } => {
+                    (Driver::Time, Form::Step { x0: 0.0, f: 1.0 }, offset)
+                }
+            };
+            // A time step's threshold in the engine's time_s, through the
+            // same integer difference as every event's time (model.md).
+            let form = match (driver, form) {
+                (Driver::Time, Form::Step { x0, f }) => {
+                    let t0_ns = (x0 * 1e9).round() as i64;
+                    Form::Step {
+                        x0: t0_ns.wrapping_sub(origin_ns) as f64 * 1e-9,
+                        f,
+                    }
+                }
+                (_, form) => form,
+            };
+            set.by_acts_on[term.acts_on.index()].push(Compiled {
+                driver,
+                form,
+                x_ref: driver.x_ref().unwrap_or(0.0),
+                offset,
+                applicator: index(&term.applicator, section.applicators.iter().map(|a| &a.id)),
+                rail: index(&term.rail, section.rails.iter()),
+                site: index(&term.site, section.sites.iter().map(|s| &s.id)),
+                quantity: term.quantity,
+            });
+        }
+        set
+    }
+
+    /// Whether any term acts on `acts_on`.
+    pub fn any(&self, acts_on: ActsOn) -> bool {
+        !self.by_acts_on[acts_on.index()].is_empty()
+    }
+
+    /// Whether a term on `acts_on` for `rail` changes along a wheel's path
+    /// (driven by time or weather).
+    pub fn varies(&self, acts_on: ActsOn, rail: usize) -> bool {
+        self.by_acts_on[acts_on.index()]
+            .iter()
+            .any(|t| t.rail.is_none_or(|r| r == rail) && !t.driver.is_wheel())
+    }
+
+    /// The product of the terms on `acts_on` that `which` selects and that
+    /// apply to `rail` (and `applicator`, for pulses), `at` a time with its
+    /// weather and, at a contact, the wheel's drivers. A wheel term has no
+    /// value without a wheel: it does not act (g = 1).
+    #[inline]
+    pub fn factor(
+        &self,
+        acts_on: ActsOn,
+        which: Which,
+        applicator: Option<usize>,
+        rail: usize,
+        at: When<'_>,
+    ) -> f64 {
+        let When {
+            time_s,
+            weather,
+            wheel,
+        } = at;
+        let mut g = 1.0;
+        for t in &self.by_acts_on[acts_on.index()] {
+            if t.rail.is_some_and(|r| r != rail)
+                || t.applicator.is_some_and(|a| Some(a) != applicator)
+            {
+                continue;
+            }
+            let x = match (t.driver, which) {
+                (d, Which::Wheel) if !d.is_wheel() => continue,
+                (d, Which::Event) if d.is_wheel() => continue,
+                (Driver::Time, _) => time_s,
+                (Driver::AirTemperatureC, _) => weather.air_temperature_c,
+                (Driver::RelativeHumidity, _) => weather.relative_humidity,
+                (Driver::PrecipitationMmH, _) => weather.precipitation_mm_h,
+                (Driver::SpeedMps, _) => match wheel {
+                    Some(w) => w.speed_mps,
+                    None => continue,
+                },
+                (Driver::WheelLoadKn, _) => match wheel {
+                    Some(w) => w.wheel_load_kn,
+                    None => continue,
+                },
+                (Driver::Creepage, _) => match wheel {
+                    Some(w) => w.creepage,
+                    None => continue,
+                },
+            };
+            g *= t.form.g(x, t.x_ref);
+        }
+        g
+    }
+
+    /// muD and muC of eq. (4) with the friction terms for `rail` at this
+    /// contact or reading.
+    #[inline]
+    pub fn friction_levels(
+        &self,
+        mu_d: f64,
+        mu_c: f64,
+        rail: usize,
+        time_s: f64,
+        weather: &Weather,
+        wheel: Option<&WheelDrivers>,
+    ) -> (f64, f64) {
+        let dry = ActsOn::FrictionDry;
+        let boundary = ActsOn::FrictionBoundary;
+        let at = When {
+            time_s,
+            weather,
+            wheel,
+        };
+        let gd = self.factor(dry, Which::All, None, rail, at);
+        let gc = self.factor(boundary, Which::All, None, rail, at);
+        (mu_d * gd, mu_c * gc)
+    }
+
+    /// Whether any friction term exists (the field and the site contacts
+    /// then carry their own muD, muC).
+    pub fn any_friction(&self) -> bool {
+        self.any(ActsOn::FrictionDry) || self.any(ActsOn::FrictionBoundary)
+    }
+
+    /// The simulated value of a measurement with the `measurement` terms'
+    /// offsets added, in the order of the terms.
+    #[inline]
+    pub fn measured(&self, value: f64, site: usize, rail: usize, quantity: Quantity) -> f64 {
+        let mut v = value;
+        for t in &self.by_acts_on[ActsOn::Measurement.index()] {
+            if t.site.is_none_or(|s| s == site)
+                && t.rail.is_none_or(|r| r == rail)
+                && t.quantity.is_none_or(|q| q == quantity)
+            {
+                v += t.offset;
+            }
+        }
+        v
+    }
+}
+
+/// Checks the generic terms of `terms` against `section`; the error names
+/// the term (its index among the `[[effects.generic]]` tables) and the key.
+pub fn check_terms_against(
+    terms: &[GenericTerm],
+    section: &Section,
+    source_name: &str,
+) -> Result<(), ConfigError> {
+    for (k, term) in terms.iter().enumerate() {
+        check_section(term, section).map_err(|(key, message)| ConfigError {
+            source_name: source_name.into(),
+            key: format!("effects.generic[{k}].{key}"),
+            message: format!("({} term) {message}", term.acts_on.name()),
+        })?;
+    }
+    Ok(())
+}
+
+/// Every name in the scope exists in `section` (an unknown applicator,
+/// rail or site is a configuration error naming the term and key).
+fn check_section(term: &GenericTerm, section: &Section) -> Result<(), TermError> {
+    if let Some(a) = &term.applicator {
+        if !section.applicators.iter().any(|x| &x.id == a) {
+            let ids: Vec<&str> = section.applicators.iter().map(|x| x.id.as_str()).collect();
+            return Err(err(
+                "applicator",
+                format!(
+                    "unknown applicator `{a}`: section {} has {}",
+                    section.section_id,
+                    ids.join(", ")
+                ),
+            ));
+        }
+    }
+    if let Some(r) = &term.rail {
+        if !section.rails.iter().any(|x| x == r) {
+            return Err(err(
+                "rail",
+                format!(
+                    "unknown rail `{r}`: section {} has {}",
+                    section.section_id,
+                    section.rails.join(", ")
+                ),
+            ));
+        }
+    }
+    if let Some(s) = &term.site {
+        if !section.sites.iter().any(|x| &x.id == s) {
+            let ids: Vec<&str> = section.sites.iter().map(|x| x.id.as_str()).collect();
+            return Err(err(
+                "site",
+                format!(
+                    "unknown site `{s}`: section {} has {}",
+                    section.section_id,
+                    ids.join(", ")
+                ),
+            ));
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,1027 @@
+//! The engine: owns time and the section's state, and steps the product
+//! model wheel pass by wheel pass (../shared/spec/model.md, "One contact"
+//! and "Order of events").
+//!
+//! Events arrive in replay order (log_time). A train occupies the section
+//! from its passage's time until its last axle has left; trains never share
+//! the section (the reader refuses recordings where they would). So the
+//! engine buffers the events of one occupation (pulses, tribometer readings,
+//! weather, measurements) until the stream passes the train's end, then rolls
+//! the train's wheels one after the other over every grid point. That order
+//! is exact: wheel k+1 reaches every point after wheel k, and a pulse or a
+//! reading at point p goes in just before the first wheel that reaches p
+//! strictly after it.
+//!
+//! Everything that simulates (replay, paper scenarios, synthetic truth runs,
+//! fits, strategies) drives this one engine with [`Engine::push`].
+
+pub mod generic;
+mod roll;
+pub mod sink;
+pub mod state;
+pub mod weather;
+
+use std::collections::VecDeque;
+use std::sync::Arc;
+
+use crate::sink::{
+    MassBalance, MeasurementOutput, PulseEvent, RunSummary, SectionInfo, Sink, SinkError,
+    SnapshotKind, TrackInfo, TrainEvent,
+};
+use tortwin_model::config::ModelConfig;
+use tortwin_model::contact::{
+    self, HertzContact, HertzShape, KalkerCoefficients, PolachInput, Steel,
+};
+use tortwin_model::effects::TimeEffects;
+use tortwin_model::generic::ActsOn;
+use tortwin_model::product;
+use tortwin_recording::{
+    BogiePosition, Creepage, Direction, Event, EventKind, Measurement, Passage, Quantity, Section,
+};
+
+use generic::{GenericSet, WheelDrivers};
+pub use state::EngineState;
+use weather::{WeatherState, WeatherTimeline};
+
+/// How many past trains keep their contacts at the measurement sites, for
+/// measurements logged after their train has left.
+const RECENT_TRAINS: usize = 16;
+
+/// Why the engine stopped.
+#[derive(Debug, thiserror::Error)]
+pub enum EngineError {
+    /// A sink failed: an output could not be written.
+    #[error("writing the outputs")]
+    Sink(#[source] SinkError),
+    /// A `mu`/`adhesion` measurement logged so long after its train that the
+    /// engine no longer keeps that train's contacts at the sites.
+    #[error(
+        "measurement at log_time {log_time_ns} ns (message index {index_in_file}) of train \
+         {train_id} arrives more than {RECENT_TRAINS} trains after its passage; tortwin keeps \
+         the site contacts of the last {RECENT_TRAINS} trains"
+    )]
+    MeasurementTooLate {
+        train_id: String,
+        log_time_ns: u64,
+        index_in_file: u64,
+    },
+}
+
+impl From<SinkError> for EngineError {
+    fn from(e: SinkError) -> Self {
+        EngineError::Sink(e)
+    }
+}
+
+/// Marks "no applicator at this point" in [`Engine::applicator_at`].
+const NO_APPLICATOR: u32 = u32::MAX;
+
+/// Options that change what the engine reports, not what it computes.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct EngineOptions {
+    /// Also emit a [`SnapshotKind::Wheel`] field snapshot after every wheel.
+    pub snapshot_every_wheel: bool,
+    /// Give every wheel's contacts to [`Sink::wheel_contacts`] (what strategy
+    /// statistics over every contact need; far cheaper than a snapshot).
+    pub every_wheel_contacts: bool,
+}
+
+/// The calculation grid: `d_i = i * C`, `C = pi * nominal wheel diameter`,
+/// `i = 0 ..= floor(L / C)` (model.md).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Grid {
+    pub spacing_m: f64,
+    pub d_m: Vec<f64>,
+}
+
+impl Grid {
+    pub fn new(length_m: f64, nominal_wheel_diameter_m: f64) -> Self {
+        let spacing_m = std::f64::consts::PI * nominal_wheel_diameter_m;
+        let i_last = (length_m / spacing_m).floor() as usize;
+        let d_m = (0..=i_last).map(|i| i as f64 * spacing_m).collect();
+        Self { spacing_m, d_m }
+    }
+
+    pub fn i_last(&self) -> usize {
+        self.d_m.len() - 1
+    }
+
+    /// The grid point a position snaps to: `min(floor(x / C + 0.5), i_last)`.
+    pub fn snap(&self, position_m: f64) -> usize {
+        ((position_m / self.spacing_m + 0.5).floor() as usize).min(self.i_last())
+    }
+}
+
+/// One surface of one rail: its product mass and touch history per point.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TrackState {
+    pub rail_mass_kg: Vec<f64>,
+    /// time_s of the last contact or pulse; NaN where never touched.
+    pub last_touch_s: Vec<f64>,
+    /// P (mm, effects.md) at the last touch; meaningless where never touched.
+    pub precip_at_touch_mm: Vec<f64>,
+    /// Wheels that have rolled over this track.
+    pub wheel_pass: u64,
+}
+
+impl TrackState {
+    fn new(points: usize) -> Self {
+        Self {
+            rail_mass_kg: vec![0.0; points],
+            last_touch_s: vec![f64::NAN; points],
+            precip_at_touch_mm: vec![0.0; points],
+            wheel_pass: 0,
+        }
+    }
+}
+
+/// One wheel on one rail: what depends on the wheel and not on the point.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct WheelOnRail {
+    pub track: usize,
+    pub q_n: f64,
+    pub hertz: HertzContact,
+    pub kalker: KalkerCoefficients,
+    pub creepage: Creepage,
+    /// fp · fc, eq. (2) and (3).
+    pub fp_fc: f64,
+    /// What generic terms driven by the wheel see.
+    pub drivers: WheelDrivers,
+}
+
+/// A train being rolled, or kept for late measurements.
+#[derive(Debug, Clone)]
+struct TrainRecord {
+    passage: Passage,
+    log_time_ns: u64,
+    /// When the last axle leaves the section, time_s (the occupation's end).
+    end_s: f64,
+    end_ns: u64,
+    /// [axle][rail]
+    wheels: Vec<WheelOnRail>,
+    /// Total mass at step 2 of each contact at a measurement site:
+    /// [(axle * rails + rail) * sites + site].
+    site_mass_kg: Vec<f64>,
+    /// muD and muC of eq. (4) at those contacts, where friction terms make
+    /// them differ from the configuration's (else empty).
+    site_levels: Vec<(f64, f64)>,
+}
+
+/// An event inside a train's occupation, waiting for the train to be rolled.
+#[derive(Debug, Clone)]
+struct Buffered {
+    event: Event,
+    time_s: f64,
+    /// The simulated value of a tribometer reading, filled while rolling.
+    reading: Option<f64>,
+}
+
+/// A pulse or tribometer reading at one point of one track, inside a window.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct PointEvent {
+    pub point: usize,
+    pub time_s: f64,
+    /// Index into the window's buffered events.
+    pub buffered: usize,
+    pub kind: PointEventKind,
+    pub done: bool,
+}
+
+#[derive(Debug, Clone, Copy)]
+pub(crate) enum PointEventKind {
+    Pulse {
+        applicator: usize,
+        mass_kg: f64,
+        pulse_mass_kg: f64,
+    },
+    Reading,
+}
+
+/// Running totals for the run summary.
+#[derive(Debug, Clone, Copy, Default)]
+pub(crate) struct Totals {
+    pub trains: u64,
+    pub wheels: u64,
+    pub contacts: u64,
+    pub pulses: u64,
+    pub measurements: u64,
+    pub weather_messages: u64,
+    pub applied_kg: f64,
+    pub carried_out_kg: f64,
+    pub consumed_kg: f64,
+    pub capped_kg: f64,
+    pub effects_lost_kg: f64,
+    /// Sum of squared residuals and counts per quantity (mu, adhesion, rail_mu).
+    pub sq_residual: [f64; 3],
+    pub residual_n: [u64; 3],
+}
+
+/// The replay engine of one section.
+pub struct Engine {
+    cfg: ModelConfig,
+    opts: EngineOptions,
+    section: Section,
+    grid: Grid,
+    steel: Steel,
+    tracks: Vec<TrackState>,
+    track_info: Vec<TrackInfo>,
+    /// Per rail: the track of a leading and of a trailing axle.
+    rail_tracks: Vec<[usize; 2]>,
+    /// Per rail: the track a tribometer reads (the top band).
+    reading_track: Vec<usize>,
+    /// Per rail: the tracks a pulse lands on.
+    pulse_tracks: Vec<Vec<usize>>,
+    applicator_points: Vec<usize>,
+    site_points: Vec<usize>,
+    /// Per track, per point: the applicator a wheel passes there, or NO_APPLICATOR.
+    applicator_at: Vec<Vec<u32>>,
+    /// Per point: the sites there (usually none).
+    sites_at: Vec<Vec<usize>>,
+    /// Per applicator and track: the latest pulse's mass (m0), NaN before one.
+    latest_pulse_kg: Vec<f64>,
+    /// `exp(-(N - 1) / cN)` for N - 1 = 0 ..= i_last.
+    revolution: Vec<f64>,
+    time_effects: TimeEffects,
+    /// The generic terms, compiled for this section (shared with the
+    /// rolling wheel).
+    generic: Arc<GenericSet>,
+    weather: WeatherState,
+    occupied_until_s: f64,
+    origin_ns: i64,
+    on_rail_start_kg: f64,
+    totals: Totals,
+    begun: bool,
+    // The occupation being buffered.
+    pending: Option<TrainRecord>,
+    window: Vec<Buffered>,
+    recent: VecDeque<TrainRecord>,
+    // Scratch, reused from train to train.
+    timeline: WeatherTimeline,
+    point_events: Vec<Vec<PointEvent>>,
+    pending_at: Vec<Vec<u32>>,
+    /// Per track: what its last wheel saw at each point.
+    observed: Vec<roll::Observed>,
+    /// Per track: the axle that rolled over it last in the current train.
+    last_axle: Vec<usize>,
+    /// Per track: the points where an applicator or a measurement site is,
+    /// ascending. Pulses land and readings are taken only there.
+    special_points: Vec<Vec<usize>>,
+    snapshot: roll::SnapshotBuffers,
+    /// Hertz shapes by wheel diameter (bits).
+    hertz_shapes: Vec<(u64, HertzShape)>,
+}
+
+impl Engine {
+    /// A fresh section: clean rails, no weather yet, time origin `origin_ns`
+    /// (the log_time of the first recording's `/section`).
+    pub fn new(section: Section, cfg: ModelConfig, opts: EngineOptions, origin_ns: i64) -> Self {
+        let grid = Grid::new(section.length_m, section.nominal_wheel_diameter_m);
+        let points = grid.d_m.len();
+
+        let bands = cfg.effects.bogie_bands.is_some();
+        let mut track_info = Vec::new();
+        let mut rail_tracks = Vec::new();
+        let mut reading_track = Vec::new();
+        let mut pulse_tracks = Vec::new();
+        for (rail, name) in section.rails.iter().enumerate() {
+            if bands && name == "high" {
+                let gauge = track_info.len();
+                track_info.push(TrackInfo {
+                    rail,
+                    rail_name: name.clone(),
+                    band: "gauge_corner".into(),
+                });
+                let top = track_info.len();
+                track_info.push(TrackInfo {
+                    rail,
+                    rail_name: name.clone(),
+                    band: "top".into(),
+                });
+                rail_tracks.push([gauge, top]);
+                reading_track.push(top);
+                pulse_tracks.push(vec![gauge, top]);
+            } else {
+                let t = track_info.len();
+                track_info.push(TrackInfo {
+                    rail,
+                    rail_name: name.clone(),
+                    band: "top".into(),
+                });
+                rail_tracks.push([t, t]);
+                reading_track.push(t);
+                pulse_tracks.push(vec![t]);
+            }
+        }
+
+        let applicator_points: Vec<usize> = section
+            .applicators
+            .iter()
+            .map(|a| grid.snap(a.position_m))
+            .collect();
+        let site_points: Vec<usize> = section
+            .sites
+            .iter()
+            .map(|s| grid.snap(s.position_m))
+            .collect();
+        let mut applicator_at = vec![vec![NO_APPLICATOR; points]; track_info.len()];
+        for (a, app) in section.applicators.iter().enumerate() {
+            for &rail in &app.rails {
+                for &track in &pulse_tracks[rail] {
+                    let slot = &mut applicator_at[track][applicator_points[a]];
+                    // Of several applicators at one point, the first listed counts.
+                    if *slot == NO_APPLICATOR {
+                        *slot = a as u32;
+                    }
+                }
+            }
+        }
+        let mut sites_at = vec![Vec::new(); points];
+        for (s, &p) in site_points.iter().enumerate() {
+            sites_at[p].push(s);
+        }
+        let revolution = (0..points)
+            .map(|n| product::revolution_factor(&cfg.product, n as u32 + 1))
+            .collect();
+        let time_effects = TimeEffects {
+            ageing_tau_s: cfg.effects.rail_ageing.map(|e| e.tau_s),
+            rain_k_per_mm: cfg.effects.rain_washoff.map(|e| e.k_per_mm),
+        };
+        let n_tracks = track_info.len();
+        let generic = Arc::new(GenericSet::compile(
+            &cfg.effects.generic,
+            &section,
+            origin_ns,
+        ));
+        Self {
+            steel: Steel {
+                e_pa: cfg.contact.e_pa,
+                nu: cfg.contact.nu,
+            },
+            tracks: (0..n_tracks).map(|_| TrackState::new(points)).collect(),
+            latest_pulse_kg: vec![f64::NAN; section.applicators.len() * n_tracks],
+            point_events: vec![Vec::new(); n_tracks],
+            pending_at: vec![vec![0; points]; n_tracks],
+            observed: vec![roll::Observed::new(points); n_tracks],
+            last_axle: vec![usize::MAX; n_tracks],
+            special_points: (0..n_tracks)
+                .map(|t| {
+                    (0..points)
+                        .filter(|&i| {
+                            applicator_at[t][i] != NO_APPLICATOR || !sites_at[i].is_empty()
+                        })
+                        .collect()
+                })
+                .collect(),
+            snapshot: roll::SnapshotBuffers::default(),
+            hertz_shapes: Vec::new(),
+            cfg,
+            opts,
+            grid,
+            track_info,
+            rail_tracks,
+            reading_track,
+            pulse_tracks,
+            applicator_points,
+            site_points,
+            applicator_at,
+            sites_at,
+            revolution,
+            time_effects,
+            generic,
+            weather: WeatherState::default(),
+            occupied_until_s: f64::NEG_INFINITY,
+            origin_ns,
+            on_rail_start_kg: 0.0,
+            totals: Totals::default(),
+            begun: false,
+            pending: None,
+            window: Vec::new(),
+            recent: VecDeque::new(),
+            timeline: WeatherTimeline::default(),
+            section,
+        }
+    }
+
+    pub fn section(&self) -> &Section {
+        &self.section
+    }
+
+    pub fn grid(&self) -> &Grid {
+        &self.grid
+    }
+
+    pub fn config(&self) -> &ModelConfig {
+        &self.cfg
+    }
+
+    pub fn tracks(&self) -> &[TrackState] {
+        &self.tracks
+    }
+
+    pub fn track_info(&self) -> &[TrackInfo] {
+        &self.track_info
+    }
+
+    pub fn origin_ns(&self) -> i64 {
+        self.origin_ns
+    }
+
+    /// End of the last train's occupation, time_s (−inf before any train).
+    pub fn occupied_until_s(&self) -> f64 {
+        self.occupied_until_s
+    }
+
+    /// `time_s = (log_time_ns - origin_ns) * 1e-9`, the difference in 64-bit
+    /// integers (model.md).
+    pub fn time_s(&self, log_time_ns: u64) -> f64 {
+        (log_time_ns as i64).wrapping_sub(self.origin_ns) as f64 * 1e-9
+    }
+
+    fn rail_mass_total_kg(&self) -> f64 {
+        self.tracks.iter().flat_map(|t| t.rail_mass_kg.iter()).sum()
+    }
+
+    fn begin(&mut self, sink: &mut dyn Sink) -> Result<(), EngineError> {
+        if !self.begun {
+            self.begun = true;
+            self.on_rail_start_kg = self.rail_mass_total_kg();
+            sink.begin(&SectionInfo {
+                section: &self.section,
+                grid_d_m: &self.grid.d_m,
+                tracks: &self.track_info,
+                applicator_points: &self.applicator_points,
+                site_points: &self.site_points,
+                origin_ns: self.origin_ns,
+            })?;
+        }
+        Ok(())
+    }
+
+    /// Takes the next event in replay order.
+    pub fn push(&mut self, event: Event, sink: &mut dyn Sink) -> Result<(), EngineError> {
+        self.begin(sink)?;
+        let time_s = self.time_s(event.log_time_ns);
+        if let Some(train) = &self.pending {
+            if matches!(event.kind, EventKind::Passage(_)) || time_s > train.end_s {
+                self.roll_pending(sink)?;
+            }
+        }
+        if self.pending.is_some() {
+            self.window.push(Buffered {
+                event,
+                time_s,
+                reading: None,
+            });
+            return Ok(());
+        }
+        let log_time_ns = event.log_time_ns;
+        if let EventKind::Passage(passage) = event.kind {
+            return self.start_train(log_time_ns, passage, sink);
+        }
+        match &event.kind {
+            EventKind::Passage(_) => unreachable!("handled above"),
+            EventKind::Pulse(pulse) => {
+                let pulse_mass = pulse.mass_kg;
+                for k in 0..self.pulse_tracks[pulse.rail].len() {
+                    let track = self.pulse_tracks[pulse.rail][k];
+                    let share = pulse_mass / self.pulse_tracks[pulse.rail].len() as f64;
+                    let point = self.applicator_points[pulse.applicator];
+                    let weather = self.weather;
+                    self.land_pulse(
+                        track,
+                        point,
+                        time_s,
+                        pulse.applicator,
+                        share,
+                        pulse_mass,
+                        &weather,
+                    );
+                }
+                self.emit_pulse(log_time_ns, pulse, sink)
+            }
+            EventKind::Measurement(m) => {
+                let simulated = match m.quantity {
+                    Quantity::RailMu => {
+                        let track = self.reading_track[m.rail];
+                        let point = self.site_points[m.site];
+                        let weather = self.weather;
+                        self.read_rail(track, point, time_s, &weather)
+                    }
+                    _ => self.contact_value(&event, m)?,
+                };
+                self.emit_measurement(&event, m, simulated, sink)
+            }
+            EventKind::Weather(w) => {
+                self.totals.weather_messages += 1;
+                self.weather = self.weather.after_message(time_s, *w);
+                Ok(())
+            }
+        }
+    }
+
+    /// Rolls the train still buffered, if any, and reports the run's figures.
+    /// The engine stays usable: [`Engine::state`] gives what the next day needs.
+    pub fn finish(
+        &mut self,
+        sink: &mut dyn Sink,
+        unknown_topic_messages: u64,
+    ) -> Result<RunSummary, EngineError> {
+        self.begin(sink)?;
+        if self.pending.is_some() {
+            self.roll_pending(sink)?;
+        }
+        let summary = self.summary(unknown_topic_messages);
+        sink.finish(&summary)?;
+        Ok(summary)
+    }
+
+    /// The figures so far.
+    pub fn summary(&self, unknown_topic_messages: u64) -> RunSummary {
+        let t = &self.totals;
+        let rmse = [Quantity::Mu, Quantity::Adhesion, Quantity::RailMu]
+            .iter()
+            .enumerate()
+            .filter(|(q, _)| t.residual_n[*q] > 0)
+            .map(|(q, quantity)| {
+                let n = t.residual_n[q];
+                (
+                    quantity.as_str().to_string(),
+                    n,
+                    (t.sq_residual[q] / n as f64).sqrt(),
+                )
+            })
+            .collect();
+        RunSummary {
+            trains: t.trains,
+            wheels: t.wheels,
+            contacts: t.contacts,
+            pulses: t.pulses,
+            measurements: t.measurements,
+            weather_messages: t.weather_messages,
+            unknown_topic_messages,
+            rmse,
+            mass_balance: MassBalance {
+                on_rail_start_kg: self.on_rail_start_kg,
+                applied_kg: t.applied_kg,
+                on_rail_end_kg: self.rail_mass_total_kg(),
+                carried_out_kg: t.carried_out_kg,
+                consumed_kg: t.consumed_kg,
+                capped_kg: t.capped_kg,
+                effects_lost_kg: t.effects_lost_kg,
+            },
+        }
+    }
+
+    fn start_train(
+        &mut self,
+        log_time_ns: u64,
+        passage: Passage,
+        sink: &mut dyn Sink,
+    ) -> Result<(), EngineError> {
+        let time_s = self.time_s(log_time_ns);
+        let last_offset_m = passage.axles.last().map_or(0.0, |a| a.offset_m);
+        let end_s = time_s + (self.section.length_m + last_offset_m) / passage.speed_mps;
+        // The end as a log_time, rounded up so that the window holds every
+        // event at or before the last axle's exit.
+        let end_ns = (self.origin_ns as f64 + end_s * 1e9)
+            .ceil()
+            .max(log_time_ns as f64) as u64;
+        let mut record = match self.recent.len() {
+            n if n >= RECENT_TRAINS => self.recent.pop_front().map(|mut r| {
+                r.passage = passage.clone();
+                r
+            }),
+            _ => None,
+        }
+        .unwrap_or_else(|| TrainRecord {
+            passage: passage.clone(),
+            log_time_ns,
+            end_s,
+            end_ns,
+            wheels: Vec::new(),
+            site_mass_kg: Vec::new(),
+            site_levels: Vec::new(),
+        });
+        drop(passage);
+        record.log_time_ns = log_time_ns;
+        record.end_s = end_s;
+        record.end_ns = end_ns;
+        record.wheels.clear();
+        let rails = self.section.rails.len();
+        for axle in &record.passage.axles {
+            for rail in 0..rails {
+                let q_n = axle.wheel_load_n.get(rail).copied().unwrap_or(0.0);
+                let creepage = axle.creepage.get(rail).copied().unwrap_or(Creepage {
+                    cx: 0.0,
+                    cy: 0.0,
+                    spin_per_m: 0.0,
+                });
+                let hertz = self.hertz_shape(axle.wheel_diameter_m).contact(q_n);
+                let kalker = contact::kalker(self.cfg.contact.nu, hertz.a_m, hertz.b_m);
+                let fp_fc = product::pressure_factor(&self.cfg.product, hertz.pm_pa)
+                    * product::creepage_factor(&self.cfg.product, creepage.cx, creepage.cy);
+                let bogie = usize::from(axle.bogie_position == BogiePosition::Trailing);
+                record.wheels.push(WheelOnRail {
+                    track: self.rail_tracks[rail][bogie],
+                    q_n,
+                    hertz,
+                    kalker,
+                    creepage,
+                    fp_fc,
+                    drivers: WheelDrivers {
+                        speed_mps: record.passage.speed_mps,
+                        wheel_load_kn: q_n / 1000.0,
+                        creepage: (creepage.cx * creepage.cx + creepage.cy * creepage.cy).sqrt(),
+                    },
+                });
+            }
+        }
+        record.site_mass_kg.clear();
+        record.site_mass_kg.resize(
+            record.passage.axles.len() * rails * self.section.sites.len(),
+            f64::NAN,
+        );
+        record.site_levels.clear();
+        if self.generic.any_friction() {
+            record
+                .site_levels
+                .resize(record.site_mass_kg.len(), (f64::NAN, f64::NAN));
+        }
+        sink.train(&TrainEvent {
+            log_time_ns,
+            end_ns,
+            train_id: &record.passage.train_id,
+            direction: record.passage.direction,
+            speed_mps: record.passage.speed_mps,
+            axles: record.passage.axles.len(),
+        })?;
+        self.totals.trains += 1;
+        self.pending = Some(record);
+        self.window.clear();
+        Ok(())
+    }
+
+    /// The Hertz shape of a wheel of this diameter on this section's rails,
+    /// solved once per diameter (the load only scales it).
+    fn hertz_shape(&mut self, wheel_diameter_m: f64) -> HertzShape {
+        let key = wheel_diameter_m.to_bits();
+        if let Some((_, shape)) = self.hertz_shapes.iter().find(|(k, _)| *k == key) {
+            return *shape;
+        }
+        let shape = HertzShape::new(
+            wheel_diameter_m / 2.0,
+            self.cfg.contact.wheel_profile_radius_m,
+            self.section.rail_head_radius_m,
+            &self.steel,
+        );
+        // Recordings carry a handful of wheel diameters; a recording with
+        // every wheel different keeps the cache small all the same.
+        if self.hertz_shapes.len() >= 256 {
+            self.hertz_shapes.clear();
+        }
+        self.hertz_shapes.push((key, shape));
+        shape
+    }
+
+    /// Rolls the buffered train and publishes its window.
+    fn roll_pending(&mut self, sink: &mut dyn Sink) -> Result<(), EngineError> {
+        let Some(mut record) = self.pending.take() else {
+            return Ok(());
+        };
+        // The weather over the occupation, and the point events per track.
+        self.timeline.reset(self.weather);
+        for q in &mut self.point_events {
+            q.clear();
+        }
+        for (b, buffered) in self.window.iter().enumerate() {
+            match &buffered.event.kind {
+                EventKind::Weather(w) => self.timeline.push(buffered.time_s, *w),
+                EventKind::Pulse(p) => {
+                    let tracks = &self.pulse_tracks[p.rail];
+                    for &track in tracks {
+                        let point = self.applicator_points[p.applicator];
+                        self.point_events[track].push(PointEvent {
+                            point,
+                            time_s: buffered.time_s,
+                            buffered: b,
+                            kind: PointEventKind::Pulse {
+                                applicator: p.applicator,
+                                mass_kg: p.mass_kg / tracks.len() as f64,
+                                pulse_mass_kg: p.mass_kg,
+                            },
+                            done: false,
+                        });
+                        self.pending_at[track][point] += 1;
+                    }
+                }
+                EventKind::Measurement(m) if m.quantity == Quantity::RailMu => {
+                    let track = self.reading_track[m.rail];
+                    let point = self.site_points[m.site];
+                    self.point_events[track].push(PointEvent {
+                        point,
+                        time_s: buffered.time_s,
+                        buffered: b,
+                        kind: PointEventKind::Reading,
+                        done: false,
+                    });
+                    self.pending_at[track][point] += 1;
+                }
+                _ => {}
+            }
+        }
+
+        self.roll_train(&mut record, sink)?;
+
+        // Point events after the last wheel at their point, in replay order.
+        for track in 0..self.tracks.len() {
+            for k in 0..self.point_events[track].len() {
+                let ev = self.point_events[track][k];
+                if !ev.done {
+                    let weather = *self.timeline.at(ev.time_s);
+                    self.run_point_event(track, k, &weather);
+                }
+            }
+        }
+        self.weather = self.timeline.last();
+        self.occupied_until_s = record.end_s.max(self.occupied_until_s);
+
+        // Publish the window in replay order, then the field.
+        let window = std::mem::take(&mut self.window);
+        for buffered in &window {
+            match &buffered.event.kind {
+                EventKind::Pulse(p) => self.emit_pulse(buffered.event.log_time_ns, p, sink)?,
+                EventKind::Measurement(m) => {
+                    let simulated = match (m.quantity, buffered.reading) {
+                        (Quantity::RailMu, Some(v)) => v,
+                        (Quantity::RailMu, None) => {
+                            unreachable!("every reading in a window is run while rolling or after")
+                        }
+                        _ if m.axle.as_ref().map(|a| a.train_seq)
+                            == Some(record.passage.train_seq) =>
+                        {
+                            self.value_from(&record, m)
+                        }
+                        _ => self.contact_value(&buffered.event, m)?,
+                    };
+                    self.emit_measurement(&buffered.event, m, simulated, sink)?;
+                }
+                EventKind::Weather(_) => self.totals.weather_messages += 1,
+                EventKind::Passage(_) => unreachable!("a passage ends the window"),
+            }
+        }
+        self.window = window;
+        self.window.clear();
+        self.emit_fields(&record, SnapshotKind::Train, sink)?;
+        self.recent.push_back(record);
+        Ok(())
+    }
+
+    /// The simulated `mu` or `adhesion` of a contact of a train kept in
+    /// [`Engine::recent`].
+    fn contact_value(&self, event: &Event, m: &Measurement) -> Result<f64, EngineError> {
+        let Some(axle) = &m.axle else {
+            unreachable!("the reader gives mu/adhesion measurements an axle");
+        };
+        match self
+            .recent
+            .iter()
+            .rev()
+            .find(|r| r.passage.train_seq == axle.train_seq)
+        {
+            Some(record) => Ok(self.value_from(record, m)),
+            None => Err(EngineError::MeasurementTooLate {
+                train_id: axle.train_id.clone(),
+                log_time_ns: event.log_time_ns,
+                index_in_file: event.index_in_file,
+            }),
+        }
+    }
+
+    fn value_from(&self, record: &TrainRecord, m: &Measurement) -> f64 {
+        let Some(axle) = &m.axle else {
+            unreachable!("the reader gives mu/adhesion measurements an axle");
+        };
+        let rails = self.section.rails.len();
+        let sites = self.section.sites.len();
+        let k = (axle.axle_index * rails + m.rail) * sites + m.site;
+        let mass = record.site_mass_kg[k];
+        let mu = match record.site_levels.get(k) {
+            Some(&levels) => self.friction_at(levels, mass),
+            None => product::friction(&self.cfg.product, mass),
+        };
+        match m.quantity {
+            Quantity::Mu => mu,
+            _ => {
+                let wheel = &record.wheels[axle.axle_index * rails + m.rail];
+                self.adhesion(wheel, record.passage.speed_mps, mu)
+            }
+        }
+    }
+
+    /// Eq. (4) with muD and muC as the friction terms make them.
+    pub(crate) fn friction_at(&self, (mu_d, mu_c): (f64, f64), mass_kg: f64) -> f64 {
+        let params = product::ProductParams {
+            mu_d,
+            mu_c,
+            ..self.cfg.product
+        };
+        product::friction(&params, mass_kg)
+    }
+
+    /// T/N by Polach with mu0 = mu (contact.md).
+    pub(crate) fn adhesion(&self, wheel: &WheelOnRail, speed_mps: f64, mu: f64) -> f64 {
+        contact::polach(
+            &PolachInput {
+                q_n: wheel.q_n,
+                a_m: wheel.hertz.a_m,
+                b_m: wheel.hertz.b_m,
+                g_pa: self.steel.g_pa(),
+                kalker: wheel.kalker,
+                sx: wheel.creepage.cx,
+                sy: wheel.creepage.cy,
+                psi_per_m: wheel.creepage.spin_per_m,
+                speed_mps,
+                mu0: mu,
+            },
+            &self.cfg.polach.params(),
+        )
+        .t_over_q
+    }
+
+    /// A pulse landing at `point` of `track` at `time_s` (model.md, "A pulse
+    /// landing"): time effects up to now, add, cap, touch.
+    #[allow(clippy::too_many_arguments)]
+    pub(crate) fn land_pulse(
+        &mut self,
+        track: usize,
+        point: usize,
+        time_s: f64,
+        applicator: usize,
+        mass_kg: f64,
+        pulse_mass_kg: f64,
+        weather: &WeatherState,
+    ) {
+        let (mut mass_kg, mut pulse_mass_kg) = (mass_kg, pulse_mass_kg);
+        if self.generic.any(ActsOn::PulseMass) {
+            let g = self.generic.factor(
+                ActsOn::PulseMass,
+                generic::Which::All,
+                Some(applicator),
+                self.track_info[track].rail,
+                generic::When {
+                    time_s,
+                    weather: &weather.current,
+                    wheel: None,
+                },
+            );
+            mass_kg *= g;
+            pulse_mass_kg *= g;
+        }
+        let effects = self.time_effects;
+        let t = &mut self.tracks[track];
+        let precip = weather.precip_mm_at(time_s);
+        let mut m = t.rail_mass_kg[point];
+        let last = t.last_touch_s[point];
+        if effects.any() && !last.is_nan() {
+            let aged = effects.apply(m, time_s - last, precip - t.precip_at_touch_mm[point]);
+            self.totals.effects_lost_kg += m - aged;
+            m = aged;
+        }
+        m += mass_kg;
+        self.totals.applied_kg += mass_kg;
+        self.totals.capped_kg += product::cap(&self.cfg.product, &mut m);
+        t.rail_mass_kg[point] = m;
+        t.last_touch_s[point] = time_s;
+        t.precip_at_touch_mm[point] = precip;
+        self.latest_pulse_kg[applicator * self.tracks.len() + track] = pulse_mass_kg;
+    }
+
+    /// A tribometer reading (model.md): eq. (4) with the rail mass alone, the
+    /// time effects since the last touch applied to the value read only.
+    pub(crate) fn read_rail(
+        &self,
+        track: usize,
+        point: usize,
+        time_s: f64,
+        weather: &WeatherState,
+    ) -> f64 {
+        let t = &self.tracks[track];
+        let mut m = t.rail_mass_kg[point];
+        let last = t.last_touch_s[point];
+        if self.time_effects.any() && !last.is_nan() {
+            let rain = weather.precip_mm_at(time_s) - t.precip_at_touch_mm[point];
+            m = self.time_effects.apply(m, time_s - last, rain);
+        }
+        if self.generic.any_friction() {
+            let p = &self.cfg.product;
+            let levels = self.generic.friction_levels(
+                p.mu_d,
+                p.mu_c,
+                self.track_info[track].rail,
+                time_s,
+                &weather.current,
+                None,
+            );
+            return self.friction_at(levels, m);
+        }
+        product::friction(&self.cfg.product, m)
+    }
+
+    /// Runs point event `k` of `track` (a pulse or a reading of the window).
+    pub(crate) fn run_point_event(&mut self, track: usize, k: usize, weather: &WeatherState) {
+        let ev = self.point_events[track][k];
+        match ev.kind {
+            PointEventKind::Pulse {
+                applicator,
+                mass_kg,
+                pulse_mass_kg,
+            } => {
+                self.land_pulse(
+                    track,
+                    ev.point,
+                    ev.time_s,
+                    applicator,
+                    mass_kg,
+                    pulse_mass_kg,
+                    weather,
+                );
+            }
+            PointEventKind::Reading => {
+                let value = self.read_rail(track, ev.point, ev.time_s, weather);
+                self.window[ev.buffered].reading = Some(value);
+            }
+        }
+        self.point_events[track][k].done = true;
+        self.pending_at[track][ev.point] -= 1;
+    }
+
+    fn emit_pulse(
+        &mut self,
+        log_time_ns: u64,
+        pulse: &tortwin_recording::Pulse,
+        sink: &mut dyn Sink,
+    ) -> Result<(), EngineError> {
+        self.totals.pulses += 1;
+        sink.pulse(&PulseEvent {
+            log_time_ns,
+            applicator_id: &self.section.applicators[pulse.applicator].id,
+            rail: pulse.rail,
+            rail_name: &self.section.rails[pulse.rail],
+            mass_kg: pulse.mass_kg,
+        })?;
+        Ok(())
+    }
+
+    fn emit_measurement(
+        &mut self,
+        event: &Event,
+        m: &Measurement,
+        simulated: f64,
+        sink: &mut dyn Sink,
+    ) -> Result<(), EngineError> {
+        let simulated = self.generic.measured(simulated, m.site, m.rail, m.quantity);
+        let q = match m.quantity {
+            Quantity::Mu => 0,
+            Quantity::Adhesion => 1,
+            Quantity::RailMu => 2,
+        };
+        self.totals.measurements += 1;
+        self.totals.sq_residual[q] += (m.value - simulated).powi(2);
+        self.totals.residual_n[q] += 1;
+        sink.measurement(&MeasurementOutput {
+            log_time_ns: event.log_time_ns,
+            index_in_file: event.index_in_file,
+            site_id: &self.section.sites[m.site].id,
+            site: m.site,
+            rail_name: &self.section.rails[m.rail],
+            rail: m.rail,
+            quantity: m.quantity,
+            train_id: m.axle.as_ref().map(|a| a.train_id.as_str()),
+            axle_index: m.axle.as_ref().map(|a| a.axle_index),
+            measured: m.value,
+            simulated,
+        })?;
+        Ok(())
+    }
+
+    /// The state the next recording starts from.
+    pub fn state(&self) -> EngineState {
+        state::capture(self)
+    }
+
+    /// Continues from a state saved by [`Engine::state`] after an earlier
+    /// recording of the same section.
+    pub fn from_state(
+        section: Section,
+        cfg: ModelConfig,
+        opts: EngineOptions,
+        saved: &EngineState,
+    ) -> Result<Self, state::StateError> {
+        state::restore(section, cfg, opts, saved)
+    }
+}
+
+/// Whether a direction enters at d = 0.
+pub(crate) fn enters_at_zero(direction: Direction) -> bool {
+    direction == Direction::Up
+}

@@ -1,0 +1,238 @@
+//! Sinks: listeners that publish what the engine produces.
+//!
+//! A sink sees a stream of borrowed snapshots and measurements in replay
+//! order; it never reaches into the engine. Adding a sink touches no model
+//! code. Every method may fail (I/O); the engine stops at the first error.
+//!
+//! Output files are written under a temporary name and renamed only by
+//! [`Sink::finish`], so a failed run never leaves a file that looks complete.
+
+use tortwin_recording::{Direction, Quantity, Section};
+
+/// What a sink learns before the first event.
+#[derive(Debug, Clone)]
+pub struct SectionInfo<'a> {
+    pub section: &'a Section,
+    /// The calculation grid `d_i = i * C` in m.
+    pub grid_d_m: &'a [f64],
+    /// Every surface the engine keeps: one per rail, two on the rail named
+    /// `high` when the `bogie_bands` effect is on.
+    pub tracks: &'a [TrackInfo],
+    /// Grid index of every applicator (as in `section.applicators`).
+    pub applicator_points: &'a [usize],
+    /// Grid index of every measurement site (as in `section.sites`).
+    pub site_points: &'a [usize],
+    /// log_time of the first recording's `/section`: time_s = 0.
+    pub origin_ns: i64,
+}
+
+/// One surface of one rail.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct TrackInfo {
+    pub rail: usize,
+    pub rail_name: String,
+    /// `top` for a single-band rail; `gauge_corner` or `top` with `bogie_bands`.
+    pub band: String,
+}
+
+/// A train that entered the section.
+#[derive(Debug, Clone)]
+pub struct TrainEvent<'a> {
+    /// When the front crossed the entry end.
+    pub log_time_ns: u64,
+    /// When the last axle left the section.
+    pub end_ns: u64,
+    pub train_id: &'a str,
+    pub direction: Direction,
+    pub speed_mps: f64,
+    pub axles: usize,
+}
+
+/// A pulse that landed.
+#[derive(Debug, Clone)]
+pub struct PulseEvent<'a> {
+    pub log_time_ns: u64,
+    pub applicator_id: &'a str,
+    pub rail: usize,
+    pub rail_name: &'a str,
+    pub mass_kg: f64,
+}
+
+/// The simulated value for one input measurement.
+#[derive(Debug, Clone)]
+pub struct MeasurementOutput<'a> {
+    pub log_time_ns: u64,
+    pub index_in_file: u64,
+    pub site_id: &'a str,
+    pub site: usize,
+    pub rail_name: &'a str,
+    pub rail: usize,
+    pub quantity: Quantity,
+    /// `None` for `rail_mu`.
+    pub train_id: Option<&'a str>,
+    pub axle_index: Option<usize>,
+    pub measured: f64,
+    pub simulated: f64,
+}
+
+/// Whether a field snapshot closes a train or a single wheel pass.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SnapshotKind {
+    /// After the train's last wheel: the `/twin/field` message.
+    Train,
+    /// After one wheel (only when asked for every wheel pass).
+    Wheel,
+}
+
+/// The friction field of one track after a train (or a wheel).
+#[derive(Debug, Clone)]
+pub struct FieldSnapshot<'a> {
+    pub kind: SnapshotKind,
+    /// Time the snapshot's last wheel left the section.
+    pub log_time_ns: u64,
+    pub train_id: &'a str,
+    pub track: usize,
+    pub rail_name: &'a str,
+    pub band: &'a str,
+    /// Wheels that have rolled over this track so far.
+    pub wheel_pass: u64,
+    pub d_m: &'a [f64],
+    /// Seen by the last wheel, at step 2 of each contact.
+    pub mu: &'a [f64],
+    pub adhesion: &'a [f64],
+    /// Rail mass after the wheel passed.
+    pub rail_mass_kg: &'a [f64],
+    /// The last wheel's mass after each contact.
+    pub wheel_mass_kg: &'a [f64],
+}
+
+/// What one wheel saw at every grid point of its track, given to
+/// [`Sink::wheel_contacts`] after the wheel has rolled (only when
+/// `EngineOptions::every_wheel_contacts` is set).
+#[derive(Debug, Clone, Copy)]
+pub struct WheelContacts<'a> {
+    pub track: usize,
+    pub rail: usize,
+    pub direction: Direction,
+    pub train_seq: usize,
+    /// 0-based axle index in its train.
+    pub axle: usize,
+    /// The total mass `m = m_w + m_r` of step 2 at each grid point, in grid
+    /// order (d ascending): mu of the contact is eq. (4) of it.
+    pub seen_mass_kg: &'a [f64],
+    /// mu of each contact, given where generic friction terms make it more
+    /// than eq. (4) of the mass (`None`: eq. (4) of `seen_mass_kg`).
+    pub mu: Option<&'a [f64]>,
+}
+
+/// The end-of-run figures.
+#[derive(Debug, Clone, Default, serde::Serialize)]
+pub struct RunSummary {
+    pub trains: u64,
+    pub wheels: u64,
+    pub contacts: u64,
+    pub pulses: u64,
+    pub measurements: u64,
+    pub weather_messages: u64,
+    pub unknown_topic_messages: u64,
+    /// RMSE measured vs simulated, per quantity (`mu`, `adhesion`, `rail_mu`).
+    pub rmse: Vec<(String, u64, f64)>,
+    pub mass_balance: MassBalance,
+}
+
+/// Where the applied product went, in kg. `applied = on_rail_end -
+/// on_rail_start + carried_out + consumed + capped + effects_lost`.
+#[derive(Debug, Clone, Copy, Default, serde::Serialize)]
+pub struct MassBalance {
+    pub on_rail_start_kg: f64,
+    pub applied_kg: f64,
+    pub on_rail_end_kg: f64,
+    /// Left the section on wheels (including any wheel edge reservoir).
+    pub carried_out_kg: f64,
+    pub consumed_kg: f64,
+    /// Squeezed out by the cap at m_max (contacts and pulses).
+    pub capped_kg: f64,
+    /// Removed by time effects (ageing, rain).
+    pub effects_lost_kg: f64,
+}
+
+impl MassBalance {
+    /// Relative closing error of the balance.
+    pub fn closing_error(&self) -> f64 {
+        let inflow = self.on_rail_start_kg + self.applied_kg;
+        let outflow = self.on_rail_end_kg
+            + self.carried_out_kg
+            + self.consumed_kg
+            + self.capped_kg
+            + self.effects_lost_kg;
+        let scale = inflow.abs().max(outflow.abs());
+        if scale == 0.0 {
+            0.0
+        } else {
+            (inflow - outflow).abs() / scale
+        }
+    }
+}
+
+/// Why a sink failed (an output that could not be written): any error,
+/// with its causes, which the engine passes on as [`crate::EngineError::Sink`].
+pub type SinkError = Box<dyn std::error::Error + Send + Sync + 'static>;
+
+/// What every [`Sink`] method returns.
+pub type SinkResult = Result<(), SinkError>;
+
+/// A listener of the engine.
+pub trait Sink {
+    fn begin(&mut self, _info: &SectionInfo<'_>) -> SinkResult {
+        Ok(())
+    }
+    fn train(&mut self, _train: &TrainEvent<'_>) -> SinkResult {
+        Ok(())
+    }
+    fn pulse(&mut self, _pulse: &PulseEvent<'_>) -> SinkResult {
+        Ok(())
+    }
+    fn measurement(&mut self, _m: &MeasurementOutput<'_>) -> SinkResult {
+        Ok(())
+    }
+    fn field(&mut self, _f: &FieldSnapshot<'_>) -> SinkResult {
+        Ok(())
+    }
+    fn wheel_contacts(&mut self, _w: &WheelContacts<'_>) -> SinkResult {
+        Ok(())
+    }
+    /// Completes the output (e.g. renames the temporary file into place).
+    fn finish(&mut self, _summary: &RunSummary) -> SinkResult {
+        Ok(())
+    }
+}
+
+/// Forwards every call to several sinks in turn.
+#[derive(Default)]
+pub struct Fanout<'s> {
+    pub sinks: Vec<&'s mut dyn Sink>,
+}
+
+impl Sink for Fanout<'_> {
+    fn begin(&mut self, info: &SectionInfo<'_>) -> SinkResult {
+        self.sinks.iter_mut().try_for_each(|s| s.begin(info))
+    }
+    fn train(&mut self, train: &TrainEvent<'_>) -> SinkResult {
+        self.sinks.iter_mut().try_for_each(|s| s.train(train))
+    }
+    fn pulse(&mut self, pulse: &PulseEvent<'_>) -> SinkResult {
+        self.sinks.iter_mut().try_for_each(|s| s.pulse(pulse))
+    }
+    fn measurement(&mut self, m: &MeasurementOutput<'_>) -> SinkResult {
+        self.sinks.iter_mut().try_for_each(|s| s.measurement(m))
+    }
+    fn field(&mut self, f: &FieldSnapshot<'_>) -> SinkResult {
+        self.sinks.iter_mut().try_for_each(|s| s.field(f))
+    }
+    fn wheel_contacts(&mut self, w: &WheelContacts<'_>) -> SinkResult {
+        self.sinks.iter_mut().try_for_each(|s| s.wheel_contacts(w))
+    }
+    fn finish(&mut self, summary: &RunSummary) -> SinkResult {
+        self.sinks.iter_mut().try_for_each(|s| s.finish(summary))
+    }
+}

@@ -1,0 +1,531 @@
+//! The model configuration: the built-in defaults (the paper's Table 2, the
+//! contact constants and Polach's dry set, `crates/model/config/default.toml`) overlaid by
+//! a user's TOML file that sets only the keys it changes
+//! (../shared/spec/interfaces.md).
+//!
+//! The overlay is parsed into a mirror of [`ModelConfig`] whose fields are all
+//! optional and whose tables deny unknown keys, so a misspelt key, a wrong
+//! type or a missing effect parameter is a serde error that names the key.
+//! Ranges are checked once, after merging, by [`ModelConfig::validate`], which
+//! names the dotted key of the first bad value.
+
+pub mod generic;
+
+use std::path::Path;
+
+use serde::{Deserialize, Serialize};
+
+use crate::contact::PolachParams;
+use crate::error::ConfigError;
+use crate::product::ProductParams;
+
+pub use generic::{format_utc, GenericTerm, TermEffect};
+
+/// The text of `config/default.toml`, compiled in.
+pub const DEFAULT_TOML: &str = include_str!("../../config/default.toml");
+
+/// Steel and wheel profile (contact.md, "Hertz").
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ContactParams {
+    pub e_pa: f64,
+    pub nu: f64,
+    /// R_wy, the wheel's transverse profile radius; infinite = flat.
+    pub wheel_profile_radius_m: f64,
+}
+
+/// Polach's creep force parameters (contact.md).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PolachConfig {
+    pub p_a: f64,
+    pub p_b_s_per_m: f64,
+    pub k_a: f64,
+    pub k_s: f64,
+}
+
+impl PolachConfig {
+    pub fn params(&self) -> PolachParams {
+        PolachParams {
+            p_a: self.p_a,
+            p_b_s_per_m: self.p_b_s_per_m,
+            k_a: self.k_a,
+            k_s: self.k_s,
+        }
+    }
+}
+
+/// `rail_ageing` (effects.md): rail product dries out between touches.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RailAgeing {
+    pub tau_s: f64,
+}
+
+/// `rain_washoff` (effects.md): rain washes rail product off.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RainWashoff {
+    pub k_per_mm: f64,
+}
+
+/// `temperature_consumption` (effects.md): consumption follows air temperature.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TemperatureConsumption {
+    pub beta_per_k: f64,
+}
+
+/// `speed_transfer` (effects.md): transfer depends on train speed.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SpeedTransfer {
+    pub n: f64,
+}
+
+/// `wheel_edge_reservoir` (effects.md): product parked at the band's edge.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct WheelEdgeReservoir {
+    pub alpha: f64,
+    pub r: f64,
+}
+
+/// `bogie_bands` (effects.md): two bands on the rail named `high`.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct BogieBands {}
+
+/// The candidate effects of effects.md; `None` = off (the default), and
+/// the generic terms (none by default).
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Effects {
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub rail_ageing: Option<RailAgeing>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub rain_washoff: Option<RainWashoff>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub temperature_consumption: Option<TemperatureConsumption>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub speed_transfer: Option<SpeedTransfer>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub wheel_edge_reservoir: Option<WheelEdgeReservoir>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub bogie_bands: Option<BogieBands>,
+    /// `[[effects.generic]]`: factors outside the catalogue (effects.md,
+    /// "Generic terms"), in the order they were given.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub generic: Vec<GenericTerm>,
+}
+
+impl Effects {
+    /// The names of the effects that are on, in the order of effects.md.
+    pub fn names(&self) -> Vec<&'static str> {
+        crate::effects::EFFECTS
+            .iter()
+            .filter(|spec| (spec.get)(self).is_some())
+            .map(|spec| spec.name)
+            .collect()
+    }
+}
+
+/// Everything the engine needs to know about the physics.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ModelConfig {
+    pub product: ProductParams,
+    pub contact: ContactParams,
+    pub polach: PolachConfig,
+    #[serde(default)]
+    pub effects: Effects,
+}
+
+/// The overlay: every key optional, unknown keys refused.
+#[derive(Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct Overlay {
+    #[serde(default)]
+    product: ProductOverlay,
+    #[serde(default)]
+    contact: ContactOverlay,
+    #[serde(default)]
+    polach: PolachOverlay,
+    #[serde(default)]
+    effects: EffectsOverlay,
+}
+
+/// The effects of an overlay: the named ones as in [`Effects`]; the generic
+/// terms as raw tables, parsed one by one so that an error names the term.
+#[derive(Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct EffectsOverlay {
+    rail_ageing: Option<RailAgeing>,
+    rain_washoff: Option<RainWashoff>,
+    temperature_consumption: Option<TemperatureConsumption>,
+    speed_transfer: Option<SpeedTransfer>,
+    wheel_edge_reservoir: Option<WheelEdgeReservoir>,
+    bogie_bands: Option<BogieBands>,
+    #[serde(default)]
+    generic: Vec<toml::Value>,
+}
+
+/// Declares an overlay struct of optional fields and its merge into the full one.
+macro_rules! overlay {
+    ($overlay:ident => $full:ty { $($field:ident),* $(,)? }) => {
+        #[derive(Debug, Default, Deserialize)]
+        #[serde(deny_unknown_fields)]
+        struct $overlay {
+            $($field: Option<f64>,)*
+        }
+        impl $overlay {
+            fn merge_into(&self, full: &mut $full) {
+                $(if let Some(v) = self.$field { full.$field = v; })*
+            }
+        }
+    };
+}
+
+overlay!(ProductOverlay => ProductParams {
+    k0_kg, km1_kg, km2, kp, kc, mu_d, mu_c, km_kg, kt, cm_kg, cn, m_max_kg,
+});
+overlay!(ContactOverlay => ContactParams { e_pa, nu, wheel_profile_radius_m });
+overlay!(PolachOverlay => PolachConfig { p_a, p_b_s_per_m, k_a, k_s });
+
+impl Default for ModelConfig {
+    /// The built-in defaults. `config/default.toml` is checked by a test, so
+    /// this cannot fail at run time.
+    fn default() -> Self {
+        Self::from_default_toml()
+            .unwrap_or_else(|e| unreachable!("config/default.toml is compiled in and tested: {e}"))
+    }
+}
+
+impl ModelConfig {
+    fn from_default_toml() -> Result<Self, ConfigError> {
+        let cfg: ModelConfig = toml::from_str(DEFAULT_TOML).map_err(|e| ConfigError {
+            source_name: "built-in defaults".into(),
+            key: "-".into(),
+            message: e.to_string(),
+        })?;
+        cfg.validate("built-in defaults")?;
+        Ok(cfg)
+    }
+
+    /// The defaults overlaid with the TOML text `text` (from `source_name`).
+    pub fn from_overlay_str(text: &str, source_name: &str) -> Result<Self, ConfigError> {
+        let mut cfg = Self::default();
+        cfg.overlay_str(text, source_name)?;
+        Ok(cfg)
+    }
+
+    /// The defaults overlaid with the file at `path`.
+    pub fn from_file(path: &Path) -> Result<Self, ConfigError> {
+        let source_name = path.display().to_string();
+        let text = std::fs::read_to_string(path).map_err(|e| ConfigError {
+            source_name: source_name.clone(),
+            key: "-".into(),
+            message: format!("cannot read: {e}"),
+        })?;
+        Self::from_overlay_str(&text, &source_name)
+    }
+
+    /// Overlays `text` on `self`: keys it sets replace ours; effects it
+    /// switches on replace ours (an effect it does not name stays as it is);
+    /// its generic terms are added after ours.
+    pub fn overlay_str(&mut self, text: &str, source_name: &str) -> Result<(), ConfigError> {
+        let overlay: Overlay = toml::from_str(text).map_err(|e| ConfigError {
+            source_name: source_name.into(),
+            key: overlay_error_key(&e, text),
+            message: e.message().to_string(),
+        })?;
+        overlay.product.merge_into(&mut self.product);
+        overlay.contact.merge_into(&mut self.contact);
+        overlay.polach.merge_into(&mut self.polach);
+        let e = overlay.effects;
+        let first = self.effects.generic.len();
+        for (k, value) in e.generic.into_iter().enumerate() {
+            let term = GenericTerm::from_toml(value).map_err(|(key, message)| ConfigError {
+                source_name: source_name.into(),
+                key: format!("effects.generic[{}].{key}", first + k),
+                message,
+            })?;
+            self.effects.generic.push(term);
+        }
+        let mine = &mut self.effects;
+        mine.rail_ageing = e.rail_ageing.or(mine.rail_ageing);
+        mine.rain_washoff = e.rain_washoff.or(mine.rain_washoff);
+        mine.temperature_consumption = e.temperature_consumption.or(mine.temperature_consumption);
+        mine.speed_transfer = e.speed_transfer.or(mine.speed_transfer);
+        mine.wheel_edge_reservoir = e.wheel_edge_reservoir.or(mine.wheel_edge_reservoir);
+        mine.bogie_bands = e.bogie_bands.or(mine.bogie_bands);
+        self.validate(source_name)
+    }
+
+    /// The whole configuration as TOML (for `discover`'s model.toml).
+    pub fn to_toml(&self) -> String {
+        // A struct of f64s and tables always serializes; infinity is valid TOML.
+        toml::to_string(self).unwrap_or_else(|e| unreachable!("ModelConfig serializes: {e}"))
+    }
+
+    /// Checks every value's range; the error names the first bad key.
+    pub fn validate(&self, source_name: &str) -> Result<(), ConfigError> {
+        let bad = |key: &str, message: String| ConfigError {
+            source_name: source_name.into(),
+            key: key.into(),
+            message,
+        };
+        let check = |key: &str, v: f64, ok: bool, what: &str| {
+            if v.is_nan() {
+                Err(bad(key, "is NaN; a finite number is required".into()))
+            } else if !ok {
+                Err(bad(key, format!("is {v}; it must be {what}")))
+            } else {
+                Ok(())
+            }
+        };
+        let fin = |v: f64| v.is_finite();
+        let p = &self.product;
+        check(
+            "product.k0_kg",
+            p.k0_kg,
+            fin(p.k0_kg) && p.k0_kg >= 0.0,
+            "finite and >= 0",
+        )?;
+        check(
+            "product.km1_kg",
+            p.km1_kg,
+            fin(p.km1_kg) && p.km1_kg >= 0.0,
+            "finite and >= 0",
+        )?;
+        check(
+            "product.km2",
+            p.km2,
+            fin(p.km2) && p.km2 > 0.0,
+            "finite and > 0",
+        )?;
+        check("product.kp", p.kp, fin(p.kp), "finite")?;
+        check("product.kc", p.kc, fin(p.kc), "finite")?;
+        check(
+            "product.mu_c",
+            p.mu_c,
+            fin(p.mu_c) && p.mu_c >= 0.0,
+            "finite and >= 0",
+        )?;
+        check(
+            "product.mu_d",
+            p.mu_d,
+            fin(p.mu_d) && p.mu_d >= p.mu_c,
+            "finite and >= product.mu_c",
+        )?;
+        check(
+            "product.km_kg",
+            p.km_kg,
+            fin(p.km_kg) && p.km_kg > 0.0,
+            "finite and > 0",
+        )?;
+        check(
+            "product.kt",
+            p.kt,
+            fin(p.kt) && p.kt >= 0.0,
+            "finite and >= 0",
+        )?;
+        check(
+            "product.cm_kg",
+            p.cm_kg,
+            fin(p.cm_kg) && p.cm_kg > 0.0,
+            "finite and > 0",
+        )?;
+        check(
+            "product.cn",
+            p.cn,
+            fin(p.cn) && p.cn > 0.0,
+            "finite and > 0",
+        )?;
+        check(
+            "product.m_max_kg",
+            p.m_max_kg,
+            fin(p.m_max_kg) && p.m_max_kg > 0.0,
+            "finite and > 0",
+        )?;
+        let c = &self.contact;
+        check(
+            "contact.e_pa",
+            c.e_pa,
+            fin(c.e_pa) && c.e_pa > 0.0,
+            "finite and > 0",
+        )?;
+        check(
+            "contact.nu",
+            c.nu,
+            (0.0..0.5).contains(&c.nu),
+            "in [0, 0.5)",
+        )?;
+        let r = c.wheel_profile_radius_m;
+        check(
+            "contact.wheel_profile_radius_m",
+            r,
+            r > 0.0,
+            "> 0 (inf = flat)",
+        )?;
+        let k = &self.polach;
+        check(
+            "polach.p_a",
+            k.p_a,
+            (0.0..=1.0).contains(&k.p_a),
+            "in [0, 1]",
+        )?;
+        check(
+            "polach.p_b_s_per_m",
+            k.p_b_s_per_m,
+            fin(k.p_b_s_per_m) && k.p_b_s_per_m >= 0.0,
+            "finite and >= 0",
+        )?;
+        check(
+            "polach.k_a",
+            k.k_a,
+            fin(k.k_a) && k.k_a > 0.0,
+            "finite and > 0",
+        )?;
+        check(
+            "polach.k_s",
+            k.k_s,
+            fin(k.k_s) && k.k_s > 0.0,
+            "finite and > 0",
+        )?;
+        let e = &self.effects;
+        for spec in &crate::effects::EFFECTS {
+            let Some(values) = (spec.get)(e) else {
+                continue;
+            };
+            for (param, &x) in spec.params.iter().zip(&values) {
+                let key = format!("effects.{}.{}", spec.name, param.name);
+                check(&key, x, param.is_valid(x), &param.rule())?;
+            }
+        }
+        for (k, term) in e.generic.iter().enumerate() {
+            term.check()
+                .map_err(|(key, message)| bad(&format!("effects.generic[{k}].{key}"), message))?;
+        }
+        Ok(())
+    }
+}
+
+/// The dotted key a TOML error points at (e.g. `product.cn`): the key on the
+/// line of the error's span, under the last table header before it; else the
+/// name a message like "unknown field `x`" quotes.
+fn overlay_error_key(e: &toml::de::Error, text: &str) -> String {
+    if let Some(span) = e.span() {
+        let start = span.start.min(text.len());
+        let line_start = text[..start].rfind('\n').map_or(0, |p| p + 1);
+        let line_end = text[start..].find('\n').map_or(text.len(), |p| start + p);
+        let line = text[line_start..line_end].trim();
+        let table = text[..line_start]
+            .lines()
+            .rev()
+            .map(str::trim)
+            .find(|l| l.starts_with('[') && l.ends_with(']'))
+            .map(|l| l.trim_matches(|c| c == '[' || c == ']').trim().to_string());
+        if let Some((key, _)) = line.split_once('=') {
+            let key = key.trim().trim_matches('"');
+            return match table {
+                Some(t) => format!("{t}.{key}"),
+                None => key.to_string(),
+            };
+        }
+        if line.starts_with('[') {
+            return line
+                .trim_matches(|c| c == '[' || c == ']')
+                .trim()
+                .to_string();
+        }
+    }
+    let msg = e.message();
+    if let Some(start) = msg.find('`') {
+        if let Some(len) = msg[start + 1..].find('`') {
+            return msg[start + 1..start + 1 + len].to_string();
+        }
+    }
+    "-".into()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn defaults_are_table_2() {
+        let c = ModelConfig::default();
+        assert_eq!(c.product.k0_kg, 1.0449e-9);
+        assert_eq!(c.product.km1_kg, 1.1617e-6);
+        assert_eq!(c.product.km2, 0.53);
+        assert_eq!(c.product.kp, 1.84);
+        assert_eq!(c.product.kc, 0.57);
+        assert_eq!(c.product.mu_d, 0.58);
+        assert_eq!(c.product.mu_c, 0.15);
+        assert_eq!(c.product.km_kg, 1.6290e-4);
+        assert_eq!(c.product.kt, 0.5);
+        assert_eq!(c.product.cm_kg, 3.5e-5);
+        assert_eq!(c.product.cn, 12.1);
+        assert_eq!(c.product.m_max_kg, 2.0e-4);
+        assert_eq!(c.contact.e_pa, 210e9);
+        assert_eq!(c.contact.nu, 0.3);
+        assert!(c.contact.wheel_profile_radius_m.is_infinite());
+        assert_eq!((c.polach.p_a, c.polach.p_b_s_per_m), (0.40, 0.60));
+        assert_eq!((c.polach.k_a, c.polach.k_s), (1.00, 0.40));
+        assert!(c.effects.names().is_empty());
+    }
+
+    #[test]
+    fn overlay_sets_only_its_keys() {
+        let c = ModelConfig::from_overlay_str("[product]\ncn = 6\n", "t.toml").unwrap();
+        assert_eq!(c.product.cn, 6.0); // an integer is a valid float
+        assert_eq!(c.product.cm_kg, 3.5e-5);
+        let c =
+            ModelConfig::from_overlay_str("[effects.rail_ageing]\ntau_s = 7200.0\n", "t").unwrap();
+        assert_eq!(c.effects.rail_ageing, Some(RailAgeing { tau_s: 7200.0 }));
+        assert_eq!(c.product, ModelConfig::default().product);
+        let c = ModelConfig::from_overlay_str("[effects.bogie_bands]\n", "t").unwrap();
+        assert!(c.effects.bogie_bands.is_some());
+    }
+
+    fn err(text: &str) -> ConfigError {
+        ModelConfig::from_overlay_str(text, "bad.toml").unwrap_err()
+    }
+
+    #[test]
+    fn bad_overlays_name_the_key() {
+        let e = err("[product]\nkm3 = 1.0\n");
+        assert_eq!(e.key, "product.km3", "{e}");
+        let e = err("[product]\ncn = \"twelve\"\n");
+        assert_eq!(e.key, "product.cn", "{e}");
+        let e = err("[polach]\nk_a = 1\n[product]\nkt = 0.5\ncn = true\n");
+        assert_eq!(e.key, "product.cn", "{e}");
+        let e = err("[product]\ncn = nan\n");
+        assert_eq!(e.key, "product.cn", "{e}");
+        let e = err("[product]\ncm_kg = -1.0\n");
+        assert_eq!(e.key, "product.cm_kg", "{e}");
+        let e = err("[effects.rail_ageing]\ntau_s = -5.0\n");
+        assert_eq!(e.key, "effects.rail_ageing.tau_s", "{e}");
+        let e = err("[effects.rail_ageing]\n");
+        assert!(e.to_string().contains("tau_s"), "{e}");
+        let e = err("[effects.moon_phase]\nx = 1\n");
+        assert!(e.key.contains("moon_phase"), "{e}");
+        let e = err("[effects.speed_transfer]\nn = 11\n");
+        assert_eq!(e.key, "effects.speed_transfer.n", "{e}");
+        let e = err("[nonsense]\n");
+        assert!(e.key.contains("nonsense"), "{e}");
+        let e = err("[product\n");
+        assert!(e.to_string().contains("bad.toml"), "{e}");
+    }
+
+    #[test]
+    fn round_trips_through_toml() {
+        let mut c = ModelConfig::default();
+        c.effects.rail_ageing = Some(RailAgeing { tau_s: 3600.0 });
+        c.effects.bogie_bands = Some(BogieBands {});
+        let text = c.to_toml();
+        let back = ModelConfig::from_overlay_str(&text, "round trip").unwrap();
+        assert_eq!(back, c);
+    }
+}

@@ -1,0 +1,22 @@
+//! The model of ../shared/spec: the pure physics (no I/O, no allocation in
+//! the hot paths) and its configuration.
+//!
+//! - [`product`]: product consumption, friction and transfer (Trummer et al.,
+//!   Lubricants 2021, 9, 100, eq. 1–6; ../shared/spec/model.md).
+//! - [`effects`]: the candidate extensions of ../shared/spec/effects.md.
+//! - [`contact`]: Hertz contact, Kalker coefficients and Polach's creep force
+//!   model (../shared/spec/contact.md).
+//! - [`generic`]: generic terms g(x) on one model quantity.
+//! - [`config`]: the model configuration (the paper's Table 2, the contact
+//!   parameters, the effects switched on), overlaid from TOML.
+//! - [`error`]: configuration and usage errors.
+
+pub mod config;
+pub mod contact;
+pub mod effects;
+pub mod error;
+pub mod generic;
+pub mod product;
+mod quantity;
+
+pub use quantity::Quantity;

@@ -1,0 +1,8 @@
+//! What the engine's results are written to: the MCAP output for Foxglove
+//! ([`mcap_out`]), the rerun recording ([`rerun_out`]), both
+//! [`tortwin_engine::sink::Sink`]s, and files that appear only when complete
+//! ([`files`]).
+
+pub mod files;
+pub mod mcap_out;
+pub mod rerun_out;

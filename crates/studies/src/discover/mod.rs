@@ -1,0 +1,1077 @@
+//! The discrepancy workflow behind `tortwin discover`: what does the model
+//! miss in a recording?
+//!
+//! 1. **Residuals.** The recording is read once ([`data::Dataset`]) and
+//!    replayed through the one engine with the starting model; residual =
+//!    measured − simulated for every measurement (mu, adhesion, rail_mu).
+//! 2. **Diagnosis.** Each measurement carries covariates computed from the
+//!    events (distance downstream of the applicator, time since the site
+//!    was last touched, rain in that time, air temperature, train speed,
+//!    leading/trailing axle, rail, wheel load, time of day, day, ...);
+//!    [`diagnose::rank`] ranks them by the share of the residual variance
+//!    they explain (eta²). [`diagnose::noise_estimate`] estimates the
+//!    measurement noise from axle-to-axle differences, independently of
+//!    the fit.
+//! 3. **Candidates.** Every effect of ../shared/spec/effects.md not yet in
+//!    the model is fitted by re-running the engine ([`fit`]), the candidates
+//!    in parallel (rayon), and judged by two criteria: the Bayesian
+//!    information criterion must drop by more than
+//!    [`Options::bic_threshold`] (`ΔBIC = n ln(SSE1/SSE0) + Δk ln n`); it
+//!    must remove at least [`Options::min_excess_share`] of what the current
+//!    model leaves above the noise; and cross-validation blocked by day, then
+//!    by measurement site, must predict the held-out blocks better than the
+//!    current model does (summed held-out SSE). The site blocks keep a
+//!    cause that belongs to one place (a sensor's offset) from being taken
+//!    for an effect of the track: an effect fitted on the other sites would
+//!    not predict it.
+//! 4. **Forward selection.** Of the candidates passing both, the one with
+//!    the largest BIC drop is added, every effect in the model is refitted
+//!    jointly, and the search repeats until no candidate passes.
+//! 5. **What is left.** If the final RMSE is still well above the noise
+//!    estimate ([`Options::unexplained_ratio`]), the remaining residual is
+//!    reported with the covariate it follows most closely: no effect is
+//!    forced onto it.
+//!
+//! Effects already in the starting configuration stay on and are refitted
+//! first (step 0).
+
+pub mod data;
+pub mod describe;
+pub mod diagnose;
+pub mod fit;
+pub mod report;
+pub mod screen;
+pub mod space;
+
+use std::collections::{BTreeMap, HashMap};
+use std::time::Instant;
+
+use anyhow::Result;
+use rayon::prelude::*;
+use serde::Serialize;
+
+use data::Dataset;
+use diagnose::CovariateScore;
+use fit::{Blocking, Candidate, CrossValidation, Evaluator, Space, Start};
+use space::Drivers;
+use tortwin_model::config::{ModelConfig, TermEffect};
+use tortwin_model::effects::Named;
+use tortwin_model::generic::{ActsOn, FormKind};
+
+/// The thresholds of the selection.
+#[derive(Debug, Clone, Copy, Serialize)]
+pub struct Options {
+    /// A candidate must lower the BIC by more than this (a negative number).
+    pub bic_threshold: f64,
+    /// A candidate must explain at least this share of what the current
+    /// model leaves above the noise (`(SSE0 − SSE1) / (SSE0 − n σ̂²)`): an
+    /// effect that removes only a sliver of a large residual is not its
+    /// cause, however significant the sliver.
+    pub min_excess_share: f64,
+    /// After selection, a RMSE above this times the noise estimate is
+    /// reported as an unexplained residual.
+    pub unexplained_ratio: f64,
+    /// At most this many effects are added.
+    pub max_steps: usize,
+}
+
+impl Default for Options {
+    fn default() -> Self {
+        Self {
+            bic_threshold: -10.0,
+            min_excess_share: 0.25,
+            unexplained_ratio: 1.1,
+            max_steps: Candidate::ALL.len(),
+        }
+    }
+}
+
+pub use crate::progress::{Progress, Silent};
+
+/// An effect switched on, with its parameters by name (interfaces.md,
+/// report.json): a named effect, or a generic term with its acts_on,
+/// driver, form, scope and a sentence for an engineer.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct EffectParams {
+    pub name: String,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub acts_on: Option<String>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub driver: Option<String>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub form: Option<String>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub scope: Option<BTreeMap<String, String>>,
+    pub params: BTreeMap<String, serde_json::Value>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub description: Option<String>,
+    /// `physics` or `data quality` (a term on `measurement`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub kind: Option<String>,
+}
+
+impl EffectParams {
+    /// Whether two entries are the same effect (whatever their parameters).
+    pub fn same_effect(&self, other: &EffectParams) -> bool {
+        self.name == other.name
+            && self.acts_on == other.acts_on
+            && self.driver == other.driver
+            && self.form == other.form
+            && self.scope == other.scope
+            && (self.name != "generic"
+                || self.params.get("t0_utc") == other.params.get("t0_utc")
+                    && self.params.get("x0") == other.params.get("x0"))
+    }
+
+    /// `name (p = v, ...)` for people.
+    pub fn text(&self) -> String {
+        let params: Vec<String> = self
+            .params
+            .iter()
+            .map(|(k, v)| match v.as_f64() {
+                Some(x) => format!("{k} = {}", fmt_param(x)),
+                None => format!("{k} = {}", v.as_str().unwrap_or("?")),
+            })
+            .collect();
+        let head = match (&self.acts_on, &self.driver, &self.form) {
+            (Some(a), Some(d), Some(f)) => format!("generic {a} × {d} ({f}{})", self.scope_text()),
+            (Some(a), _, _) => format!(
+                "generic {a} offset ({})",
+                self.scope_text().trim_start_matches("; ")
+            ),
+            _ => self.name.clone(),
+        };
+        if params.is_empty() {
+            head
+        } else {
+            format!("{head} ({})", params.join(", "))
+        }
+    }
+
+    fn scope_text(&self) -> String {
+        match &self.scope {
+            Some(s) if !s.is_empty() => format!(
+                "; {}",
+                s.iter()
+                    .map(|(k, v)| format!("{k} {v}"))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ),
+            _ => String::new(),
+        }
+    }
+}
+
+/// One candidate at one step.
+#[derive(Debug, Clone, Serialize)]
+pub struct CandidateResult {
+    pub name: String,
+    /// The name, or a generic term's acts_on, driver, form and scope.
+    pub label: String,
+    /// Fitted on every day.
+    pub params: BTreeMap<String, f64>,
+    pub sse: f64,
+    pub rmse: f64,
+    /// Parameters fitted (Δk).
+    pub k: usize,
+    pub delta_bic: f64,
+    pub passes_bic: bool,
+    /// Share of the current model's excess over the noise this candidate
+    /// removes (`None` without a noise estimate, or with no excess).
+    pub excess_share: Option<f64>,
+    pub passes_share: bool,
+    /// Blocked-by-day cross-validation; computed for candidates that pass
+    /// the BIC and the share, in order of their BIC drop, until one passes.
+    pub cv: Option<CrossValidation>,
+    pub passes_cv: Option<bool>,
+    /// Blocked-by-site cross-validation, for a candidate that passes by
+    /// day (with measurements at two sites or more).
+    pub cv_site: Option<CrossValidation>,
+    pub passes_cv_site: Option<bool>,
+    pub engine_runs: usize,
+}
+
+/// One round of the forward selection.
+#[derive(Debug, Clone, Serialize)]
+pub struct Step {
+    pub step: usize,
+    /// The model the candidates are tried on.
+    pub model_effects: Vec<EffectParams>,
+    pub sse: f64,
+    pub rmse: f64,
+    /// The current model's held-out SSE: each block predicted with the
+    /// current parameters (fitted on every block, which favours the current
+    /// model: a candidate must beat it all the same). The SSE itself.
+    pub cv_sse: f64,
+    /// The current model's SSE per day and per measured site.
+    pub sse_by_day: Vec<f64>,
+    pub sse_by_site: Vec<f64>,
+    /// What the screening of the generic terms saw.
+    pub screening: screen::Screening,
+    /// Best BIC drop first.
+    pub candidates: Vec<CandidateResult>,
+    pub accepted: Option<String>,
+    /// An effect taken out again after the step: the model no longer needs it.
+    pub removed: Option<String>,
+    /// The model after the step (after the joint refit).
+    pub rmse_after: f64,
+    pub effects_after: Vec<EffectParams>,
+}
+
+/// A residual no known effect explains.
+#[derive(Debug, Clone, Serialize)]
+pub struct Unexplained {
+    pub rmse: f64,
+    pub noise_estimate: f64,
+    pub ratio: f64,
+    /// The covariate the remaining residual follows most closely.
+    pub covariate: String,
+    pub description: String,
+    pub eta2: f64,
+    /// The three covariates it follows most closely, with eta².
+    pub follows: Vec<(String, f64)>,
+    /// Where it lives: site, rail, time window, distance.
+    pub location: Option<describe::Location>,
+}
+
+/// Everything a run of the workflow found (report.json is this, in order).
+#[derive(Debug, Clone, Serialize)]
+pub struct Discovery {
+    /// Effects the workflow added (not those of the starting model).
+    pub effects_found: Vec<EffectParams>,
+    /// RMSE over the measurements used (all but gross outliers), before
+    /// and after: what a replay with model.toml gives when there are none.
+    pub rmse_before: f64,
+    pub rmse_after: f64,
+    /// sigma of the measurements, from axle-to-axle residual differences.
+    pub noise_estimate: Option<f64>,
+    /// One paragraph: what was found, or that nothing is missing.
+    pub verdict: String,
+    pub recording: String,
+    pub measurements: usize,
+    /// Measurements the fits use (all but the gross outliers).
+    pub measurements_used: usize,
+    /// The measurements treated as gross errors, and where.
+    pub outliers: screen::Outliers,
+    /// RMSE of the final model over every measurement, outliers included
+    /// (`rmse_after` leaves them out).
+    pub rmse_after_all_rows: f64,
+    pub days: usize,
+    /// The starting model's effects (from --config), and the final model's.
+    pub start_effects: Vec<EffectParams>,
+    pub model_effects: Vec<EffectParams>,
+    /// Step 0: the starting model's effects refitted (if it has any).
+    pub start_refit: Option<Vec<EffectParams>>,
+    pub steps: Vec<Step>,
+    /// (label, RMSE): the starting model, after step 0, after each added effect.
+    pub rmse_by_step: Vec<(String, f64)>,
+    pub covariates_before: Vec<CovariateScore>,
+    pub covariates_after: Vec<CovariateScore>,
+    pub unexplained: Option<Unexplained>,
+    pub options: Options,
+    pub engine_runs: usize,
+    pub elapsed_s: f64,
+    #[serde(skip)]
+    pub start: ModelConfig,
+    #[serde(skip)]
+    pub model: ModelConfig,
+    #[serde(skip)]
+    pub residual_before: Vec<f64>,
+    #[serde(skip)]
+    pub residual_after: Vec<f64>,
+}
+
+/// The effects on in `cfg`, with their parameters: the named ones in the
+/// order of effects.md, then the generic terms in their order.
+pub fn effects_of(cfg: &ModelConfig) -> Vec<EffectParams> {
+    let mut list: Vec<EffectParams> = Candidate::ALL
+        .iter()
+        .filter_map(|c| {
+            c.get(&cfg.effects).map(|p| EffectParams {
+                name: c.name().to_string(),
+                acts_on: None,
+                driver: None,
+                form: None,
+                scope: None,
+                params: c
+                    .named(&p)
+                    .into_iter()
+                    .map(|(k, v)| (k, serde_json::Value::from(v)))
+                    .collect(),
+                description: None,
+                kind: None,
+            })
+        })
+        .collect();
+    for term in &cfg.effects.generic {
+        let mut params: BTreeMap<String, serde_json::Value> = term
+            .params()
+            .into_iter()
+            .map(|(k, v)| (k.to_string(), serde_json::Value::from(v)))
+            .collect();
+        if let Some(t0) = term.t0_utc() {
+            params.insert("t0_utc".into(), serde_json::Value::from(t0));
+        }
+        let (driver, form) = match term.effect {
+            TermEffect::Factor { driver, form } => (
+                Some(driver.name().to_string()),
+                Some(form.kind().name().to_string()),
+            ),
+            TermEffect::Offset { .. } => (None, None),
+        };
+        list.push(EffectParams {
+            name: "generic".into(),
+            acts_on: Some(term.acts_on.name().to_string()),
+            driver,
+            form,
+            scope: Some(
+                term.scope()
+                    .into_iter()
+                    .map(|(k, v)| (k.to_string(), v))
+                    .collect(),
+            ),
+            params,
+            description: None,
+            kind: Some(
+                if term.acts_on == ActsOn::Measurement {
+                    "data quality"
+                } else {
+                    "physics"
+                }
+                .into(),
+            ),
+        });
+    }
+    list
+}
+
+fn rmse(sse: f64, n: usize) -> f64 {
+    (sse / n.max(1) as f64).sqrt()
+}
+
+/// Residuals with the outliers' set to NaN (left out of the diagnosis).
+fn screened(residual: &[f64], active: &[bool]) -> Vec<f64> {
+    residual
+        .iter()
+        .zip(active)
+        .map(|(&r, &a)| if a { r } else { f64::NAN })
+        .collect()
+}
+
+/// Runs the workflow on `data` from the model `start`.
+pub fn discover(
+    data: &Dataset,
+    start: &ModelConfig,
+    options: &Options,
+    progress: &dyn Progress,
+) -> Result<Discovery> {
+    let t0 = Instant::now();
+    tortwin_engine::generic::check_terms_against(
+        &start.effects.generic,
+        &data.section,
+        "--config",
+    )?;
+
+    progress.stage("replaying with the starting model");
+    // Gross outliers first: nothing after this sees them.
+    let simulated_start = data.simulate(start)?;
+    let raw_residual: Vec<f64> = data
+        .rows
+        .iter()
+        .zip(&simulated_start)
+        .map(|(r, s)| r.measured - s)
+        .collect();
+    let outliers = screen::outliers(data, &raw_residual);
+    let ev = Evaluator::new(data, outliers.active.clone(), |runs| progress.done(runs));
+    let n = ev.n_active();
+    let drivers = Drivers::of(data);
+
+    let (residual_before, eval_before) = ev.residuals(start)?;
+    let rmse_before = rmse(eval_before.sse, n);
+    let clean_before = screened(&residual_before, &ev.active);
+    let noise_estimate = diagnose::noise_estimate(data, &clean_before);
+    let covariates_before = diagnose::rank(data, &clean_before);
+
+    let mut current = start.clone();
+    let mut sse = eval_before.sse;
+    // The noise estimate of the selection: an effect that varies from axle
+    // to axle (a load-driven one) inflates the first estimate, so it is
+    // estimated again as the model grows, the smallest kept.
+    let mut noise_now = noise_estimate;
+    let mut accepted: Vec<Candidate> = Candidate::ALL
+        .into_iter()
+        .filter(|c| c.get(&start.effects).is_some())
+        .collect();
+    let mut rmse_by_step = vec![("starting model".to_string(), rmse_before)];
+
+    // Step 0: the starting model's own effects, refitted.
+    let mut start_refit = None;
+    if accepted.iter().any(|c| c.dims() > 0) {
+        progress.stage("step 0: refitting the starting model's effects");
+        let space = Space {
+            base: current.clone(),
+            slots: accepted.clone(),
+        };
+        let fit = fit::fit(&ev, &space, Start::Warm(space.units_of(&current)), None)?;
+        if fit.eval.sse < sse {
+            current = space.config(&fit.u);
+            sse = fit.eval.sse;
+        }
+        start_refit = Some(effects_of(&current));
+        rmse_by_step.push(("starting effects refitted".to_string(), rmse(sse, n)));
+    }
+
+    let has_high_rail = data.section.rails.iter().any(|r| r == "high");
+    let mut warm: HashMap<Candidate, Vec<f64>> = HashMap::new();
+    let mut responses = screen::ResponseCache::default();
+    // Named effects that did not pass the BIC at a step are not tried again.
+    let mut hopeless: Vec<Candidate> = Vec::new();
+    let mut steps = Vec::new();
+    let ln_n = (n as f64).ln();
+    let mut simulated_current = if current == *start {
+        simulated_start
+    } else {
+        ev.simulate(&current)?
+    };
+    for step in 1..=options.max_steps {
+        let mut candidates: Vec<(Candidate, Start)> = Candidate::ALL
+            .into_iter()
+            .filter(|c| !accepted.contains(c))
+            // Without a rail named `high` the effect does nothing.
+            .filter(|c| *c != Candidate::Named(Named::BogieBands) || has_high_rail)
+            .filter(|c| !hopeless.contains(c))
+            .map(|c| {
+                let start = warm
+                    .get(&c)
+                    .map_or(Start::Fresh, |u| Start::Warm(u.clone()));
+                (c, start)
+            })
+            .collect();
+        progress.stage(&format!("step {step}: screening the generic terms"));
+        let (generic, screening) = screen::propose(
+            &ev,
+            &drivers,
+            &current,
+            &simulated_current,
+            noise_now,
+            // ΔBIC < threshold needs n ln(SSE1/SSE0) < threshold − k ln n,
+            // about a reduction of (|threshold| + k ln n) σ² for k = 1.
+            noise_now.map_or(0.0, |s| (options.bic_threshold.abs() + ln_n) * s * s),
+            &mut responses,
+        )?;
+        let generic: Vec<(Candidate, Start)> = generic
+            .into_iter()
+            .filter(|(c, _)| !accepted.contains(c) && !hopeless.contains(c))
+            .collect();
+        // After a step: a named effect whose earlier optimum no longer
+        // lowers the SSE at all was standing in for what was just added
+        // (unless a generic term of its own family is a candidate: then it
+        // is the better name for what that term finds).
+        let families: Vec<Candidate> = generic
+            .iter()
+            .filter_map(|(c, _)| named_family(c))
+            .collect();
+        let stale: Vec<bool> = candidates
+            .par_iter()
+            .map(|(c, start)| match start {
+                Start::Warm(u) if !c.is_generic() && !families.contains(c) => {
+                    let space = Space {
+                        base: current.clone(),
+                        slots: vec![c.clone()],
+                    };
+                    Ok(ev.evaluate(&space.config(u))?.sse >= sse)
+                }
+                _ => Ok(false),
+            })
+            .collect::<Result<_>>()?;
+        let mut stale = stale.into_iter();
+        candidates.retain(|_| !stale.next().unwrap_or(false));
+        candidates.extend(generic);
+        if candidates.is_empty() {
+            break;
+        }
+        progress.stage(&format!(
+            "step {step}: fitting {} candidates",
+            candidates.len()
+        ));
+        let fits = fit_each(&ev, &current, &candidates)?;
+        // The best exp terms in their other forms (linear, power, a step).
+        let mut exp_fits: Vec<&(Candidate, Space, fit::Fit)> = fits
+            .iter()
+            .filter(|(c, _, _)| matches!(c, Candidate::Generic(g) if g.form == Some(FormKind::Exp)))
+            .collect();
+        exp_fits.sort_by(|a, b| a.2.eval.sse.total_cmp(&b.2.eval.sse));
+        let residual_now: Vec<f64> = data
+            .rows
+            .iter()
+            .zip(&simulated_current)
+            .map(|(r, s)| r.measured - s)
+            .collect();
+        let more: Vec<(Candidate, Start)> = exp_fits
+            .iter()
+            .take(FORMS_FOR)
+            .filter(|(_, _, f)| f.eval.sse < sse)
+            .flat_map(|(c, space, f)| match c {
+                Candidate::Generic(g) => {
+                    let beta = space.params(&f.u).pop().and_then(|p| p.first().copied());
+                    screen::other_forms(
+                        data,
+                        &drivers,
+                        &ev.active,
+                        &residual_now,
+                        g,
+                        beta.unwrap_or(0.0),
+                    )
+                }
+                _ => Vec::new(),
+            })
+            .collect();
+        let mut fits = fits;
+        if !more.is_empty() {
+            progress.stage(&format!("step {step}: fitting {} more forms", more.len()));
+            fits.extend(fit_each(&ev, &current, &more)?);
+        }
+        let mut results: Vec<(CandidateResult, Space, Vec<f64>)> = fits
+            .into_iter()
+            .map(|(c, space, f)| {
+                if !c.is_generic() {
+                    warm.insert(c.clone(), f.u.clone());
+                    // A named effect that could not pass the BIC while the
+                    // residual was larger will not pass on a smaller one.
+                    let bic = n as f64 * (f.eval.sse / sse).ln() + c.dims() as f64 * ln_n;
+                    if bic >= options.bic_threshold {
+                        hopeless.push(c.clone());
+                    }
+                }
+                let k = c.dims() + usize::from(is_step(&c));
+                let delta_bic = n as f64 * (f.eval.sse / sse).ln() + k as f64 * ln_n;
+                let (excess_share, passes_share) =
+                    judge_share(sse, f.eval.sse, n, noise_now, options);
+                let params = space.params(&f.u).pop().unwrap_or_default();
+                (
+                    CandidateResult {
+                        name: c.name().to_string(),
+                        label: c.label(),
+                        params: c.named(&params),
+                        sse: f.eval.sse,
+                        rmse: rmse(f.eval.sse, n),
+                        k,
+                        delta_bic,
+                        passes_bic: delta_bic < options.bic_threshold,
+                        excess_share,
+                        passes_share,
+                        cv: None,
+                        passes_cv: None,
+                        cv_site: None,
+                        passes_cv_site: None,
+                        engine_runs: f.runs,
+                    },
+                    space,
+                    f.u,
+                )
+            })
+            .collect();
+        results.sort_by(|a, b| a.0.delta_bic.total_cmp(&b.0.delta_bic));
+        // The change point of the residual lags a cause with memory (less
+        // product on the rail shows only as it runs out): the best time
+        // step's t0 is searched among the gaps between trains before it.
+        if let Some(k) = results.iter().position(|r| is_time_step(&r.1)) {
+            progress.stage(&format!("step {step}: placing the time step"));
+            if let Some(better) = refine_t0(&ev, data, &results[k].1, &results[k].2)? {
+                let (space, u, eval) = better;
+                let r = &mut results[k].0;
+                let Some(c) = space.slots.first() else {
+                    unreachable!("a refined space has its slot")
+                };
+                r.label = c.label();
+                r.params = c.named(&space.params(&u).pop().unwrap_or_default());
+                r.sse = eval.sse;
+                r.rmse = rmse(eval.sse, n);
+                r.delta_bic = n as f64 * (eval.sse / sse).ln() + r.k as f64 * ln_n;
+                r.passes_bic = r.delta_bic < options.bic_threshold;
+                (r.excess_share, r.passes_share) =
+                    judge_share(sse, eval.sse, n, noise_now, options);
+                results[k].1 = space;
+                results[k].2 = u;
+                results.sort_by(|a, b| a.0.delta_bic.total_cmp(&b.0.delta_bic));
+            }
+        }
+        // A named effect that describes the data (nearly) as well as the
+        // best generic term is the better statement: it goes first.
+        prefer_named(&mut results, sse);
+
+        // The current model's held-out SSE: every block predicted as it is.
+        let cv_current = sse;
+        let mut chosen = None;
+        for (k, (result, space, u)) in results.iter_mut().enumerate() {
+            if !(result.passes_bic && result.passes_share) {
+                continue;
+            }
+            progress.stage(&format!(
+                "step {step}: cross-validating {} by day",
+                result.label
+            ));
+            let cv = fit::cross_validate(&ev, space, u, Blocking::Day)?;
+            let passes = cv.held_out_sse < cv_current;
+            result.engine_runs += cv.runs;
+            result.cv = Some(cv);
+            result.passes_cv = Some(passes);
+            if !passes {
+                continue;
+            }
+            // A sensor's offset belongs to its site: other sites cannot
+            // predict it, and need not.
+            let site_bound = space.slots.first().is_some_and(|c| {
+                matches!(c, Candidate::Generic(g) if g.acts_on == ActsOn::Measurement && g.site.is_some())
+            });
+            if ev.sites.len() >= 2 && !site_bound {
+                progress.stage(&format!(
+                    "step {step}: cross-validating {} by site",
+                    result.label
+                ));
+                let cv = fit::cross_validate(&ev, space, u, Blocking::Site)?;
+                let passes = cv.held_out_sse < cv_current;
+                result.engine_runs += cv.runs;
+                result.cv_site = Some(cv);
+                result.passes_cv_site = Some(passes);
+                if !passes {
+                    continue;
+                }
+            }
+            chosen = Some(k);
+            break;
+        }
+        let now = ev.evaluate(&current)?;
+        let mut record = Step {
+            step,
+            model_effects: effects_of(&current),
+            sse,
+            rmse: rmse(sse, n),
+            cv_sse: cv_current,
+            sse_by_day: now.sse_by_day.clone(),
+            sse_by_site: now.sse_by_site.clone(),
+            screening,
+            candidates: results.iter().map(|r| r.0.clone()).collect(),
+            accepted: None,
+            removed: None,
+            rmse_after: rmse(sse, n),
+            effects_after: effects_of(&current),
+        };
+        let Some(k) = chosen else {
+            steps.push(record);
+            break;
+        };
+        let (result, space, u) = &results[k];
+        let Some(c) = space.slots.first().cloned() else {
+            break;
+        };
+        current = space.config(u);
+        sse = result.sse;
+        accepted.push(c.clone());
+        record.accepted = Some(c.label());
+
+        // Refit every effect of the model together: the one just added was
+        // fitted with the others held at values that had to make up for it.
+        let joint = Space {
+            base: current.clone(),
+            slots: accepted.clone(),
+        };
+        if joint.dims() > c.dims() {
+            progress.stage(&format!("step {step}: refitting every effect jointly"));
+            let fit = fit::fit(&ev, &joint, Start::Warm(joint.units_of(&current)), None)?;
+            if fit.eval.sse < sse {
+                current = joint.config(&fit.u);
+                sse = fit.eval.sse;
+            }
+        }
+        // Backward: an effect added earlier that the model no longer needs
+        // (it stood in for what came later) is taken out again.
+        if accepted.len() > 1 {
+            let starting = Candidate::ALL
+                .iter()
+                .filter(|c| c.get(&start.effects).is_some())
+                .count();
+            let without: Vec<f64> = accepted[starting..]
+                .par_iter()
+                .map(|c| {
+                    let mut cfg = current.clone();
+                    c.unset(&mut cfg.effects);
+                    Ok(ev.evaluate(&cfg)?.sse)
+                })
+                .collect::<Result<_>>()?;
+            let weakest = without
+                .iter()
+                .enumerate()
+                .map(|(i, &w)| {
+                    let c = &accepted[starting + i];
+                    let k = c.dims() + usize::from(is_step(c));
+                    let keep_bic = n as f64 * (sse / w).ln() + k as f64 * ln_n;
+                    let (_, big) = judge_share(w, sse, n, noise_now, options);
+                    (starting + i, keep_bic, big)
+                })
+                .filter(|(_, keep_bic, big)| *keep_bic >= options.bic_threshold || !big)
+                .max_by(|a, b| a.1.total_cmp(&b.1));
+            if let Some((i, _, _)) = weakest {
+                let c = accepted.remove(i);
+                progress.stage(&format!("step {step}: {} is no longer needed", c.label()));
+                c.unset(&mut current.effects);
+                let joint = Space {
+                    base: current.clone(),
+                    slots: accepted.clone(),
+                };
+                let fit = fit::fit(&ev, &joint, Start::Warm(joint.units_of(&current)), None)?;
+                current = joint.config(&fit.u);
+                sse = fit.eval.sse;
+                record.removed = Some(c.label());
+                hopeless.push(c);
+            }
+        }
+        simulated_current = ev.simulate(&current)?;
+        let residual_now: Vec<f64> = data
+            .rows
+            .iter()
+            .zip(&simulated_current)
+            .zip(&ev.active)
+            .map(|((r, s), &a)| if a { r.measured - s } else { f64::NAN })
+            .collect();
+        if let Some(again) = diagnose::noise_estimate(data, &residual_now) {
+            noise_now = Some(noise_now.map_or(again, |s| s.min(again)));
+        }
+        record.rmse_after = rmse(sse, n);
+        record.effects_after = effects_of(&current);
+        rmse_by_step.push((format!("+ {}", c.label()), rmse(sse, n)));
+        steps.push(record);
+    }
+
+    progress.stage("replaying with the final model");
+    let (residual_after, eval_after) = ev.residuals(&current)?;
+    let rmse_after = rmse(eval_after.sse, n);
+    let clean_after = screened(&residual_after, &ev.active);
+    let covariates_after = diagnose::rank(data, &clean_after);
+    let noise_estimate = noise_now;
+    let unexplained = match (noise_estimate, covariates_after.first()) {
+        (Some(noise), Some(top)) if rmse_after > options.unexplained_ratio * noise => {
+            Some(Unexplained {
+                rmse: rmse_after,
+                noise_estimate: noise,
+                ratio: rmse_after / noise,
+                covariate: top.name.clone(),
+                description: top.description.clone(),
+                eta2: top.eta2,
+                follows: covariates_after
+                    .iter()
+                    .take(3)
+                    .map(|c| (c.name.clone(), c.eta2))
+                    .collect(),
+                location: describe::locate(data, &clean_after, noise),
+            })
+        }
+        _ => None,
+    };
+    let start_effects = effects_of(start);
+    let mut model_effects = effects_of(&current);
+    for (e, term) in model_effects
+        .iter_mut()
+        .filter(|e| e.name == "generic")
+        .zip(&current.effects.generic)
+    {
+        e.description = Some(describe::term(term, data, &drivers));
+    }
+    let effects_found: Vec<EffectParams> = model_effects
+        .iter()
+        .filter(|e| !start_effects.iter().any(|s| s.same_effect(e)))
+        .cloned()
+        .collect();
+    let verdict = verdict(
+        &effects_found,
+        rmse_before,
+        rmse_after,
+        noise_estimate,
+        unexplained.as_ref(),
+    );
+    let rmse_after_all_rows = {
+        let all: f64 = residual_after.iter().map(|r| r * r).sum();
+        rmse(all, residual_after.len())
+    };
+    Ok(Discovery {
+        effects_found,
+        rmse_before,
+        rmse_after,
+        noise_estimate,
+        verdict,
+        recording: data.path.display().to_string(),
+        measurements: data.rows.len(),
+        measurements_used: n,
+        outliers,
+        rmse_after_all_rows,
+        days: data.days.len(),
+        start_effects,
+        model_effects,
+        start_refit,
+        steps,
+        rmse_by_step,
+        covariates_before,
+        covariates_after,
+        unexplained,
+        options: *options,
+        engine_runs: ev.runs() + 1,
+        elapsed_s: t0.elapsed().as_secs_f64(),
+        start: start.clone(),
+        model: current,
+        residual_before,
+        residual_after,
+    })
+}
+
+fn is_time_step(space: &Space) -> bool {
+    matches!(space.slots.first(), Some(Candidate::Generic(g)) if g.driver == Some(tortwin_model::generic::Driver::Time))
+}
+
+/// A fitted space: the space, its search coordinates and their evaluation.
+type Fitted = (Space, Vec<f64>, std::sync::Arc<fit::Evaluation>);
+
+/// The time step of `space` (fitted at `u`) moved to the best gap between
+/// trains within six hours before its t0 (or one after), its factor held;
+/// then the factor refitted there. `None` when no gap does better.
+fn refine_t0(
+    ev: &Evaluator<'_>,
+    data: &Dataset,
+    space: &Space,
+    u: &[f64],
+) -> Result<Option<Fitted>> {
+    let Some(Candidate::Generic(slot)) = space.slots.first() else {
+        return Ok(None);
+    };
+    let Some(t0) = slot.x0() else {
+        return Ok(None);
+    };
+    let f = space
+        .params(u)
+        .pop()
+        .and_then(|p| p.first().copied())
+        .unwrap_or(1.0);
+    let times: Vec<f64> = data
+        .passages
+        .iter()
+        .map(|p| p.log_time_ns as f64 * 1e-9)
+        .collect();
+    let gaps: Vec<f64> = times
+        .windows(2)
+        .map(|w| (0.5 * (w[0] + w[1])).round())
+        .filter(|&g| g >= t0 - 6.0 * 3600.0 && g <= t0 + 3600.0)
+        .collect();
+    let with_t0 = |t: f64| -> Space {
+        let moved = space::GenericSlot::factor(
+            slot.acts_on,
+            slot.driver.unwrap_or(tortwin_model::generic::Driver::Time),
+            FormKind::Step,
+            slot.scope(),
+            Some(t),
+            (0.0, 1.0),
+        );
+        Space {
+            base: space.base.clone(),
+            slots: vec![Candidate::Generic(moved)],
+        }
+    };
+    let base_sse = ev.evaluate(&space.config(u))?.sse;
+    let tried: Vec<(f64, f64)> = gaps
+        .par_iter()
+        .map(|&t| {
+            let s = with_t0(t);
+            let cfg = s.config(&[s.slots[0].unit(0, f)]);
+            Ok((t, ev.evaluate(&cfg)?.sse))
+        })
+        .collect::<Result<_>>()?;
+    let Some(&(best_t, best_sse)) = tried.iter().min_by(|a, b| a.1.total_cmp(&b.1)) else {
+        return Ok(None);
+    };
+    if best_sse >= base_sse {
+        return Ok(None);
+    }
+    let s = with_t0(best_t);
+    let start = Start::Warm(vec![s.slots[0].unit(0, f)]);
+    let fitted = fit::fit(ev, &s, start, None)?;
+    Ok(Some((s, fitted.u, fitted.eval)))
+}
+
+/// The named effect a generic term is a form of (effects.md:
+/// `temperature_consumption` is consumption × exp of air temperature,
+/// `speed_transfer` transfer × power of speed), for an unscoped term.
+fn named_family(c: &Candidate) -> Option<Candidate> {
+    use tortwin_model::generic::Driver;
+    match c {
+        Candidate::Generic(g) if g.scope().keys() == 0 => match (g.acts_on, g.driver) {
+            (ActsOn::Consumption, Some(Driver::AirTemperatureC)) => {
+                Some(Candidate::Named(Named::TemperatureConsumption))
+            }
+            (ActsOn::Transfer, Some(Driver::SpeedMps)) => {
+                Some(Candidate::Named(Named::SpeedTransfer))
+            }
+            _ => None,
+        },
+        _ => None,
+    }
+}
+
+/// Each candidate fitted alone on top of `current`, in parallel.
+fn fit_each(
+    ev: &Evaluator<'_>,
+    current: &ModelConfig,
+    candidates: &[(Candidate, Start)],
+) -> Result<Vec<(Candidate, Space, fit::Fit)>> {
+    candidates
+        .par_iter()
+        .map(|(c, start)| {
+            let space = Space {
+                base: current.clone(),
+                slots: vec![c.clone()],
+            };
+            fit::fit(ev, &space, start.clone(), None).map(|f| (c.clone(), space, f))
+        })
+        .collect()
+}
+
+/// Whether a candidate is a step whose threshold the data chose (one more
+/// parameter for the BIC).
+fn is_step(c: &Candidate) -> bool {
+    matches!(c, Candidate::Generic(g) if g.form == Some(FormKind::Step))
+}
+
+/// Moves the best passing named effect in front of the generic terms when
+/// it removes at least [`NAMED_SHARE`] of what the best candidate removes:
+/// effects.md's named effects are the model's own vocabulary.
+fn prefer_named(results: &mut [(CandidateResult, Space, Vec<f64>)], sse: f64) {
+    let passing = |r: &CandidateResult| r.passes_bic && r.passes_share;
+    let Some(best) = results.iter().position(|r| passing(&r.0)) else {
+        return;
+    };
+    if results[best].0.name != "generic" {
+        return;
+    }
+    // A named effect acts everywhere: it describes the data only where the
+    // best generic term does too (a term scoped to one rail, applicator or
+    // site says something the named effect cannot).
+    let unscoped = matches!(
+        results[best].1.slots.first(),
+        Some(Candidate::Generic(g)) if g.scope().keys() == 0
+    );
+    if !unscoped {
+        return;
+    }
+    let best_gain = sse - results[best].0.sse;
+    if let Some(named) = results.iter().position(|r| {
+        r.0.name != "generic" && passing(&r.0) && sse - r.0.sse >= NAMED_SHARE * best_gain
+    }) {
+        results[best..=named].rotate_right(1);
+    }
+}
+
+/// The share of the current excess over the noise a candidate removes, and
+/// whether that passes: at least [`Options::min_excess_share`] of it, and
+/// a drop of the mean squared residual of at least [`MIN_EFFECT`] σ² (an
+/// effect too small to matter to anyone is not added, however significant
+/// with many measurements).
+fn judge_share(
+    sse0: f64,
+    sse1: f64,
+    n: usize,
+    noise: Option<f64>,
+    options: &Options,
+) -> (Option<f64>, bool) {
+    let Some(s) = noise else {
+        return (None, true);
+    };
+    let excess = sse0 - n as f64 * s * s;
+    let share = (excess > 0.0).then(|| (sse0 - sse1) / excess);
+    let big_enough = (sse0 - sse1) / n as f64 >= MIN_EFFECT * s * s;
+    (
+        share,
+        big_enough && share.is_none_or(|x| x >= options.min_excess_share),
+    )
+}
+
+/// See [`judge_share`]: 2 % of σ², an effect of about 0.14 σ RMS.
+const MIN_EFFECT: f64 = 0.02;
+
+/// The exp terms whose other forms are fitted too, per step.
+const FORMS_FOR: usize = 2;
+
+/// See [`prefer_named`].
+const NAMED_SHARE: f64 = 0.95;
+
+fn verdict(
+    found: &[EffectParams],
+    rmse_before: f64,
+    rmse_after: f64,
+    noise: Option<f64>,
+    unexplained: Option<&Unexplained>,
+) -> String {
+    let noise_text = noise.map_or_else(
+        || "the noise could not be estimated (no pairs of axles)".to_string(),
+        |s| format!("the noise estimate is {s:.5}"),
+    );
+    let mut text = if found.is_empty() {
+        match unexplained {
+            None => format!(
+                "The model explains the data to the noise level: no candidate effect passes \
+                 (RMSE {rmse_before:.5}; {noise_text}). Nothing was added."
+            ),
+            Some(_) => format!(
+                "No candidate effect passes, but the model does not explain the data to the noise \
+                 level (RMSE {rmse_before:.5}; {noise_text}). Nothing was added."
+            ),
+        }
+    } else {
+        let names: Vec<String> = found.iter().map(EffectParams::text).collect();
+        format!(
+            "Found {}: RMSE {rmse_before:.5} -> {rmse_after:.5}; {noise_text}.",
+            names.join(", ")
+        )
+    };
+    if let (Some(_), false) = (unexplained, found.is_empty()) {
+        text.push_str(
+            " The effects found explain part of the residual; what is left may have a cause \
+             they only stand in for.",
+        );
+    }
+    for e in found.iter().filter(|e| e.description.is_some()) {
+        text.push_str(&format!(" {}", e.description.as_deref().unwrap_or("")));
+    }
+    if let Some(u) = unexplained {
+        text.push_str(&format!(
+            " An unexplained residual remains (RMSE {:.5} = {:.2} x the noise estimate); it follows \
+             {} most closely (eta² = {:.3}). No known effect explains it.",
+            u.rmse, u.ratio, u.covariate, u.eta2
+        ));
+        if let Some(at) = &u.location {
+            let distance = at
+                .distance_from_applicator_m
+                .map_or_else(String::new, |d| format!(", {d:.0} m from the applicator"));
+            text.push_str(&format!(
+                " It lives at site {} on the {} rail{distance}, from {} to {} ({} measurements, \
+                 mean residual {:+.4}, {:.0} % of the excess over the noise): look there.",
+                at.site,
+                at.rail,
+                at.from_utc,
+                at.to_utc,
+                at.measurements,
+                at.mean_residual,
+                100.0 * at.share_of_excess
+            ));
+        }
+    }
+    text
+}
+
+/// A parameter value for people: 4 significant digits.
+pub fn fmt_param(v: f64) -> String {
+    if v == 0.0 {
+        "0".into()
+    } else if v.abs() >= 1e4 || v.abs() < 1e-3 {
+        format!("{v:.3e}")
+    } else {
+        let digits = (3 - v.abs().log10().floor() as i32).max(0) as usize;
+        format!("{v:.digits$}")
+    }
+}

@@ -1,0 +1,372 @@
+//! The space of generic terms discover searches (effects.md, "Generic
+//! terms"): every acts_on × driver × form × scope the recording can show.
+//!
+//! A [`GenericSlot`] is one term with its parameter left free: acts_on,
+//! driver, form, scope, and for a step its threshold (`x0`, or `t0` for a
+//! time step), fixed when the slot is made. Its one fitted parameter (beta,
+//! n, gamma, f or offset) is searched on a bounded range that follows from
+//! the driver's observed range, so that every slot can move g over the same
+//! span whatever the driver's units.
+//!
+//! [`Space::enumerate`] lists the directions the screening
+//! (`screen.rs`) tries; adding a driver is one line in
+//! `model::generic::Driver` and one in [`Drivers`].
+
+use serde::Serialize;
+
+use super::data::Dataset;
+use tortwin_model::config::{Effects, GenericTerm, TermEffect};
+use tortwin_model::generic::{ActsOn, Driver, Form, FormKind};
+use tortwin_recording::{EventKind, Quantity};
+
+/// How far a fitted factor may reach over the observed range of its
+/// driver: `|ln g|` up to about this much at the extreme of the range.
+const REACH: f64 = 2.5;
+/// The largest measurement offset searched.
+const OFFSET_MAX: f64 = 0.3;
+/// A step's factor is searched in [0, STEP_F_MAX].
+const STEP_F_MAX: f64 = 3.0;
+
+/// One generic term with its parameter left free.
+#[derive(Debug, Clone, PartialEq, Eq, Hash, Serialize)]
+pub struct GenericSlot {
+    pub acts_on: ActsOn,
+    /// `None` for `measurement`.
+    pub driver: Option<Driver>,
+    pub form: Option<FormKind>,
+    pub applicator: Option<String>,
+    pub rail: Option<String>,
+    pub site: Option<String>,
+    pub quantity: Option<Quantity>,
+    /// A step's threshold (unix seconds for time), as bits.
+    x0_bits: Option<u64>,
+    lo_bits: u64,
+    hi_bits: u64,
+}
+
+/// Where a slot acts, by name.
+#[derive(Debug, Clone, Default, PartialEq, Eq, Hash, Serialize)]
+pub struct Scope {
+    pub applicator: Option<String>,
+    pub rail: Option<String>,
+    pub site: Option<String>,
+    pub quantity: Option<Quantity>,
+}
+
+impl Scope {
+    /// Scope keys named (more keys: a narrower statement).
+    pub fn keys(&self) -> usize {
+        usize::from(self.applicator.is_some())
+            + usize::from(self.rail.is_some())
+            + usize::from(self.site.is_some())
+            + usize::from(self.quantity.is_some())
+    }
+}
+
+impl GenericSlot {
+    /// A slot on `acts_on` driven by `driver` in `form` (a step at `x0`),
+    /// its parameter searched on the range that `range` (the driver's
+    /// observed min and max) allows.
+    pub fn factor(
+        acts_on: ActsOn,
+        driver: Driver,
+        form: FormKind,
+        scope: Scope,
+        x0: Option<f64>,
+        range: (f64, f64),
+    ) -> Self {
+        let x_ref = driver.x_ref().unwrap_or(0.0);
+        let (lo, hi) = match form {
+            FormKind::Exp | FormKind::Linear => {
+                let span = (range.0 - x_ref)
+                    .abs()
+                    .max((range.1 - x_ref).abs())
+                    .max(1e-9);
+                let b = if form == FormKind::Exp {
+                    REACH / span
+                } else {
+                    1.0 / span
+                };
+                (-b, b)
+            }
+            FormKind::Power => {
+                let span = (range.0.max(1e-12) / x_ref)
+                    .ln()
+                    .abs()
+                    .max((range.1.max(1e-12) / x_ref).ln().abs())
+                    .max(1e-9);
+                (-REACH / span, REACH / span)
+            }
+            FormKind::Step => (0.0, STEP_F_MAX),
+        };
+        Self {
+            acts_on,
+            driver: Some(driver),
+            form: Some(form),
+            applicator: scope.applicator,
+            rail: scope.rail,
+            site: scope.site,
+            quantity: scope.quantity,
+            x0_bits: x0.map(f64::to_bits),
+            lo_bits: lo.to_bits(),
+            hi_bits: hi.to_bits(),
+        }
+    }
+
+    /// An offset on what a site measures.
+    pub fn offset(scope: Scope) -> Self {
+        Self {
+            acts_on: ActsOn::Measurement,
+            driver: None,
+            form: None,
+            applicator: None,
+            rail: scope.rail,
+            site: scope.site,
+            quantity: scope.quantity,
+            x0_bits: None,
+            lo_bits: (-OFFSET_MAX).to_bits(),
+            hi_bits: OFFSET_MAX.to_bits(),
+        }
+    }
+
+    pub fn scope(&self) -> Scope {
+        Scope {
+            applicator: self.applicator.clone(),
+            rail: self.rail.clone(),
+            site: self.site.clone(),
+            quantity: self.quantity,
+        }
+    }
+
+    pub fn x0(&self) -> Option<f64> {
+        self.x0_bits.map(f64::from_bits)
+    }
+
+    /// The fitted parameter's range.
+    pub fn bounds(&self) -> (f64, f64) {
+        (f64::from_bits(self.lo_bits), f64::from_bits(self.hi_bits))
+    }
+
+    /// The parameter's name in a `[[effects.generic]]` table.
+    pub fn param_name(&self) -> &'static str {
+        match self.form {
+            None => "offset",
+            Some(FormKind::Exp) => "beta",
+            Some(FormKind::Power) => "n",
+            Some(FormKind::Linear) => "gamma",
+            Some(FormKind::Step) => "f",
+        }
+    }
+
+    /// The parameter value at which the term changes nothing.
+    pub fn neutral(&self) -> f64 {
+        match self.form {
+            Some(FormKind::Step) => 1.0,
+            _ => 0.0,
+        }
+    }
+
+    /// The term with parameter `p`.
+    pub fn term(&self, p: f64) -> GenericTerm {
+        let effect = match (self.driver, self.form) {
+            (Some(driver), Some(kind)) => TermEffect::Factor {
+                driver,
+                form: match kind {
+                    FormKind::Exp => Form::Exp { beta: p },
+                    FormKind::Power => Form::Power { n: p },
+                    FormKind::Linear => Form::Linear { gamma: p },
+                    FormKind::Step => Form::Step {
+                        x0: self.x0().unwrap_or(0.0),
+                        f: p,
+                    },
+                },
+            },
+            _ => TermEffect::Offset { offset: p },
+        };
+        GenericTerm {
+            acts_on: self.acts_on,
+            applicator: self.applicator.clone(),
+            rail: self.rail.clone(),
+            site: self.site.clone(),
+            quantity: self.quantity,
+            effect,
+        }
+    }
+
+    /// Whether `term` is this slot (whatever its parameter).
+    pub fn is(&self, term: &GenericTerm) -> bool {
+        let shape = match term.effect {
+            TermEffect::Offset { .. } => (None, None, None),
+            TermEffect::Factor { driver, form } => (
+                Some(driver),
+                Some(form.kind()),
+                match form {
+                    Form::Step { x0, .. } => Some(x0.to_bits()),
+                    _ => None,
+                },
+            ),
+        };
+        term.acts_on == self.acts_on
+            && term.applicator == self.applicator
+            && term.rail == self.rail
+            && term.site == self.site
+            && term.quantity == self.quantity
+            && shape == (self.driver, self.form, self.x0_bits)
+    }
+
+    /// The parameter of this slot's term in `effects`, if it is on.
+    pub fn get(&self, effects: &Effects) -> Option<f64> {
+        effects
+            .generic
+            .iter()
+            .find(|t| self.is(t))
+            .map(|t| match t.effect {
+                TermEffect::Offset { offset } => offset,
+                TermEffect::Factor { form, .. } => match form {
+                    Form::Exp { beta } => beta,
+                    Form::Power { n } => n,
+                    Form::Linear { gamma } => gamma,
+                    Form::Step { f, .. } => f,
+                },
+            })
+    }
+
+    /// Switches the term on in `effects` with parameter `p` (replacing
+    /// its earlier value).
+    pub fn set(&self, effects: &mut Effects, p: f64) {
+        let term = self.term(p);
+        match effects.generic.iter_mut().find(|t| self.is(t)) {
+            Some(t) => *t = term,
+            None => effects.generic.push(term),
+        }
+    }
+
+    /// A short label: `consumption × creepage (power; rail low)`.
+    pub fn label(&self) -> String {
+        let scope = self.scope();
+        let mut parts = Vec::new();
+        if let Some(a) = &scope.applicator {
+            parts.push(format!("applicator {a}"));
+        }
+        if let Some(r) = &scope.rail {
+            parts.push(format!("rail {r}"));
+        }
+        if let Some(s) = &scope.site {
+            parts.push(format!("site {s}"));
+        }
+        if let Some(q) = scope.quantity {
+            parts.push(format!("quantity {}", q.as_str()));
+        }
+        let scope = if parts.is_empty() {
+            "everywhere".to_string()
+        } else {
+            parts.join(", ")
+        };
+        match (self.driver, self.form) {
+            (Some(d), Some(f)) => {
+                let at = match (d, self.x0()) {
+                    (Driver::Time, Some(x0)) => {
+                        format!(" at {}", tortwin_model::config::format_utc(x0))
+                    }
+                    (_, Some(x0)) => format!(" at {x0:.4}"),
+                    _ => String::new(),
+                };
+                format!(
+                    "generic {} × {} ({}{at}; {scope})",
+                    self.acts_on.name(),
+                    d.name(),
+                    f.name()
+                )
+            }
+            _ => format!("generic measurement offset ({scope})"),
+        }
+    }
+}
+
+/// Every driver's value at each measurement (NaN where it has none), and its
+/// range over everything the recording shows (contacts and weather).
+pub struct Drivers {
+    /// [driver][row]
+    pub at_row: Vec<Vec<f64>>,
+    /// [driver]: (min, max) over the recording.
+    pub range: Vec<(f64, f64)>,
+}
+
+impl Drivers {
+    pub fn of(data: &Dataset) -> Self {
+        let n = data.rows.len();
+        let mut at_row = vec![vec![f64::NAN; n]; Driver::ALL.len()];
+        let mut range = vec![(f64::INFINITY, f64::NEG_INFINITY); Driver::ALL.len()];
+        let mut widen = |d: Driver, x: f64| {
+            if x.is_finite() {
+                let r = &mut range[d as usize];
+                *r = (r.0.min(x), r.1.max(x));
+            }
+        };
+        let defaults = tortwin_recording::Weather::default();
+        widen(Driver::AirTemperatureC, defaults.air_temperature_c);
+        widen(Driver::RelativeHumidity, defaults.relative_humidity);
+        widen(Driver::PrecipitationMmH, defaults.precipitation_mm_h);
+        for event in &data.events {
+            match &event.kind {
+                EventKind::Weather(w) => {
+                    widen(Driver::AirTemperatureC, w.air_temperature_c);
+                    widen(Driver::RelativeHumidity, w.relative_humidity);
+                    widen(Driver::PrecipitationMmH, w.precipitation_mm_h);
+                }
+                EventKind::Passage(p) => {
+                    widen(Driver::SpeedMps, p.speed_mps);
+                    for axle in &p.axles {
+                        for q in &axle.wheel_load_n {
+                            widen(Driver::WheelLoadKn, q / 1000.0);
+                        }
+                        for c in &axle.creepage {
+                            widen(Driver::Creepage, (c.cx * c.cx + c.cy * c.cy).sqrt());
+                        }
+                    }
+                }
+                _ => {}
+            }
+            widen(Driver::Time, event.log_time_ns as f64 * 1e-9);
+        }
+        for (k, row) in data.rows.iter().enumerate() {
+            at_row[Driver::Time as usize][k] = row.log_time_ns as f64 * 1e-9;
+            let w = data.weather_at(row.log_time_ns);
+            at_row[Driver::AirTemperatureC as usize][k] = w.air_temperature_c;
+            at_row[Driver::RelativeHumidity as usize][k] = w.relative_humidity;
+            at_row[Driver::PrecipitationMmH as usize][k] = w.precipitation_mm_h;
+            if let (Some(seq), Some(axle)) = (row.train_seq, row.axle_index) {
+                if let Some(p) = data.passages.get(seq) {
+                    at_row[Driver::SpeedMps as usize][k] = p.speed_mps;
+                    if let Some(q) = p.wheel_load_n.get(axle).and_then(|l| l.get(row.rail)) {
+                        at_row[Driver::WheelLoadKn as usize][k] = q / 1000.0;
+                    }
+                    if let Some(c) = p.creepage.get(axle).and_then(|l| l.get(row.rail)) {
+                        at_row[Driver::Creepage as usize][k] = *c;
+                    }
+                }
+            }
+        }
+        Self { at_row, range }
+    }
+
+    pub fn values(&self, d: Driver) -> &[f64] {
+        &self.at_row[d as usize]
+    }
+
+    pub fn range(&self, d: Driver) -> (f64, f64) {
+        self.range[d as usize]
+    }
+
+    /// Whether the recording shows the driver changing at all.
+    pub fn varies(&self, d: Driver) -> bool {
+        let (lo, hi) = self.range(d);
+        lo.is_finite() && hi > lo * (1.0 + 1e-9) + 1e-12
+    }
+
+    /// Whether `form` can describe `d` over its observed range (a power
+    /// needs x > 0 throughout).
+    pub fn allows(&self, d: Driver, form: FormKind) -> bool {
+        d.allows(form) && (form != FormKind::Power || self.range(d).0 > 0.0)
+    }
+}

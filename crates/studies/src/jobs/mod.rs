@@ -1,0 +1,49 @@
+//! The `tortwin` commands as library functions (../shared/spec/interfaces.md).
+//!
+//! Each job takes its options (a plain struct; with the `cli` feature it is
+//! also the command's `clap::Args`), writes its files and returns what it
+//! found, plus a `render` of the few lines the command prints. The binary
+//! adds only argument parsing, the progress display and exit codes.
+
+pub mod discover;
+pub mod paper;
+pub mod replay;
+pub mod strategy;
+pub mod summary;
+pub mod synth;
+
+use anyhow::{Context, Result};
+use tortwin_model::config::ModelConfig;
+
+/// The recording the main job replays when none is given: the one bundled
+/// with the repository, `recordings/demo_day.mcap`.
+pub fn default_recording() -> std::path::PathBuf {
+    let crate_dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+    // crates/studies -> the repository.
+    let repository = crate_dir.ancestors().nth(2).unwrap_or(crate_dir);
+    repository.join("recordings").join("demo_day.mcap")
+}
+
+/// Loads the model configuration: the defaults, overlaid by `path`.
+pub fn load_config(path: Option<&std::path::Path>) -> Result<ModelConfig> {
+    Ok(match path {
+        Some(p) => ModelConfig::from_file(p)?,
+        None => ModelConfig::default(),
+    })
+}
+
+/// Runs `work` on a pool of `threads` workers, or on rayon's global pool
+/// (one per core) when `None`.
+pub fn with_threads<T: Send>(
+    threads: Option<usize>,
+    work: impl FnOnce() -> Result<T> + Send,
+) -> Result<T> {
+    match threads {
+        Some(threads) => rayon::ThreadPoolBuilder::new()
+            .num_threads(threads.max(1))
+            .build()
+            .context("cannot start the worker threads")?
+            .install(work),
+        None => work(),
+    }
+}

@@ -1,0 +1,190 @@
+//! `tortwin replay`: a recording in, the friction field out.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result};
+
+use tortwin_engine::sink::{Fanout, RunSummary, Sink};
+use tortwin_engine::{Engine, EngineOptions, EngineState};
+use tortwin_model::error::UsageError;
+use tortwin_outputs::mcap_out::McapSink;
+use tortwin_outputs::rerun_out::{RerunOptions, RerunSink};
+use tortwin_recording::error::InputError;
+use tortwin_recording::reader::ReaderContext;
+use tortwin_recording::RecordingReader;
+
+use super::load_config;
+use crate::progress::{Progress, Silent};
+
+#[derive(Debug, Clone)]
+#[cfg_attr(feature = "cli", derive(clap::Args))]
+pub struct ReplayArgs {
+    /// The recording (MCAP). Default: the bundled demo recording.
+    #[cfg_attr(feature = "cli", arg(default_value_os_t = super::default_recording()))]
+    pub recording: PathBuf,
+    /// Model configuration overlaid on the built-in defaults (TOML).
+    #[cfg_attr(feature = "cli", arg(long))]
+    pub config: Option<PathBuf>,
+    /// Write the MCAP output here (Foxglove-readable).
+    #[cfg_attr(feature = "cli", arg(long))]
+    pub out_mcap: Option<PathBuf>,
+    /// Write the rerun recording here (open with `rerun FILE.rrd`).
+    #[cfg_attr(feature = "cli", arg(long))]
+    pub out_rrd: Option<PathBuf>,
+    /// Start from the state an earlier replay wrote with --state-out.
+    #[cfg_attr(feature = "cli", arg(long))]
+    pub state_in: Option<PathBuf>,
+    /// Write the section's state at the end, for the next recording.
+    #[cfg_attr(feature = "cli", arg(long))]
+    pub state_out: Option<PathBuf>,
+    /// Snapshot the field after every wheel pass in the rerun recording
+    /// (default: after every train).
+    #[cfg_attr(feature = "cli", arg(long))]
+    pub every_wheel: bool,
+    /// Do not print the summary.
+    #[cfg_attr(feature = "cli", arg(long, short))]
+    pub quiet: bool,
+}
+
+impl ReplayArgs {
+    /// A quiet replay of `recording` with the default model and no outputs;
+    /// set the fields a caller needs.
+    pub fn new(recording: impl Into<PathBuf>) -> Self {
+        Self {
+            recording: recording.into(),
+            config: None,
+            out_mcap: None,
+            out_rrd: None,
+            state_in: None,
+            state_out: None,
+            every_wheel: false,
+            quiet: true,
+        }
+    }
+}
+
+/// Reads a state written by `--state-out`.
+pub fn read_state(path: &Path) -> Result<EngineState> {
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| InputError::file(path, format!("cannot read the state: {e}")))?;
+    let state: EngineState = serde_json::from_str(&text)
+        .map_err(|e| InputError::file(path, format!("not a tortwin state: {e}")))?;
+    Ok(state)
+}
+
+/// Replays `args.recording` through the engine into the outputs the
+/// arguments ask for, plus `extra` sinks. Returns the run's summary.
+pub fn replay(args: &ReplayArgs, extra: &mut [&mut dyn Sink]) -> Result<RunSummary> {
+    replay_with(args, extra, &Silent)
+}
+
+/// [`replay`], telling `progress` how far the recording has been read.
+pub fn replay_with(
+    args: &ReplayArgs,
+    extra: &mut [&mut dyn Sink],
+    progress: &dyn Progress,
+) -> Result<RunSummary> {
+    let cfg = load_config(args.config.as_deref())?;
+    for (a, b) in [
+        (&args.out_mcap, &args.out_rrd),
+        (&args.state_out, &args.out_mcap),
+        (&args.state_out, &args.out_rrd),
+    ] {
+        if let (Some(a), Some(b)) = (a, b) {
+            if a == b {
+                return Err(
+                    UsageError(format!("two outputs would be written to {}", a.display())).into(),
+                );
+            }
+        }
+    }
+    let saved = args.state_in.as_deref().map(read_state).transpose()?;
+    let ctx = match &saved {
+        Some(s) => ReaderContext {
+            origin_ns: Some(s.origin_ns),
+            occupied_until_s: s.occupied_until_s.unwrap_or(f64::NEG_INFINITY),
+        },
+        None => ReaderContext::default(),
+    };
+    let mut reader = RecordingReader::open(&args.recording, ctx)?;
+    let opts = EngineOptions {
+        snapshot_every_wheel: args.every_wheel,
+        ..EngineOptions::default()
+    };
+    let section = reader.section().clone();
+    let source = args.config.as_deref().map_or_else(
+        || "built-in defaults".to_string(),
+        |p| p.display().to_string(),
+    );
+    tortwin_engine::generic::check_terms_against(&cfg.effects.generic, &section, &source)?;
+    let mut engine = match (&saved, &args.state_in) {
+        (Some(s), Some(path)) => Engine::from_state(section, cfg, opts, s)
+            .map_err(|e| InputError::file(path, e.to_string()))?,
+        _ => Engine::new(section, cfg, opts, reader.origin_ns()),
+    };
+
+    let mut mcap = args.out_mcap.as_deref().map(McapSink::create).transpose()?;
+    let mut rrd = args
+        .out_rrd
+        .as_deref()
+        .map(|p| RerunSink::create(p, RerunOptions::default()))
+        .transpose()?;
+    let mut fanout = Fanout::default();
+    if let Some(s) = mcap.as_mut() {
+        fanout.sinks.push(s);
+    }
+    if let Some(s) = rrd.as_mut() {
+        fanout.sinks.push(s);
+    }
+    for s in extra.iter_mut() {
+        fanout.sinks.push(&mut **s);
+    }
+
+    let mut events = 0u64;
+    for event in reader.by_ref() {
+        let event = event?;
+        events += 1;
+        if events.is_multiple_of(4096) {
+            progress.stage(&format!(
+                "{events} events, {}",
+                super::summary::utc(event.log_time_ns)
+            ));
+        }
+        engine
+            .push(event, &mut fanout)
+            .with_context(|| format!("replaying {}", args.recording.display()))?;
+    }
+    let summary = engine.finish(&mut fanout, reader.unknown_topic_messages())?;
+
+    if let Some(path) = &args.state_out {
+        let text = serde_json::to_string(&engine.state()).context("cannot serialize the state")?;
+        tortwin_outputs::files::write_atomically(path, text.as_bytes())?;
+    }
+    Ok(summary)
+}
+
+/// The lines that say where the outputs are and how to open them.
+pub fn render_outputs(args: &ReplayArgs) -> String {
+    let mut out = String::new();
+    for (what, path) in [
+        ("rerun recording", &args.out_rrd),
+        ("MCAP output", &args.out_mcap),
+    ] {
+        if let Some(path) = path {
+            out += &format!("{what}: {}\n", path.display());
+        }
+    }
+    if let Some(path) = &args.out_rrd {
+        out += &format!(
+            "open it with: pip install rerun-sdk==0.36.3 && rerun {}\n",
+            path.display()
+        );
+    }
+    if let Some(path) = &args.out_mcap {
+        out += &format!(
+            "or open {} in Foxglove (https://app.foxglove.dev, Open local file)\n",
+            path.display()
+        );
+    }
+    out
+}
