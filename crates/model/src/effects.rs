@@ -63,6 +63,7 @@ pub struct TimeEffects {
 }
 
 impl TimeEffects {
+    #[inline]
     pub fn any(&self) -> bool {
         self.ageing_tau_s.is_some() || self.rain_k_per_mm.is_some()
     }

@@ -76,6 +76,7 @@ impl ActsOn {
     }
 
     /// Index into per-quantity tables (`ALL` order).
+    #[inline]
     pub fn index(self) -> usize {
         self as usize
     }
@@ -130,6 +131,7 @@ impl Driver {
 
     /// `x_ref` of the forms (effects.md); `None` for time, which takes only
     /// a step.
+    #[inline]
     pub fn x_ref(self) -> Option<f64> {
         match self {
             Driver::Time => None,
@@ -143,6 +145,7 @@ impl Driver {
     }
 
     /// A property of the wheel (no value at a pulse or a tribometer reading).
+    #[inline]
     pub fn is_wheel(self) -> bool {
         matches!(
             self,
@@ -234,6 +237,7 @@ pub enum Form {
 }
 
 impl Form {
+    #[inline]
     pub fn kind(self) -> FormKind {
         match self {
             Form::Exp { .. } => FormKind::Exp,

@@ -52,12 +52,14 @@ pub struct ProductParams {
 /// `fp = max(0, 1 + kp (pm / 1178 MPa - 1))`. The clamp at 0 is fixed by
 /// model.md: below about 537 MPa the paper's linear law would turn negative
 /// and make consumption create product.
+#[inline]
 pub fn pressure_factor(params: &ProductParams, pm_pa: f64) -> f64 {
     (1.0 + params.kp * (pm_pa / PM_REF_PA - 1.0)).max(0.0)
 }
 
 /// Eq. (3): the influence of the creepage on consumption,
 /// `fc = max(0, 1 + kc (sqrt(cx² + cy²) / 0.01 - 1))`. Spin does not enter.
+#[inline]
 pub fn creepage_factor(params: &ProductParams, cx: f64, cy: f64) -> f64 {
     (1.0 + params.kc * ((cx * cx + cy * cy).sqrt() / CREEPAGE_REF - 1.0)).max(0.0)
 }
@@ -71,6 +73,7 @@ pub fn creepage_factor(params: &ProductParams, cx: f64, cy: f64) -> f64 {
 /// - `fp_fc`: eq. (2) times eq. (3) for this wheel on this rail.
 /// - `factor`: an effect's multiplier of the whole `c` (1 without one),
 ///   applied before the limit `c <= m` (effects.md, temperature_consumption).
+#[inline]
 pub fn consumption(params: &ProductParams, m_kg: f64, m0_kg: f64, fp_fc: f64, factor: f64) -> f64 {
     // Multiplying by the reciprocal keeps the division off the wheel mass's
     // dependency chain in the stepping loop (it depends only on m0); the
@@ -87,6 +90,7 @@ pub fn consumption(params: &ProductParams, m_kg: f64, m0_kg: f64, fp_fc: f64, fa
 
 /// Eq. (4): the friction coefficient of a contact holding `m_kg` of product,
 /// `mu = muC + (muD - muC) exp(-m / km)`.
+#[inline]
 pub fn friction(params: &ProductParams, m_kg: f64) -> f64 {
     params.mu_c + (params.mu_d - params.mu_c) * (-m_kg / params.km_kg).exp()
 }
@@ -94,6 +98,7 @@ pub fn friction(params: &ProductParams, m_kg: f64) -> f64 {
 /// The part of eq. (6) that depends only on the wheel's distance from its
 /// applicator: `exp(-(N - 1) / cN)`, with `N = |i - i_app| + 1` (model.md).
 /// The engine tabulates it once per grid distance.
+#[inline]
 pub fn revolution_factor(params: &ProductParams, n: u32) -> f64 {
     (-(f64::from(n) - 1.0) / params.cn).exp()
 }
@@ -102,6 +107,7 @@ pub fn revolution_factor(params: &ProductParams, n: u32) -> f64 {
 /// `t = kt (1 - exp(-m1 / cm)) exp(-(N - 1) / cN)`, times an effect's
 /// `factor` (1 without one), clamped to at most 0.5 (equal shares; model.md).
 /// `revolution` is [`revolution_factor`] for this N.
+#[inline]
 pub fn transfer_fraction(params: &ProductParams, m1_kg: f64, revolution: f64, factor: f64) -> f64 {
     // `1 / cm` is a constant the compiler hoists out of the stepping loop.
     let t = params.kt * (1.0 - (-m1_kg * (1.0 / params.cm_kg)).exp()) * revolution;
