@@ -40,21 +40,6 @@ fn synth(dir: &Path, seed: u64, hidden: &[&str]) -> (PathBuf, serde_json::Value)
     (out, serde_json::from_str(&key).unwrap())
 }
 
-/// `tortwin discover REC --report DIR`; returns report.json.
-fn discover_cli(recording: &Path, report: &Path) -> serde_json::Value {
-    let o = tortwin()
-        .arg("discover")
-        .arg(recording)
-        .arg("--report")
-        .arg(report)
-        .output()
-        .unwrap();
-    check(&o, "tortwin discover");
-    eprintln!("{}", String::from_utf8_lossy(&o.stdout));
-    let text = std::fs::read_to_string(report.join("report.json")).unwrap();
-    serde_json::from_str(&text).unwrap()
-}
-
 type Found = BTreeMap<String, BTreeMap<String, f64>>;
 
 fn found(report: &serde_json::Value) -> Found {
@@ -101,7 +86,7 @@ fn hidden_case(seed: u64, hidden: &[(&str, &[(&str, f64)])]) -> serde_json::Valu
     }
 
     let report_dir = dir.path().join("report");
-    let report = discover_cli(&rec, &report_dir);
+    let report = common::discover_report(&rec, &report_dir);
     let got = found(&report);
     let rmse_before = report["rmse_before"].as_f64().unwrap();
     let rmse_after = report["rmse_after"].as_f64().unwrap();

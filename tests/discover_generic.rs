@@ -32,19 +32,6 @@ fn synth(dir: &Path, seed: u64, extra: &[&str]) -> (PathBuf, serde_json::Value) 
     (out, serde_json::from_str(&key).unwrap())
 }
 
-fn discover(rec: &Path, report: &Path) -> serde_json::Value {
-    let o = tortwin()
-        .arg("discover")
-        .arg(rec)
-        .arg("--report")
-        .arg(report)
-        .output()
-        .unwrap();
-    check(&o, "tortwin discover");
-    eprintln!("{}", String::from_utf8_lossy(&o.stdout));
-    serde_json::from_str(&std::fs::read_to_string(report.join("report.json")).unwrap()).unwrap()
-}
-
 /// g of a term at x (through the model's own form), for terms with a driver.
 fn g_of(term: &GenericTerm, x: f64) -> f64 {
     match term.effect {
@@ -100,7 +87,7 @@ fn a_clogged_nozzle_is_named_with_its_applicator_and_time() {
     );
     assert!(key["rmse_baseline_vs_truth"].as_f64().unwrap() > 1.5 * SIGMA);
     let report_dir = dir.path().join("report");
-    let report = discover(&rec, &report_dir);
+    let report = common::discover_report(&rec, &report_dir);
     let found = found_list(&report);
     assert_eq!(found.len(), 1, "{found:?}");
     let e = &found[0];
@@ -145,7 +132,7 @@ fn a_biased_sensor_is_a_data_quality_finding() {
         ],
     );
     let report_dir = dir.path().join("report");
-    let report = discover(&rec, &report_dir);
+    let report = common::discover_report(&rec, &report_dir);
     let found = found_list(&report);
     assert_eq!(found.len(), 1, "{found:?}");
     let e = &found[0];
@@ -179,7 +166,7 @@ fn consumption_following_humidity_is_found_on_the_tangent() {
     );
     assert!(key["rmse_baseline_vs_truth"].as_f64().unwrap() > 1.2 * SIGMA);
     let report_dir = dir.path().join("report");
-    let report = discover(&rec, &report_dir);
+    let report = common::discover_report(&rec, &report_dir);
     let found = found_list(&report);
     assert_eq!(found.len(), 1, "{found:?}");
     assert_eq!(found[0]["acts_on"], "consumption");
@@ -211,7 +198,7 @@ fn consumption_following_humidity_is_found_on_the_tangent() {
 fn gross_outliers_are_screened_and_nothing_is_added() {
     let dir = tempfile::tempdir().unwrap();
     let (rec, key) = synth(dir.path(), 7, &["--outlier-share", "0.02"]);
-    let report = discover(&rec, &dir.path().join("report"));
+    let report = common::discover_report(&rec, &dir.path().join("report"));
     assert!(
         found_list(&report).is_empty(),
         "{:?}",
@@ -259,7 +246,7 @@ fn friction_changed_at_one_site_for_half_a_day_stays_unexplained_and_located() {
         9,
         &["--local-friction", "M2:start_h=30,hours=12,delta=-0.06"],
     );
-    let report = discover(&rec, &dir.path().join("report"));
+    let report = common::discover_report(&rec, &dir.path().join("report"));
     let physics: Vec<&serde_json::Value> = found_list(&report)
         .iter()
         .filter(|e| e["kind"] != "data quality")
@@ -351,7 +338,7 @@ fn generic_case(
         "{hidden:?}: only {visible:.4} from the truth: too weak a test"
     );
     let report_dir = dir.path().join("report");
-    let report = discover(&rec, &report_dir);
+    let report = common::discover_report(&rec, &report_dir);
     let found = found_list(&report);
     assert_eq!(found.len(), named.len() + generic.len(), "{found:?}");
     for (name, param, truth) in named {
@@ -502,7 +489,7 @@ fn a_named_effect_is_found_through_two_percent_of_gross_outliers() {
             "0.02",
         ],
     );
-    let report = discover(&rec, &dir.path().join("report"));
+    let report = common::discover_report(&rec, &dir.path().join("report"));
     let found = found_list(&report);
     assert_eq!(found.len(), 1, "{found:?}");
     assert_eq!(found[0]["name"], "rail_ageing");

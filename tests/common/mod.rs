@@ -39,6 +39,22 @@ pub fn check(o: &Output, what: &str) {
     );
 }
 
+/// `tortwin discover RECORDING --report DIR` (its summary echoed to
+/// stderr); returns report.json.
+pub fn discover_report(recording: &std::path::Path, report: &std::path::Path) -> serde_json::Value {
+    let o = tortwin()
+        .arg("discover")
+        .arg(recording)
+        .arg("--report")
+        .arg(report)
+        .output()
+        .unwrap();
+    check(&o, "tortwin discover");
+    eprintln!("{}", String::from_utf8_lossy(&o.stdout));
+    let text = std::fs::read_to_string(report.join("report.json")).unwrap();
+    serde_json::from_str(&text).unwrap()
+}
+
 /// Runs `tests/python/SCRIPT` with `args` under `$TORTWIN_PYTHON` (default
 /// `python3`): the independent readers, whose packages .ci/run installs from
 /// tests/python/requirements.txt. Fails, never skips, without them.
