@@ -10,6 +10,7 @@ use anyhow::Result;
 use clap::{Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
+use tortwin_engine::EngineError;
 use tortwin_model::error::{ConfigError, UsageError};
 use tortwin_recording::error::InputError;
 use tortwin_studies::jobs::{discover, paper, replay, strategy, summary, synth};
@@ -68,6 +69,8 @@ fn is_input_error(err: &anyhow::Error) -> bool {
         e.downcast_ref::<InputError>().is_some()
             || e.downcast_ref::<ConfigError>().is_some()
             || e.downcast_ref::<UsageError>().is_some()
+            || e.downcast_ref::<EngineError>()
+                .is_some_and(EngineError::is_input)
     })
 }
 
@@ -79,18 +82,18 @@ fn run(command: Command) -> Result<()> {
             bar.0.finish_and_clear();
             let run = result?;
             if !args.quiet {
-                print!("{}", summary::render(&args.recording, &run));
-                print!("{}", replay::render_outputs(&args));
+                say(&summary::render(&args.recording, &run))?;
+                say(&replay::render_outputs(&args))?;
             }
         }
         Command::Paper(args) => {
             let report = paper::paper(&args)?;
-            print!("{}", paper::render(&report));
+            say(&paper::render(&report))?;
         }
         Command::Synth(args) => {
             let (report, key_path) = synth::synth(&args)?;
             if !args.quiet {
-                print!("{}", synth::render(&args.out, &key_path, &report));
+                say(&synth::render(&args.out, &key_path, &report))?;
             }
         }
         Command::Discover(args) => {
@@ -101,7 +104,7 @@ fn run(command: Command) -> Result<()> {
             let discovery = result?;
             if !args.quiet {
                 let elapsed_s = t0.elapsed().as_secs_f64();
-                print!("{}", discover::render(&args, &discovery, elapsed_s));
+                say(&discover::render(&args, &discovery, elapsed_s))?;
             }
         }
         Command::Strategy(args) => {
@@ -112,11 +115,22 @@ fn run(command: Command) -> Result<()> {
             let (traffic, study) = result?;
             if !args.quiet {
                 let elapsed_s = t0.elapsed().as_secs_f64();
-                print!("{}", strategy::render(&args, &traffic, &study, elapsed_s));
+                say(&strategy::render(&args, &traffic, &study, elapsed_s))?;
             }
         }
     }
     Ok(())
+}
+
+/// Prints a command's summary on stdout. A reader that has gone (`tortwin
+/// replay | head`) is not an error of the run: the rest is dropped.
+fn say(text: &str) -> std::io::Result<()> {
+    use std::io::Write as _;
+    let mut out = std::io::stdout().lock();
+    match out.write_all(text.as_bytes()).and_then(|()| out.flush()) {
+        Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => Ok(()),
+        result => result,
+    }
 }
 
 /// A spinner on stderr for a long command (indicatif hides it when stderr

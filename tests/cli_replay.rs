@@ -275,3 +275,24 @@ fn a_message_error_mid_recording_names_topic_time_and_index() {
     assert!(msg.contains(&format!("message index {index}")), "{msg}");
     assert!(msg.contains("mass_g"), "{msg}");
 }
+
+/// A reader that stops early (`tortwin replay | head -1`) is not an error of
+/// the run: no panic, exit status 0.
+#[test]
+fn a_closed_stdout_is_not_a_panic() {
+    let mut child = common::tortwin()
+        .arg("replay")
+        .arg(reference("tangent_day.mcap"))
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    drop(child.stdout.take());
+    let out = child.wait_with_output().unwrap();
+    assert!(
+        out.status.success(),
+        "{}\n{}",
+        out.status,
+        String::from_utf8_lossy(&out.stderr)
+    );
+}

@@ -527,6 +527,84 @@ fn generic_friction_levels_and_measurement_offsets() {
     assert_eq!(with[1], without[1] + 0.02);
 }
 
+/// model.md: the weather in effect at time t is the last weather message
+/// with time <= t, whatever the replay position. A weather message sorts
+/// after a pulse or a reading with the same log_time (topic order), yet it
+/// is in effect at their time, between trains as during an occupation.
+#[test]
+fn weather_logged_at_the_same_instant_is_in_effect_for_pulses_and_readings() {
+    let p = table2();
+    // muD x 0.5 from 25 °C on; the pulse mass x 0.5 from 25 °C on.
+    let cfg = format!(
+        "{}{}",
+        term(&[
+            ("acts_on", "friction_dry"),
+            ("driver", "air_temperature_c"),
+            ("form", "step"),
+            ("x0", "25.0"),
+            ("f", "0.5"),
+        ]),
+        term(&[
+            ("acts_on", "pulse_mass"),
+            ("driver", "air_temperature_c"),
+            ("form", "step"),
+            ("x0", "25.0"),
+            ("f", "0.5"),
+        ])
+    );
+    let mu_half_dry = |m: f64| p.mu_c + (0.5 * p.mu_d - p.mu_c) * (-m / p.km_kg).exp();
+    // Between trains, in replay order: a pulse and a reading at 60 s, then
+    // the 30 °C message at 60 s: both are at 30 °C.
+    let e = vec![
+        pulse(60, 0, 1e-4),
+        reading(60, 0, 0),
+        weather(60, 30.0, 0.0),
+        reading(70, 0, 0),
+    ];
+    let got = run(tiny_section(&["r"]), &cfg, e);
+    close(got[0], mu_half_dry(0.5e-4));
+    close(got[1], mu_half_dry(0.5e-4));
+    // The same instant inside a train's occupation gives the same values.
+    let e = vec![
+        train(59, 1, 0.1, &[BogiePosition::Leading]),
+        reading(60, 1, 0),
+        weather(60, 30.0, 0.0),
+    ];
+    let inside = run(tiny_section(&["r"]), &cfg, e);
+    close(inside[0], mu_half_dry(0.0));
+}
+
+/// A generic factor with no finite value at what the recording gives its
+/// driver (a power of a temperature below 0 °C) is refused, naming the
+/// term and the message, instead of emptying the rail with a NaN.
+#[test]
+fn a_factor_without_a_value_is_an_input_error_naming_the_term() {
+    let cfg = ModelConfig::from_overlay_str(
+        &term(&[
+            ("acts_on", "consumption"),
+            ("driver", "air_temperature_c"),
+            ("form", "power"),
+            ("n", "0.5"),
+        ]),
+        "test",
+    )
+    .unwrap();
+    let mut engine = Engine::new(tiny_section(&["r"]), cfg, EngineOptions::default(), 0);
+    let mut sink = Recorder::default();
+    engine.push(pulse(10, 0, 1e-4), &mut sink).unwrap();
+    let err = engine.push(weather(20, -3.0, 0.0), &mut sink).unwrap_err();
+    assert!(err.is_input(), "{err}");
+    let text = err.to_string();
+    for part in [
+        "effects.generic[0]",
+        "air_temperature_c = -3",
+        "/environment/weather",
+        "log_time 20000000000",
+    ] {
+        assert!(text.contains(part), "{part} missing in: {text}");
+    }
+}
+
 #[test]
 fn generic_terms_with_g_one_change_nothing_bit_for_bit() {
     let dir = tempfile::tempdir().unwrap();

@@ -26,6 +26,8 @@ const UNKNOWN: usize = usize::MAX;
 
 #[derive(Debug, Clone, Copy)]
 struct Compiled {
+    /// Its index among the `[[effects.generic]]` tables.
+    index: usize,
     driver: Driver,
     form: Form,
     x_ref: f64,
@@ -34,6 +36,16 @@ struct Compiled {
     rail: Option<usize>,
     site: Option<usize>,
     quantity: Option<Quantity>,
+}
+
+/// A generic term whose factor is not a finite number at a driver value.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct UndefinedFactor {
+    /// Index among the `[[effects.generic]]` tables.
+    pub term: usize,
+    pub driver: Driver,
+    pub x: f64,
+    pub g: f64,
 }
 
 /// What a wheel brings to a contact: the wheel drivers.
@@ -72,7 +84,7 @@ impl GenericSet {
             name.as_ref()
                 .map(|n| names.position(|x| x == n).unwrap_or(UNKNOWN))
         }
-        for term in terms {
+        for (term_index, term) in terms.iter().enumerate() {
             let (driver, form, offset) = match term.effect {
                 TermEffect::Factor { driver, form } => (driver, form, 0.0),
                 TermEffect::Offset { offset } => {
@@ -92,6 +104,7 @@ impl GenericSet {
                 (_, form) => form,
             };
             set.by_acts_on[term.acts_on.index()].push(Compiled {
+                index: term_index,
                 driver,
                 form,
                 x_ref: driver.x_ref().unwrap_or(0.0),
@@ -103,6 +116,24 @@ impl GenericSet {
             });
         }
         set
+    }
+
+    /// The first factor that is not a finite number where `value` gives its
+    /// driver a value (`None` for drivers the event does not carry), e.g. a
+    /// `power` of a temperature below 0 °C or of a creepage of 0 with a
+    /// negative exponent: effects.md's formula has no value there, and a NaN
+    /// or infinite factor would quietly empty or flood the rail.
+    pub fn undefined(&self, value: impl Fn(Driver) -> Option<f64>) -> Option<UndefinedFactor> {
+        self.by_acts_on.iter().flatten().find_map(|t| {
+            let x = value(t.driver)?;
+            let g = t.form.g(x, t.x_ref);
+            (!g.is_finite()).then_some(UndefinedFactor {
+                term: t.index,
+                driver: t.driver,
+                x,
+                g,
+            })
+        })
     }
 
     /// Whether any term acts on `acts_on`.

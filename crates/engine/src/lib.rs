@@ -33,10 +33,11 @@ use tortwin_model::contact::{
     self, HertzContact, HertzShape, KalkerCoefficients, PolachInput, Steel,
 };
 use tortwin_model::effects::TimeEffects;
-use tortwin_model::generic::ActsOn;
+use tortwin_model::generic::{ActsOn, Driver};
 use tortwin_model::product;
 use tortwin_recording::{
-    BogiePosition, Creepage, Direction, Event, EventKind, Measurement, Passage, Quantity, Section,
+    Axle, BogiePosition, Creepage, Direction, Event, EventKind, Measurement, Passage, Quantity,
+    Section,
 };
 
 use generic::{GenericSet, WheelDrivers};
@@ -65,6 +66,28 @@ pub enum EngineError {
         log_time_ns: u64,
         index_in_file: u64,
     },
+    /// A generic term's factor has no finite value at what the recording
+    /// gives its driver.
+    #[error(
+        "effects.generic[{}]: g({} = {}) = {} is not a finite number (the {topic} message at \
+         log_time {log_time_ns} ns, message index {index_in_file}); choose a form defined over \
+         the values the recording shows (a power needs x > 0)",
+        .factor.term, .factor.driver.name(), .factor.x, .factor.g
+    )]
+    UndefinedFactor {
+        factor: generic::UndefinedFactor,
+        topic: &'static str,
+        log_time_ns: u64,
+        index_in_file: u64,
+    },
+}
+
+impl EngineError {
+    /// Whether the recording or configuration is at fault (exit status 2),
+    /// not the machine or an output.
+    pub fn is_input(&self) -> bool {
+        !matches!(self, EngineError::Sink(_))
+    }
 }
 
 impl From<SinkError> for EngineError {
@@ -254,6 +277,12 @@ pub struct Engine {
     // The occupation being buffered.
     pending: Option<TrainRecord>,
     window: Vec<Buffered>,
+    /// Pulses and measurements outside an occupation, held until the replay
+    /// moves past their log_time: a weather message with the same log_time
+    /// comes after them in replay order (topic order) yet is the weather in
+    /// effect at their time (model.md: the last message with time <= t,
+    /// whatever the replay position), as it is for events inside a window.
+    deferred: Vec<Event>,
     recent: VecDeque<TrainRecord>,
     // Scratch, reused from train to train.
     timeline: WeatherTimeline,
@@ -396,6 +425,7 @@ impl Engine {
             begun: false,
             pending: None,
             window: Vec::new(),
+            deferred: Vec::new(),
             recent: VecDeque::new(),
             timeline: WeatherTimeline::default(),
             section,
@@ -460,6 +490,14 @@ impl Engine {
     /// Takes the next event in replay order.
     pub fn push(&mut self, event: Event, sink: &mut dyn Sink) -> Result<(), EngineError> {
         self.begin(sink)?;
+        self.check_factors(&event)?;
+        let same_instant = self
+            .deferred
+            .first()
+            .is_some_and(|d| d.log_time_ns == event.log_time_ns);
+        if !same_instant {
+            self.flush_deferred(sink)?;
+        }
         let time_s = self.time_s(event.log_time_ns);
         if let Some(train) = &self.pending {
             if matches!(event.kind, EventKind::Passage(_)) || time_s > train.end_s {
@@ -474,12 +512,82 @@ impl Engine {
             });
             return Ok(());
         }
-        let log_time_ns = event.log_time_ns;
-        if let EventKind::Passage(passage) = event.kind {
-            return self.start_train(log_time_ns, passage, sink);
+        match event.kind {
+            EventKind::Passage(passage) => self.start_train(event.log_time_ns, passage, sink),
+            EventKind::Weather(w) => {
+                self.totals.weather_messages += 1;
+                self.weather = self.weather.after_message(time_s, w);
+                Ok(())
+            }
+            EventKind::Pulse(_) | EventKind::Measurement(_) => {
+                self.deferred.push(event);
+                Ok(())
+            }
         }
+    }
+
+    /// Refuses an event at which a generic term's factor has no finite value.
+    fn check_factors(&self, event: &Event) -> Result<(), EngineError> {
+        if self.cfg.effects.generic.is_empty() {
+            return Ok(());
+        }
+        let undefined = match &event.kind {
+            EventKind::Weather(w) => self.generic.undefined(|d| match d {
+                Driver::AirTemperatureC => Some(w.air_temperature_c),
+                Driver::RelativeHumidity => Some(w.relative_humidity),
+                Driver::PrecipitationMmH => Some(w.precipitation_mm_h),
+                _ => None,
+            }),
+            EventKind::Passage(p) => p.axles.iter().find_map(|axle| {
+                (0..self.section.rails.len()).find_map(|rail| {
+                    let drivers = wheel_drivers(p.speed_mps, axle, rail);
+                    self.generic.undefined(|d| match d {
+                        Driver::SpeedMps => Some(drivers.speed_mps),
+                        Driver::WheelLoadKn => Some(drivers.wheel_load_kn),
+                        Driver::Creepage => Some(drivers.creepage),
+                        _ => None,
+                    })
+                })
+            }),
+            _ => None,
+        };
+        match undefined {
+            None => Ok(()),
+            Some(factor) => Err(EngineError::UndefinedFactor {
+                factor,
+                topic: match event.kind {
+                    EventKind::Weather(_) => "/environment/weather",
+                    _ => "/train/passage",
+                },
+                log_time_ns: event.log_time_ns,
+                index_in_file: event.index_in_file,
+            }),
+        }
+    }
+
+    /// Lands the deferred pulses and takes the deferred readings, in replay
+    /// order, with the weather in effect at their time.
+    fn flush_deferred(&mut self, sink: &mut dyn Sink) -> Result<(), EngineError> {
+        if self.deferred.is_empty() {
+            return Ok(());
+        }
+        let mut deferred = std::mem::take(&mut self.deferred);
+        let result = deferred
+            .iter()
+            .try_for_each(|event| self.apply_outside_occupation(event, sink));
+        deferred.clear();
+        self.deferred = deferred;
+        result
+    }
+
+    /// A pulse or measurement between trains.
+    fn apply_outside_occupation(
+        &mut self,
+        event: &Event,
+        sink: &mut dyn Sink,
+    ) -> Result<(), EngineError> {
+        let time_s = self.time_s(event.log_time_ns);
         match &event.kind {
-            EventKind::Passage(_) => unreachable!("handled above"),
             EventKind::Pulse(pulse) => {
                 let pulse_mass = pulse.mass_kg;
                 for k in 0..self.pulse_tracks[pulse.rail].len() {
@@ -497,7 +605,7 @@ impl Engine {
                         &weather,
                     );
                 }
-                self.emit_pulse(log_time_ns, pulse, sink)
+                self.emit_pulse(event.log_time_ns, pulse, sink)
             }
             EventKind::Measurement(m) => {
                 let simulated = match m.quantity {
@@ -507,15 +615,11 @@ impl Engine {
                         let weather = self.weather;
                         self.read_rail(track, point, time_s, &weather)
                     }
-                    _ => self.contact_value(&event, m)?,
+                    _ => self.contact_value(event, m)?,
                 };
-                self.emit_measurement(&event, m, simulated, sink)
+                self.emit_measurement(event, m, simulated, sink)
             }
-            EventKind::Weather(w) => {
-                self.totals.weather_messages += 1;
-                self.weather = self.weather.after_message(time_s, *w);
-                Ok(())
-            }
+            EventKind::Passage(_) | EventKind::Weather(_) => Ok(()),
         }
     }
 
@@ -527,6 +631,7 @@ impl Engine {
         unknown_topic_messages: u64,
     ) -> Result<RunSummary, EngineError> {
         self.begin(sink)?;
+        self.flush_deferred(sink)?;
         if self.pending.is_some() {
             self.roll_pending(sink)?;
         }
@@ -580,12 +685,12 @@ impl Engine {
     ) -> Result<(), EngineError> {
         let time_s = self.time_s(log_time_ns);
         let last_offset_m = passage.axles.last().map_or(0.0, |a| a.offset_m);
-        let end_s = time_s + (self.section.length_m + last_offset_m) / passage.speed_mps;
-        // The end as a log_time, rounded up so that the window holds every
-        // event at or before the last axle's exit.
-        let end_ns = (self.origin_ns as f64 + end_s * 1e9)
-            .ceil()
-            .max(log_time_ns as f64) as u64;
+        let occupation_s = (self.section.length_m + last_offset_m) / passage.speed_mps;
+        let end_s = time_s + occupation_s;
+        // The end as a log_time for the outputs: the passage's log_time plus
+        // the occupation in integer nanoseconds, rounded up (through a double
+        // of nanoseconds since the epoch it would be off by up to 128 ns).
+        let end_ns = log_time_ns.saturating_add((occupation_s * 1e9).ceil() as u64);
         let mut record = match self.recent.len() {
             n if n >= RECENT_TRAINS => self.recent.pop_front().map(|mut r| {
                 r.passage = passage.clone();
@@ -628,11 +733,7 @@ impl Engine {
                     kalker,
                     creepage,
                     fp_fc,
-                    drivers: WheelDrivers {
-                        speed_mps: record.passage.speed_mps,
-                        wheel_load_kn: q_n / 1000.0,
-                        creepage: (creepage.cx * creepage.cx + creepage.cy * creepage.cy).sqrt(),
-                    },
+                    drivers: wheel_drivers(record.passage.speed_mps, axle, rail),
                 });
             }
         }
@@ -1004,7 +1105,8 @@ impl Engine {
         Ok(())
     }
 
-    /// The state the next recording starts from.
+    /// The state the next recording starts from, taken after
+    /// [`Engine::finish`] (which lands what is still held back).
     pub fn state(&self) -> EngineState {
         state::capture(self)
     }
@@ -1018,6 +1120,21 @@ impl Engine {
         saved: &EngineState,
     ) -> Result<Self, state::StateError> {
         state::restore(section, cfg, opts, saved)
+    }
+}
+
+/// What generic terms driven by the wheel see of axle `axle` on `rail`.
+fn wheel_drivers(speed_mps: f64, axle: &Axle, rail: usize) -> WheelDrivers {
+    let q_n = axle.wheel_load_n.get(rail).copied().unwrap_or(0.0);
+    let c = axle.creepage.get(rail).copied().unwrap_or(Creepage {
+        cx: 0.0,
+        cy: 0.0,
+        spin_per_m: 0.0,
+    });
+    WheelDrivers {
+        speed_mps,
+        wheel_load_kn: q_n / 1000.0,
+        creepage: (c.cx * c.cx + c.cy * c.cy).sqrt(),
     }
 }
 

@@ -248,8 +248,7 @@ impl Engine {
                     result?;
                 }
                 if self.opts.snapshot_every_wheel {
-                    let end_s = self.wheel_exit_s(record, a);
-                    let end_ns = (self.origin_ns as f64 + end_s * 1e9).round() as u64;
+                    let end_ns = self.wheel_exit_ns(record, a);
                     self.emit_field(record, track, a, SnapshotKind::Wheel, end_ns, sink)?;
                 }
             }
@@ -257,11 +256,14 @@ impl Engine {
         Ok(())
     }
 
-    /// time_s at which axle `a` leaves the section.
-    fn wheel_exit_s(&self, record: &TrainRecord, a: usize) -> f64 {
-        let t_pass = self.time_s(record.log_time_ns);
+    /// The log_time at which axle `a` leaves the section: the passage's
+    /// log_time plus its time on the section in integer nanoseconds.
+    fn wheel_exit_ns(&self, record: &TrainRecord, a: usize) -> u64 {
         let offset = record.passage.axles.get(a).map_or(0.0, |x| x.offset_m);
-        t_pass + (self.section.length_m + offset) / record.passage.speed_mps
+        let on_section_s = (self.section.length_m + offset) / record.passage.speed_mps;
+        record
+            .log_time_ns
+            .saturating_add((on_section_s * 1e9).round() as u64)
     }
 
     /// One wheel (axle `a` on rail `r`) over every grid point of its track.
