@@ -495,37 +495,43 @@ pub fn discover(
             candidates.len()
         ));
         let fits = fit_each(&ev, &current, &candidates)?;
-        // The best exp terms in their other forms (linear, power, a step).
-        let mut exp_fits: Vec<&(Candidate, Space, fit::Fit)> = fits
-            .iter()
-            .filter(|(c, _, _)| matches!(c, Candidate::Generic(g) if g.form == Some(FormKind::Exp)))
-            .collect();
-        exp_fits.sort_by(|a, b| a.2.eval.sse.total_cmp(&b.2.eval.sse));
+        // The best directions (acts_on × driver × scope), whichever form
+        // found them, in every other form: a factor clamped at 0 shows
+        // first as a step, a power first as an exp.
         let residual_now: Vec<f64> = data
             .rows
             .iter()
             .zip(&simulated_current)
             .map(|(r, s)| r.measured - s)
             .collect();
-        let more: Vec<(Candidate, Start)> = exp_fits
+        let mut improving: Vec<&(Candidate, Space, fit::Fit)> = fits
             .iter()
-            .take(FORMS_FOR)
-            .filter(|(_, _, f)| f.eval.sse < sse)
-            .flat_map(|(c, space, f)| match c {
-                Candidate::Generic(g) => {
-                    let beta = space.params(&f.u).pop().and_then(|p| p.first().copied());
-                    screen::other_forms(
-                        data,
-                        &drivers,
-                        &ev.active,
-                        &residual_now,
-                        g,
-                        beta.unwrap_or(0.0),
-                    )
-                }
-                _ => Vec::new(),
+            .filter(|(c, _, f)| {
+                f.eval.sse < sse
+                    && matches!(c, Candidate::Generic(g)
+                        if g.driver.is_some_and(|d| d != tortwin_model::generic::Driver::Time))
             })
             .collect();
+        improving.sort_by(|a, b| a.2.eval.sse.total_cmp(&b.2.eval.sse));
+        let mut directions: Vec<space::GenericSlot> = Vec::new();
+        let mut more: Vec<(Candidate, Start)> = Vec::new();
+        for (c, space, f) in improving {
+            let Candidate::Generic(g) = c else { continue };
+            if directions.iter().any(|d| d.same_direction(g)) {
+                continue;
+            }
+            if directions.len() == FORMS_FOR {
+                break;
+            }
+            directions.push(g.clone());
+            let p = space.params(&f.u).pop().and_then(|p| p.first().copied());
+            let beta = p.filter(|_| g.form == Some(FormKind::Exp));
+            more.extend(
+                screen::other_forms(data, &drivers, &ev.active, &residual_now, g, beta)
+                    .into_iter()
+                    .filter(|(o, _)| !fits.iter().any(|(c, _, _)| c == o)),
+            );
+        }
         let mut fits = fits;
         if !more.is_empty() {
             progress.stage(&format!("step {step}: fitting {} more forms", more.len()));
@@ -573,16 +579,28 @@ pub fn discover(
             .collect();
         results.sort_by(|a, b| a.0.delta_bic.total_cmp(&b.0.delta_bic));
         // The change point of the residual lags a cause with memory (less
-        // product on the rail shows only as it runs out): the best time
-        // step's t0 is searched among the gaps between trains before it.
-        if let Some(k) = results.iter().position(|r| is_time_step(&r.1)) {
-            progress.stage(&format!("step {step}: placing the time step"));
-            if let Some(better) = refine_t0(&ev, data, &results[k].1, &results[k].2)? {
-                let (space, u, eval) = better;
-                let r = &mut results[k].0;
+        // product on the rail shows only as it runs out), and a split of the
+        // residual along a driver is only a first guess: the best step in
+        // time and the best step along another driver have their threshold
+        // placed by the fit itself ([`refine_step`]).
+        let best_bic = results.first().map_or(0.0, |r| r.0.delta_bic);
+        for time in [true, false] {
+            let Some(k) = results.iter().position(|r| {
+                is_step_slot(&r.1) && is_time_step(&r.1) == time && r.0.delta_bic < 0.5 * best_bic
+            }) else {
+                continue;
+            };
+            progress.stage(&format!(
+                "step {step}: placing the threshold of {}",
+                results[k].0.label
+            ));
+            let refined =
+                refine_step(&ev, data, &drivers, &results[k].1, &results[k].2, noise_now)?;
+            if let Some((space, u, eval)) = refined {
                 let Some(c) = space.slots.first() else {
                     unreachable!("a refined space has its slot")
                 };
+                let r = &mut results[k].0;
                 r.label = c.label();
                 r.params = c.named(&space.params(&u).pop().unwrap_or_default());
                 r.sse = eval.sse;
@@ -593,12 +611,13 @@ pub fn discover(
                     judge_share(sse, eval.sse, n, noise_now, options);
                 results[k].1 = space;
                 results[k].2 = u;
-                results.sort_by(|a, b| a.0.delta_bic.total_cmp(&b.0.delta_bic));
             }
         }
+        results.sort_by(|a, b| a.0.delta_bic.total_cmp(&b.0.delta_bic));
         // A named effect that describes the data (nearly) as well as the
         // best generic term is the better statement: it goes first.
-        prefer_named(&mut results, sse);
+        prefer_named(&mut results, n, options);
+        prefer_narrow_offsets(&mut results, n, options);
 
         // The current model's held-out SSE: every block predicted as it is.
         let cv_current = sse;
@@ -682,6 +701,62 @@ pub fn discover(
             if fit.eval.sse < sse {
                 current = joint.config(&fit.u);
                 sse = fit.eval.sse;
+            }
+        }
+        // The generic terms' forms once more: a term was fitted in its
+        // form with the others held where they had to make up for it; now
+        // that they are refitted, another form may describe the data better
+        // (an exp that was a power all along). The best is swapped in.
+        if joint.dims() > c.dims() {
+            let drivers = &drivers;
+            let swaps: Vec<(usize, Candidate, Space, fit::Fit)> = accepted
+                .iter()
+                .enumerate()
+                .filter_map(|(i, a)| match a {
+                    Candidate::Generic(g) => g
+                        .driver
+                        .filter(|&d| d != tortwin_model::generic::Driver::Time)
+                        .map(|d| (i, g, d)),
+                    _ => None,
+                })
+                .flat_map(|(i, g, d)| {
+                    [FormKind::Exp, FormKind::Linear, FormKind::Power]
+                        .into_iter()
+                        .filter(move |&form| Some(form) != g.form && drivers.allows(d, form))
+                        .map(move |form| {
+                            let alt = space::GenericSlot::factor(
+                                g.acts_on,
+                                d,
+                                form,
+                                g.scope(),
+                                None,
+                                drivers.typical(d),
+                            );
+                            (i, Candidate::Generic(alt))
+                        })
+                })
+                .collect::<Vec<_>>()
+                .into_par_iter()
+                .map(|(i, alt)| {
+                    let mut base = current.clone();
+                    accepted[i].unset(&mut base.effects);
+                    let space = Space {
+                        base,
+                        slots: vec![alt.clone()],
+                    };
+                    let fit = fit::fit(&ev, &space, Start::Fresh, None)?;
+                    Ok((i, alt, space, fit))
+                })
+                .collect::<Result<_>>()?;
+            if let Some((i, alt, space, fit)) = swaps
+                .into_iter()
+                .filter(|s| s.3.eval.sse < sse)
+                .min_by(|a, b| a.3.eval.sse.total_cmp(&b.3.eval.sse))
+            {
+                progress.stage(&format!("step {step}: {} describes it better", alt.label()));
+                current = space.config(&fit.u);
+                sse = fit.eval.sse;
+                accepted[i] = alt;
             }
         }
         // Backward: an effect added earlier that the model no longer needs
@@ -827,22 +902,34 @@ fn is_time_step(space: &Space) -> bool {
     matches!(space.slots.first(), Some(Candidate::Generic(g)) if g.driver == Some(tortwin_model::generic::Driver::Time))
 }
 
+fn is_step_slot(space: &Space) -> bool {
+    space.slots.first().is_some_and(is_step)
+}
+
 /// A fitted space: the space, its search coordinates and their evaluation.
 type Fitted = (Space, Vec<f64>, std::sync::Arc<fit::Evaluation>);
 
-/// The time step of `space` (fitted at `u`) moved to the best gap between
-/// trains within six hours before its t0 (or one after), its factor held;
-/// then the factor refitted there. `None` when no gap does better.
-fn refine_t0(
+/// Places a step's threshold: the fitted factor is tried at thresholds
+/// around the first guess (between consecutive trains for time; between
+/// consecutive observed values for another driver, coarse then fine), and
+/// the threshold goes to the middle of those the data cannot tell from the
+/// best (SSE within 4 σ̂², about a 95 % interval for one parameter): a
+/// friction term acts only where it is measured, so every t0 between two
+/// measured trains gives the same values, and wherever in there the change
+/// was, the middle is off by least. The factor is then fitted again there.
+fn refine_step(
     ev: &Evaluator<'_>,
     data: &Dataset,
+    drivers: &Drivers,
     space: &Space,
     u: &[f64],
+    noise: Option<f64>,
 ) -> Result<Option<Fitted>> {
+    use tortwin_model::generic::Driver;
     let Some(Candidate::Generic(slot)) = space.slots.first() else {
         return Ok(None);
     };
-    let Some(t0) = slot.x0() else {
+    let (Some(x0), Some(driver)) = (slot.x0(), slot.driver) else {
         return Ok(None);
     };
     let f = space
@@ -850,23 +937,13 @@ fn refine_t0(
         .pop()
         .and_then(|p| p.first().copied())
         .unwrap_or(1.0);
-    let times: Vec<f64> = data
-        .passages
-        .iter()
-        .map(|p| p.log_time_ns as f64 * 1e-9)
-        .collect();
-    let gaps: Vec<f64> = times
-        .windows(2)
-        .map(|w| (0.5 * (w[0] + w[1])).round())
-        .filter(|&g| g >= t0 - 6.0 * 3600.0 && g <= t0 + 3600.0)
-        .collect();
-    let with_t0 = |t: f64| -> Space {
+    let with_x0 = |x: f64| -> Space {
         let moved = space::GenericSlot::factor(
             slot.acts_on,
-            slot.driver.unwrap_or(tortwin_model::generic::Driver::Time),
+            driver,
             FormKind::Step,
             slot.scope(),
-            Some(t),
+            Some(x),
             (0.0, 1.0),
         );
         Space {
@@ -874,25 +951,139 @@ fn refine_t0(
             slots: vec![Candidate::Generic(moved)],
         }
     };
-    let base_sse = ev.evaluate(&space.config(u))?.sse;
-    let tried: Vec<(f64, f64)> = gaps
-        .par_iter()
-        .map(|&t| {
-            let s = with_t0(t);
-            let cfg = s.config(&[s.slots[0].unit(0, f)]);
-            Ok((t, ev.evaluate(&cfg)?.sse))
-        })
-        .collect::<Result<_>>()?;
-    let Some(&(best_t, best_sse)) = tried.iter().min_by(|a, b| a.1.total_cmp(&b.1)) else {
-        return Ok(None);
+    let sse_at = |x: f64| -> Result<f64> {
+        let s = with_x0(x);
+        Ok(ev.evaluate(&s.config(&[s.slots[0].unit(0, f)]))?.sse)
     };
-    if best_sse >= base_sse {
+    // The intervals between consecutive values a threshold can fall in:
+    // trains for time, observed values for another driver.
+    let values: Vec<f64> = if driver == Driver::Time {
+        data.passages
+            .iter()
+            .map(|p| p.log_time_ns as f64 * 1e-9)
+            .collect()
+    } else {
+        drivers.distinct(driver).to_vec()
+    };
+    let gaps: Vec<(f64, f64)> = values.windows(2).map(|w| (w[0], w[1])).collect();
+    if gaps.is_empty() {
         return Ok(None);
     }
-    let s = with_t0(best_t);
+    let at = gaps.partition_point(|g| g.1 <= x0).min(gaps.len() - 1);
+    // Time: the gaps from 8 h before to 2 h after. Another driver: a
+    // coarse pass over a fifth of the values on each side, then every gap
+    // next to the best coarse one.
+    let mut candidates: Vec<usize> = if driver == Driver::Time {
+        (0..gaps.len())
+            .filter(|&k| {
+                let mid = 0.5 * (gaps[k].0 + gaps[k].1);
+                mid >= x0 - 8.0 * 3600.0 && mid <= x0 + 2.0 * 3600.0
+            })
+            .collect()
+    } else {
+        let reach = (gaps.len() / 5).max(8);
+        let (lo, hi) = (at.saturating_sub(reach), (at + reach).min(gaps.len() - 1));
+        let stride = ((hi - lo) / 24).max(1);
+        (lo..=hi).step_by(stride).chain([at]).collect()
+    };
+    let mut tried: Vec<(usize, f64)> = Vec::new();
+    for pass in 0..2 {
+        candidates.sort_unstable();
+        candidates.dedup();
+        candidates.retain(|k| !tried.iter().any(|(t, _)| t == k));
+        let sse: Vec<f64> = candidates
+            .par_iter()
+            .map(|&k| sse_at(0.5 * (gaps[k].0 + gaps[k].1)))
+            .collect::<Result<_>>()?;
+        tried.extend(candidates.iter().copied().zip(sse));
+        tried.sort_unstable_by_key(|t| t.0);
+        if pass == 1 || driver == Driver::Time {
+            break;
+        }
+        // Fine: every gap between the best coarse one's neighbours.
+        let Some(b) = (0..tried.len()).min_by(|&a, &b| tried[a].1.total_cmp(&tried[b].1)) else {
+            break;
+        };
+        let from = tried[b.saturating_sub(1)].0;
+        let to = tried[(b + 1).min(tried.len() - 1)].0;
+        candidates = (from..=to).collect();
+        if candidates.len() > 48 {
+            let stride = candidates.len() / 48 + 1;
+            candidates = (from..=to).step_by(stride).chain([tried[b].0]).collect();
+        }
+    }
+    let base_sse = ev.evaluate(&space.config(u))?.sse;
+    let Some(best) = (0..tried.len()).min_by(|&a, &b| tried[a].1.total_cmp(&tried[b].1)) else {
+        return Ok(None);
+    };
+    if tried[best].1 >= base_sse {
+        return Ok(None);
+    }
+    // The factor fitted at the best threshold, and every threshold tried
+    // again with it: the first guess's factor was a compromise that makes
+    // the other thresholds look worse than they are.
+    let at_best = with_x0(0.5 * (gaps[tried[best].0].0 + gaps[tried[best].0].1));
+    let refit = fit::fit(
+        ev,
+        &at_best,
+        Start::Warm(vec![at_best.slots[0].unit(0, f)]),
+        None,
+    )?;
+    let f = at_best
+        .params(&refit.u)
+        .pop()
+        .and_then(|p| p.first().copied())
+        .unwrap_or(f);
+    let sse_at = |x: f64| -> Result<f64> {
+        let s = with_x0(x);
+        Ok(ev.evaluate(&s.config(&[s.slots[0].unit(0, f)]))?.sse)
+    };
+    let again: Vec<f64> = tried
+        .par_iter()
+        .map(|&(k, _)| sse_at(0.5 * (gaps[k].0 + gaps[k].1)))
+        .collect::<Result<_>>()?;
+    for (t, sse) in tried.iter_mut().zip(again) {
+        t.1 = sse;
+    }
+    let Some(best) = (0..tried.len()).min_by(|&a, &b| tried[a].1.total_cmp(&tried[b].1)) else {
+        return Ok(None);
+    };
+    let best_sse = tried[best].1;
+    let tolerance = noise.map_or(1e-12 * best_sse, |s| 4.0 * s * s);
+    let near = |k: usize| tried[k].1 - best_sse <= tolerance;
+    let (mut first, mut last) = (best, best);
+    while first > 0 && near(first - 1) {
+        first -= 1;
+    }
+    while last + 1 < tried.len() && near(last + 1) {
+        last += 1;
+    }
+    let (lo, hi) = (gaps[tried[first].0].0, gaps[tried[last].0].1);
+    let x = if driver == Driver::Time {
+        (0.5 * (lo + hi)).round()
+    } else {
+        readable_between(lo, hi)
+    };
+    let s = with_x0(x);
     let start = Start::Warm(vec![s.slots[0].unit(0, f)]);
     let fitted = fit::fit(ev, &s, start, None)?;
     Ok(Some((s, fitted.u, fitted.eval)))
+}
+
+/// The number with the fewest significant digits in the middle half of
+/// (lo, hi), strictly inside it: a threshold people can read (85 rather
+/// than 84.9873), where any value in between says the same.
+fn readable_between(lo: f64, hi: f64) -> f64 {
+    let mid = 0.5 * (lo + hi);
+    let (a, b) = (mid - 0.25 * (hi - lo), mid + 0.25 * (hi - lo));
+    for digits in 1..=15 {
+        let scale = 10f64.powi(digits - 1 - mid.abs().max(1e-300).log10().floor() as i32);
+        let x = (mid * scale).round() / scale;
+        if x > lo && x < hi && x >= a && x <= b {
+            return x;
+        }
+    }
+    mid
 }
 
 /// The named effect a generic term is a form of (effects.md:
@@ -939,9 +1130,10 @@ fn is_step(c: &Candidate) -> bool {
 }
 
 /// Moves the best passing named effect in front of the generic terms when
-/// it removes at least [`NAMED_SHARE`] of what the best candidate removes:
-/// effects.md's named effects are the model's own vocabulary.
-fn prefer_named(results: &mut [(CandidateResult, Space, Vec<f64>)], sse: f64) {
+/// the best generic term is not decisively better (effects.md: an effect is
+/// reported by its name where a named effect describes it; the named
+/// effects are the model's own vocabulary).
+fn prefer_named(results: &mut [(CandidateResult, Space, Vec<f64>)], n: usize, options: &Options) {
     let passing = |r: &CandidateResult| r.passes_bic && r.passes_share;
     let Some(best) = results.iter().position(|r| passing(&r.0)) else {
         return;
@@ -959,11 +1151,68 @@ fn prefer_named(results: &mut [(CandidateResult, Space, Vec<f64>)], sse: f64) {
     if !unscoped {
         return;
     }
-    let best_gain = sse - results[best].0.sse;
+    // "Describes it": the generic term is not decisively better, by the
+    // same criterion that accepts an effect at all (the BIC of one against
+    // the other). A named effect that leaves a residual the generic term
+    // explains is a stand-in (temperature for humidity, say), however much
+    // of the first residual both remove.
+    let ln_n = (n as f64).ln();
+    let generic = &results[best].0;
     if let Some(named) = results.iter().position(|r| {
-        r.0.name != "generic" && passing(&r.0) && sse - r.0.sse >= NAMED_SHARE * best_gain
+        r.0.name != "generic"
+            && passing(&r.0)
+            && n as f64 * (r.0.sse / generic.sse).ln() + (r.0.k as f64 - generic.k as f64) * ln_n
+                < options.bic_threshold.abs()
     }) {
         results[best..=named].rotate_right(1);
+    }
+}
+
+/// A sensor's offset: the narrowest scope (site, rail, quantity: one
+/// instrument) that describes the residual about as well as the best
+/// offset goes first. Tribometer readings at a site are few: a site-wide
+/// offset fits them by chance about as well as not, and the evidence is the
+/// sensor's; a broader scope wins only when it is decisively better.
+fn prefer_narrow_offsets(
+    results: &mut [(CandidateResult, Space, Vec<f64>)],
+    n: usize,
+    options: &Options,
+) {
+    let passing = |r: &CandidateResult| r.passes_bic && r.passes_share;
+    let Some(best) = results.iter().position(|r| passing(&r.0)) else {
+        return;
+    };
+    let offset_scope = |space: &Space| match space.slots.first() {
+        Some(Candidate::Generic(g)) if g.acts_on == ActsOn::Measurement => Some(g.scope()),
+        _ => None,
+    };
+    let Some(broad) = offset_scope(&results[best].1) else {
+        return;
+    };
+    let within = |narrow: &space::Scope| {
+        broad
+            .site
+            .as_ref()
+            .is_none_or(|s| narrow.site.as_ref() == Some(s))
+            && broad
+                .rail
+                .as_ref()
+                .is_none_or(|r| narrow.rail.as_ref() == Some(r))
+            && broad.quantity.is_none_or(|q| narrow.quantity == Some(q))
+            && narrow.keys() > broad.keys()
+    };
+    let best_sse = results[best].0.sse;
+    let narrowest = results
+        .iter()
+        .enumerate()
+        .filter(|(_, r)| passing(&r.0))
+        .filter_map(|(k, r)| offset_scope(&r.1).map(|s| (k, s, r.0.sse)))
+        .filter(|(_, s, sse)| {
+            within(s) && n as f64 * (sse / best_sse).ln() < options.bic_threshold.abs()
+        })
+        .max_by(|a, b| a.1.keys().cmp(&b.1.keys()).then(b.2.total_cmp(&a.2)));
+    if let Some((k, _, _)) = narrowest {
+        results[best..=k].rotate_right(1);
     }
 }
 
@@ -996,9 +1245,6 @@ const MIN_EFFECT: f64 = 0.02;
 
 /// The exp terms whose other forms are fitted too, per step.
 const FORMS_FOR: usize = 2;
-
-/// See [`prefer_named`].
-const NAMED_SHARE: f64 = 0.95;
 
 fn verdict(
     found: &[EffectParams],

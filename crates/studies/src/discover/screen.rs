@@ -202,8 +202,8 @@ struct Response {
     acts_on: ActsOn,
     driver: Driver,
     applicator: Option<String>,
-    /// A time step's t0 (unix s).
-    t0: Option<f64>,
+    /// A step's threshold (unix s for time).
+    x0: Option<f64>,
     /// The screening parameter and the slot's neutral value.
     eps: f64,
     neutral: f64,
@@ -251,7 +251,7 @@ pub struct Screened {
     #[serde(skip)]
     scope: Scope,
     #[serde(skip)]
-    t0: Option<f64>,
+    x0: Option<f64>,
     /// Gauss–Newton estimate of the exp (or step) parameter.
     #[serde(skip)]
     estimate: f64,
@@ -308,18 +308,43 @@ pub fn propose(
     let sigma2 = noise.map_or(0.0, |s| s * s);
     let n_active = active.iter().filter(|a| **a).count().max(2) as f64;
     for mask in &masks {
-        if let Some((t0, gain)) = best_split(times, &residual, mask) {
-            let t0 = t0.round();
+        if let Some((x0, gain)) = best_split(times, &residual, mask) {
+            let x0 = x0.round();
             if gain > CHANGE_POINT_CHI2 * n_active.ln() * sigma2
-                && !change_points.iter().any(|&c| (c - t0).abs() < 60.0)
+                && !change_points.iter().any(|&c| (c - x0).abs() < 60.0)
             {
-                change_points.push(t0);
+                change_points.push(x0);
             }
         }
     }
     change_points.truncate(1);
 
-    // Directions: (acts_on, driver, applicator, t0).
+    // Steps along the other drivers: a factor that jumps at a load, a
+    // speed or a humidity shows as a split of the residual along that
+    // driver, and the smooth forms' first-order screening (centred on
+    // x_ref) can miss it when it lifts nearly every contact. The strongest
+    // splits, each at a threshold people can read.
+    let mut driver_steps: Vec<(Driver, f64, f64)> = Vec::new();
+    for driver in Driver::ALL {
+        if driver == Driver::Time || !drivers.varies(driver) {
+            continue;
+        }
+        let best = masks
+            .iter()
+            .filter_map(|mask| best_split(drivers.values(driver), &residual, mask))
+            .max_by(|a, b| a.1.total_cmp(&b.1));
+        if let Some((x0, gain)) = best {
+            if gain > CHANGE_POINT_CHI2 * n_active.ln() * sigma2 {
+                driver_steps.push((driver, round_sig(x0, 3), gain));
+            }
+        }
+    }
+    driver_steps.sort_by(|a, b| b.2.total_cmp(&a.2));
+    let strongest = driver_steps.first().map_or(0.0, |s| s.2);
+    driver_steps.retain(|s| s.2 >= SECOND_DRIVER * strongest);
+    driver_steps.truncate(TOP_DIRECTIONS);
+
+    // Directions: (acts_on, driver, applicator, x0).
     let physics = [
         ActsOn::Transfer,
         ActsOn::Consumption,
@@ -335,12 +360,12 @@ pub fn propose(
         .collect();
     for driver in Driver::ALL {
         if driver == Driver::Time {
-            for &t0 in &change_points {
+            for &x0 in &change_points {
                 for acts_on in physics {
-                    directions.push((acts_on, driver, None, Some(t0)));
+                    directions.push((acts_on, driver, None, Some(x0)));
                 }
                 for a in &applicators {
-                    directions.push((ActsOn::PulseMass, driver, Some(a.clone()), Some(t0)));
+                    directions.push((ActsOn::PulseMass, driver, Some(a.clone()), Some(x0)));
                 }
             }
             continue;
@@ -356,28 +381,38 @@ pub fn propose(
                 directions.push((ActsOn::PulseMass, driver, Some(a.clone()), None));
             }
         }
+        for &(_, x0, _) in driver_steps.iter().filter(|s| s.0 == driver) {
+            for acts_on in physics {
+                directions.push((acts_on, driver, None, Some(x0)));
+            }
+            if !driver.is_wheel() {
+                for a in &applicators {
+                    directions.push((ActsOn::PulseMass, driver, Some(a.clone()), Some(x0)));
+                }
+            }
+        }
     }
     // The responses to the drivers change little as the model grows: the
-    // first step's serve the later ones; time steps depend on t0 and are
-    // run anew.
+    // first step's serve the later ones; steps depend on x0 and are run
+    // anew.
     let (reuse, to_run): (Vec<_>, Vec<_>) = directions
         .into_iter()
         .partition(|d| d.3.is_none() && cache.has(d));
     let mut responses: Vec<Response> = to_run
         .into_par_iter()
-        .map(|(acts_on, driver, applicator, t0)| {
+        .map(|(acts_on, driver, applicator, x0)| {
             let scope = Scope {
                 applicator: applicator.clone(),
                 ..Scope::default()
             };
-            let (slot, eps) = match t0 {
-                Some(t0) => (
+            let (slot, eps) = match x0 {
+                Some(x0) => (
                     GenericSlot::factor(
                         acts_on,
                         driver,
                         FormKind::Step,
                         scope,
-                        Some(t0),
+                        Some(x0),
                         (0.0, 1.0),
                     ),
                     EPS_STEP,
@@ -399,7 +434,7 @@ pub fn propose(
                 acts_on,
                 driver,
                 applicator,
-                t0,
+                x0,
                 eps,
                 neutral: slot.neutral(),
                 j: perturbed
@@ -411,7 +446,7 @@ pub fn propose(
         })
         .collect::<Result<_>>()?;
     for r in &responses {
-        if r.t0.is_none() {
+        if r.x0.is_none() {
             cache.keep(r);
         }
     }
@@ -457,14 +492,14 @@ pub fn propose(
             if jj <= 0.0 || !jj.is_finite() {
                 continue;
             }
-            let slot_preview = label_of(resp.acts_on, resp.driver, &scope, resp.t0);
+            let slot_preview = label_of(resp.acts_on, resp.driver, &scope, resp.x0);
             screened.push(Screened {
                 label: slot_preview,
                 reduction: rj * rj / jj,
                 acts_on: resp.acts_on,
                 driver: resp.driver,
                 scope,
-                t0: resp.t0,
+                x0: resp.x0,
                 estimate: resp.neutral + (resp.eps - resp.neutral) * rj / jj,
             });
         }
@@ -475,32 +510,33 @@ pub fn propose(
     // its fitted one, hence the half).
     let worth = |reduction: f64| reduction >= 0.5 * min_reduction;
 
-    // Every acts_on at the change point (the best scope of each): which one
-    // moved is what the fits tell apart; the screening's first-order
-    // response cannot (a clogged nozzle and a drop of transfer look alike
-    // until the product runs out).
+    // Every acts_on at each change point, in time or along a driver (the
+    // best scope of each): which one moved is what the fits tell apart; the
+    // screening's first-order response cannot (a clogged nozzle and a drop
+    // of transfer look alike until the product runs out).
     let mut candidates: Vec<(Candidate, Start)> = Vec::new();
     let mut timed: Vec<&Screened> = Vec::new();
-    // Time steps compete with the drivers: tried when one could remove a
-    // good part of what the best direction could.
+    // Steps compete with the smooth directions: tried when one could remove
+    // a good part of what the best direction could.
     let best_reduction = screened.first().map_or(0.0, |s| s.reduction);
     for s in screened
         .iter()
-        .filter(|s| s.t0.is_some() && worth(s.reduction))
+        .filter(|s| s.x0.is_some() && worth(s.reduction))
         .filter(|s| s.reduction >= TIME_SHARE * best_reduction)
     {
-        if !timed
-            .iter()
-            .any(|t| t.acts_on == s.acts_on && t.scope.applicator == s.scope.applicator)
-        {
+        if !timed.iter().any(|t| {
+            t.acts_on == s.acts_on
+                && t.driver == s.driver
+                && t.scope.applicator == s.scope.applicator
+        }) {
             timed.push(s);
             let slot = GenericSlot::factor(
                 s.acts_on,
                 s.driver,
                 FormKind::Step,
                 s.scope.clone(),
-                s.t0,
-                drivers.range(s.driver),
+                s.x0,
+                drivers.typical(s.driver),
             );
             let c = Candidate::Generic(slot);
             let u = c.unit(0, s.estimate);
@@ -517,7 +553,7 @@ pub fn propose(
     let mut first = None;
     for s in screened
         .iter()
-        .filter(|s| s.t0.is_none() && worth(s.reduction))
+        .filter(|s| s.x0.is_none() && worth(s.reduction))
     {
         // A second driver only if it could remove about as much: two
         // correlated weather covariates are one finding.
@@ -530,7 +566,7 @@ pub fn propose(
     let mut taken: Vec<&Screened> = Vec::new();
     for s in screened
         .iter()
-        .filter(|s| s.t0.is_none() && top_drivers.contains(&s.driver) && worth(s.reduction))
+        .filter(|s| s.x0.is_none() && top_drivers.contains(&s.driver) && worth(s.reduction))
     {
         if taken
             .iter()
@@ -545,7 +581,7 @@ pub fn propose(
             FormKind::Exp,
             s.scope.clone(),
             None,
-            drivers.range(s.driver),
+            drivers.typical(s.driver),
         );
         let c = Candidate::Generic(slot);
         let u = c.unit(0, s.estimate);
@@ -613,16 +649,47 @@ pub fn propose(
         offsets.push((scope, mask, n as f64 * mean * mean, mean));
     }
     offsets.sort_by(|a, b| b.2.total_cmp(&a.2));
-    let offsets: Vec<Screened> = offsets
+    // The strongest offsets, each with the instrument inside it that
+    // carries most of it (site, rail and quantity named): the selection
+    // prefers that one unless the broader scope is decisively better.
+    let mut chosen: Vec<usize> = Vec::new();
+    for k in 0..offsets.len().min(TOP_OFFSETS) {
+        chosen.push(k);
+        let broad = &offsets[k].0;
+        let instrument = offsets
+            .iter()
+            .enumerate()
+            .filter(|(_, o)| {
+                o.0.keys() == 3
+                    && broad.keys() < 3
+                    && broad
+                        .site
+                        .as_ref()
+                        .is_none_or(|s| o.0.site.as_ref() == Some(s))
+                    && broad
+                        .rail
+                        .as_ref()
+                        .is_none_or(|r| o.0.rail.as_ref() == Some(r))
+                    && broad.quantity.is_none_or(|q| o.0.quantity == Some(q))
+            })
+            .max_by(|a, b| a.1 .2.total_cmp(&b.1 .2))
+            .map(|(i, _)| i);
+        if let Some(i) = instrument {
+            if !chosen.contains(&i) {
+                chosen.push(i);
+            }
+        }
+    }
+    let offsets: Vec<Screened> = chosen
         .into_iter()
-        .take(TOP_OFFSETS)
+        .map(|k| offsets[k].clone())
         .map(|(scope, _, reduction, mean)| Screened {
             label: GenericSlot::offset(scope.clone()).label(),
             reduction,
             acts_on: ActsOn::Measurement,
             driver: Driver::Time,
             scope,
-            t0: None,
+            x0: None,
             estimate: mean,
         })
         .collect();
@@ -644,13 +711,13 @@ pub fn propose(
     Ok((candidates, screening))
 }
 
-fn label_of(acts_on: ActsOn, driver: Driver, scope: &Scope, t0: Option<f64>) -> String {
-    let form = if t0.is_some() {
+fn label_of(acts_on: ActsOn, driver: Driver, scope: &Scope, x0: Option<f64>) -> String {
+    let form = if x0.is_some() {
         FormKind::Step
     } else {
         FormKind::Exp
     };
-    GenericSlot::factor(acts_on, driver, form, scope.clone(), t0, (0.0, 1.0)).label()
+    GenericSlot::factor(acts_on, driver, form, scope.clone(), x0, (0.0, 1.0)).label()
 }
 
 /// `x` to `digits` significant digits (a threshold people can read).
@@ -662,43 +729,45 @@ fn round_sig(x: f64, digits: i32) -> f64 {
     (x * scale).round() / scale
 }
 
-/// The other forms of a fitted exp term (`slot` at `beta`): linear and
-/// power from the same first-order slope (`gamma ≈ beta`, `n ≈ beta x_ref`),
-/// and a step where the residual splits along the driver (over the slot's
-/// rail).
+/// The other forms of a fitted term on the same direction: exp, linear and
+/// power (from the exp's first-order slope where the fitted term is an exp,
+/// `gamma ≈ beta`, `n ≈ beta x_ref`; searched afresh otherwise), and a step
+/// where the residual splits along the driver (over the slot's rail).
 pub fn other_forms(
     data: &Dataset,
     drivers: &Drivers,
     active: &[bool],
     residual: &[f64],
     slot: &GenericSlot,
-    beta: f64,
+    beta: Option<f64>,
 ) -> Vec<(Candidate, Start)> {
     let Some(driver) = slot.driver else {
         return Vec::new();
     };
-    let range = drivers.range(driver);
+    let typical = drivers.typical(driver);
     let x_ref = driver.x_ref().unwrap_or(0.0);
     let mut out = Vec::new();
-    for form in [FormKind::Linear, FormKind::Power] {
-        if !drivers.allows(driver, form) {
+    for form in [FormKind::Exp, FormKind::Linear, FormKind::Power] {
+        if Some(form) == slot.form || !drivers.allows(driver, form) {
             continue;
         }
-        let p0 = if form == FormKind::Power {
-            beta * x_ref
-        } else {
-            beta
-        };
         let c = Candidate::Generic(GenericSlot::factor(
             slot.acts_on,
             driver,
             form,
             slot.scope(),
             None,
-            range,
+            typical,
         ));
-        let u = c.unit(0, p0);
-        out.push((c, Start::Warm(vec![u])));
+        let start = match (beta, form) {
+            (Some(b), FormKind::Power) => Start::Warm(vec![c.unit(0, b * x_ref)]),
+            (Some(b), _) => Start::Warm(vec![c.unit(0, b)]),
+            (None, _) => Start::Fresh,
+        };
+        out.push((c, start));
+    }
+    if slot.form == Some(FormKind::Step) {
+        return out;
     }
     let rail = slot
         .rail
@@ -717,7 +786,7 @@ pub fn other_forms(
             FormKind::Step,
             slot.scope(),
             Some(round_sig(x0, 3)),
-            range,
+            typical,
         ));
         // From g = 1: the bracket around it reaches f = 0.55 to 1.45, and
         // widens to the whole range if the optimum is beyond.

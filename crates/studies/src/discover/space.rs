@@ -19,9 +19,16 @@ use tortwin_model::config::{Effects, GenericTerm, TermEffect};
 use tortwin_model::generic::{ActsOn, Driver, Form, FormKind};
 use tortwin_recording::{EventKind, Quantity};
 
-/// How far a fitted factor may reach over the observed range of its
-/// driver: `|ln g|` up to about this much at the extreme of the range.
-const REACH: f64 = 2.5;
+/// How far a fitted exp or power factor may reach over the typical range
+/// of its driver: `|ln g|` up to this much at the 5th or 95th percentile of
+/// the values it sees (or between them). A driver whose values all sit far
+/// from its `x_ref` (creepage on tangent track is about a tenth of 0.01)
+/// needs room for a level, not only for a slope: a power of creepage with
+/// n = 1.3 is g = 0.01 at the 5th percentile there.
+const REACH: f64 = 5.0;
+/// The same for a linear factor: g may reach 1 ± this at the typical
+/// extremes (it is clamped at 0 below).
+const LINEAR_REACH: f64 = 3.0;
 /// The largest measurement offset searched.
 const OFFSET_MAX: f64 = 0.3;
 /// A step's factor is searched in [0, STEP_F_MAX].
@@ -65,35 +72,38 @@ impl Scope {
 
 impl GenericSlot {
     /// A slot on `acts_on` driven by `driver` in `form` (a step at `x0`),
-    /// its parameter searched on the range that `range` (the driver's
-    /// observed min and max) allows.
+    /// its parameter searched on the range that `typical` (the driver's
+    /// 5th and 95th percentiles, [`Drivers::typical`]) allows.
     pub fn factor(
         acts_on: ActsOn,
         driver: Driver,
         form: FormKind,
         scope: Scope,
         x0: Option<f64>,
-        range: (f64, f64),
+        typical: (f64, f64),
     ) -> Self {
         let x_ref = driver.x_ref().unwrap_or(0.0);
         let (lo, hi) = match form {
             FormKind::Exp | FormKind::Linear => {
-                let span = (range.0 - x_ref)
+                let span = (typical.0 - x_ref)
                     .abs()
-                    .max((range.1 - x_ref).abs())
+                    .max((typical.1 - x_ref).abs())
+                    .max(typical.1 - typical.0)
                     .max(1e-9);
                 let b = if form == FormKind::Exp {
                     REACH / span
                 } else {
-                    1.0 / span
+                    LINEAR_REACH / span
                 };
                 (-b, b)
             }
             FormKind::Power => {
-                let span = (range.0.max(1e-12) / x_ref)
+                let (lo, hi) = (typical.0.max(1e-12), typical.1.max(1e-12));
+                let span = (lo / x_ref)
                     .ln()
                     .abs()
-                    .max((range.1.max(1e-12) / x_ref).ln().abs())
+                    .max((hi / x_ref).ln().abs())
+                    .max((hi / lo).ln())
                     .max(1e-9);
                 (-REACH / span, REACH / span)
             }
@@ -193,6 +203,14 @@ impl GenericSlot {
         }
     }
 
+    /// Whether `other` acts on the same quantity, driven by the same
+    /// covariate, in the same scope (whatever its form).
+    pub fn same_direction(&self, other: &GenericSlot) -> bool {
+        self.acts_on == other.acts_on
+            && self.driver == other.driver
+            && self.scope() == other.scope()
+    }
+
     /// Whether `term` is this slot (whatever its parameter).
     pub fn is(&self, term: &GenericTerm) -> bool {
         let shape = match term.effect {
@@ -290,17 +308,23 @@ pub struct Drivers {
     pub at_row: Vec<Vec<f64>>,
     /// [driver]: (min, max) over the recording.
     pub range: Vec<(f64, f64)>,
+    /// [driver]: the 5th and 95th percentiles of the values a term sees
+    /// (every weather message, every wheel on every rail, every event
+    /// time): where a fitted factor must be able to reach.
+    pub typical: Vec<(f64, f64)>,
+    /// [driver]: every distinct value a term sees, ascending: where a
+    /// step's threshold can make a difference.
+    pub distinct: Vec<Vec<f64>>,
 }
 
 impl Drivers {
     pub fn of(data: &Dataset) -> Self {
         let n = data.rows.len();
         let mut at_row = vec![vec![f64::NAN; n]; Driver::ALL.len()];
-        let mut range = vec![(f64::INFINITY, f64::NEG_INFINITY); Driver::ALL.len()];
+        let mut seen: Vec<Vec<f64>> = vec![Vec::new(); Driver::ALL.len()];
         let mut widen = |d: Driver, x: f64| {
             if x.is_finite() {
-                let r = &mut range[d as usize];
-                *r = (r.0.min(x), r.1.max(x));
+                seen[d as usize].push(x);
             }
         };
         let defaults = tortwin_recording::Weather::default();
@@ -329,6 +353,20 @@ impl Drivers {
             }
             widen(Driver::Time, event.log_time_ns as f64 * 1e-9);
         }
+        let mut range = Vec::with_capacity(seen.len());
+        let mut typical = Vec::with_capacity(seen.len());
+        for values in &mut seen {
+            values.sort_unstable_by(f64::total_cmp);
+            let at = |q: f64| values[((values.len() - 1) as f64 * q).round() as usize];
+            if values.is_empty() {
+                range.push((f64::INFINITY, f64::NEG_INFINITY));
+                typical.push((f64::INFINITY, f64::NEG_INFINITY));
+            } else {
+                range.push((at(0.0), at(1.0)));
+                typical.push((at(0.05), at(0.95)));
+            }
+            values.dedup();
+        }
         for (k, row) in data.rows.iter().enumerate() {
             at_row[Driver::Time as usize][k] = row.log_time_ns as f64 * 1e-9;
             let w = data.weather_at(row.log_time_ns);
@@ -347,7 +385,12 @@ impl Drivers {
                 }
             }
         }
-        Self { at_row, range }
+        Self {
+            at_row,
+            range,
+            typical,
+            distinct: seen,
+        }
     }
 
     pub fn values(&self, d: Driver) -> &[f64] {
@@ -356,6 +399,16 @@ impl Drivers {
 
     pub fn range(&self, d: Driver) -> (f64, f64) {
         self.range[d as usize]
+    }
+
+    /// Every distinct value a term driven by `d` sees, ascending.
+    pub fn distinct(&self, d: Driver) -> &[f64] {
+        &self.distinct[d as usize]
+    }
+
+    /// The 5th and 95th percentiles of the values a term driven by `d` sees.
+    pub fn typical(&self, d: Driver) -> (f64, f64) {
+        self.typical[d as usize]
     }
 
     /// Whether the recording shows the driver changing at all.
