@@ -646,7 +646,7 @@ bad_input! {
         => 2, ["missing field `speed_mps`"];
     missing_nested_field:
         with(base(), 2, |v| remove(v, "/axles/1/creepage/right", "cy"))
-        => 2, ["missing field `axles[1].creepage.right.cy`"];
+        => 2, ["`axles[1].creepage.right`", "missing field `cy`"];
     true_is_not_a_number:
         with(base(), 2, |v| v["speed_mps"] = json!(true))
         => 2, ["`speed_mps`", "true"];
