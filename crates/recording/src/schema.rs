@@ -4,7 +4,7 @@
 //! reader. They say what a JSON Schema can say of
 //! ../shared/spec/recording-format.md; the rules across fields and messages
 //! (rails named by the section, offsets never decreasing, one train at a
-//! time) are the reader's ([`crate::decode`]).
+//! time) are the reader's (`decode`).
 //!
 //! The text is written into every recording byte for byte: changing it
 //! changes the bytes `tortwin synth` writes for a seed.

@@ -9,7 +9,7 @@
 //! JSON object and a list a JSON array). serde_json refuses NaN and infinite
 //! numbers, and unknown extra fields are ignored. What needs more than one
 //! field, or the section, is checked when the reader turns a wire message
-//! into a typed event ([`crate::decode`]).
+//! into a typed event (`decode`).
 //!
 //! The helpers in `json` word serde's messages in JSON's terms (a JSON
 //! number, not `f64`), and refuse what serde's derive would otherwise take:

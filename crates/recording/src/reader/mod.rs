@@ -11,12 +11,12 @@
 //!
 //! Three parts, each in its file:
 //!
-//! 1. [`layout`]: one pass over the data section learns where the chunks
+//! 1. `layout`: one pass over the data section learns where the chunks
 //!    and messages are, and checks every chunk, without keeping messages.
-//! 2. [`replay`]: the messages in replay order, a chunk decompressed only
+//! 2. `replay`: the messages in replay order, a chunk decompressed only
 //!    when the time frontier reaches it: memory is a few chunks, not the
 //!    recording.
-//! 3. [`crate::decode`]: each message parsed once into its wire struct and
+//! 3. `decode`: each message parsed once into its wire struct and
 //!    then into an [`Event`], every rule of the format checked. The
 //!    `train_id`s seen so far (for the duplicate check and measurements)
 //!    grow with the recording, by one entry a train.

@@ -44,12 +44,12 @@
 //! iterated in hash order, and the MCAP metadata has no timestamp: the same
 //! parameters give byte-identical files.
 //!
-//! One job a file: [`params`] (what decides a recording), [`hidden`] (the
-//! truth configuration), [`climate`] (the weather), [`traffic`] (what a
-//! train is), [`planner`] (a day's trains, pulses, weather and
-//! measurements), [`truth`] (the engine runs, noise and the key's figures),
-//! [`writing`] (the file, through the recording crate's writer) and
-//! [`report`] (the key).
+//! One job a file: `params` (what decides a recording), `hidden` (the
+//! truth configuration), `climate` (the weather), `traffic` (what a
+//! train is), `planner` (a day's trains, pulses, weather and
+//! measurements), `truth` (the engine runs, noise and the key's figures),
+//! `writing` (the file, through the recording crate's writer) and
+//! `report` (the key).
 
 mod climate;
 mod hidden;
