@@ -261,6 +261,13 @@ fn base_recording_replays_in_order_with_si_units_in_every_layout() {
 }
 
 #[test]
+fn an_lz4_chunk_reads_as_a_zstd_one() {
+    let (_, zstd) = read_msgs(&base(), Layout::OneChunk).unwrap();
+    let (_, lz4) = read_msgs(&base(), Layout::OneLz4Chunk).unwrap();
+    assert_eq!(lz4, zstd);
+}
+
+#[test]
 fn ties_go_by_topic_then_file_order() {
     let t = T0 + 5 * SEC;
     let msgs = vec![

@@ -41,6 +41,8 @@ pub enum Layout {
     ChunkPerMessage,
     /// No chunks: the reader's in-memory fallback.
     Unchunked,
+    /// Everything in one lz4 chunk (the other layouts use zstd).
+    OneLz4Chunk,
 }
 
 pub const LAYOUTS: [Layout; 3] = [Layout::OneChunk, Layout::ChunkPerMessage, Layout::Unchunked];
@@ -49,9 +51,13 @@ pub const LAYOUTS: [Layout; 3] = [Layout::OneChunk, Layout::ChunkPerMessage, Lay
 /// own channel, anything else (an unknown topic, another encoding) on a
 /// channel of its own.
 pub fn write_recording(path: &Path, msgs: &[Msg], layout: Layout) {
+    let compression = match layout {
+        Layout::OneLz4Chunk => mcap::Compression::Lz4,
+        _ => mcap::Compression::Zstd,
+    };
     let options = mcap::WriteOptions::new()
         .use_chunks(layout != Layout::Unchunked)
-        .compression(Some(mcap::Compression::Zstd));
+        .compression(Some(compression));
     let file = BufWriter::new(File::create(path).expect("the test can create its file"));
     let mut writer = RecordingWriter::new(file, options, None).expect("the writer starts");
     let mut channels: BTreeMap<(String, String), u16> = BTreeMap::new();

@@ -42,17 +42,18 @@ fn describe(data: &[u8], path: serde_path_to_error::Path, e: serde_json::Error) 
     }
     // serde names an array or object only by its kind ("sequence", "map"):
     // show it, shortened. Only on this error path is the JSON parsed again.
-    let shown = serde_json::from_slice::<Value>(data)
-        .ok()
+    let root = serde_json::from_slice::<Value>(data).ok();
+    let shown = root
+        .as_ref()
         .and_then(|root| {
             path.iter().try_fold(root, |value, segment| match segment {
-                serde_path_to_error::Segment::Seq { index } => value.get(*index).cloned(),
-                serde_path_to_error::Segment::Map { key } => value.get(key).cloned(),
+                serde_path_to_error::Segment::Seq { index } => value.get(*index),
+                serde_path_to_error::Segment::Map { key } => value.get(key),
                 _ => None,
             })
         })
         .filter(|v| v.is_array() || v.is_object())
-        .map_or(String::new(), |v| format!(" (got {})", show(&v)));
+        .map_or(String::new(), |v| format!(" (got {})", show(v)));
     if path.iter().next().is_none() {
         format!("{e}{shown}")
     } else {
