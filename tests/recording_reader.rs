@@ -710,6 +710,16 @@ bad_input! {
     applicator_outside_the_section:
         with(base(), 0, |v| v["applicators"][0]["position_m"] = json!(-1.0))
         => 0, ["`applicators[0].position_m`", "outside"];
+    duplicate_field_name:
+        with_raw(base(), 3, r#"{"applicator_id": "A1", "rail": "left", "mass_g": 0.1, "mass_g": 0.2}"#)
+        => 3, ["duplicate field `mass_g`"];
+    per_rail_map_names_a_rail_twice:
+        with_raw(base(), 2, r#"{"train_id": "F-1", "direction": "up", "speed_mps": 20.0, "axles": [
+            {"offset_m": 0.0, "bogie_position": "leading", "wheel_diameter_m": 0.92,
+             "wheel_load_kN": {"left": 100.0, "right": 98.0, "left": 90.0},
+             "creepage": {"left": {"cx": 0.01, "cy": 0.0, "spin_per_m": 0.1},
+                          "right": {"cx": -0.01, "cy": 0.002, "spin_per_m": -0.1}}}]}"#)
+        => 2, ["`axles[0].wheel_load_kN`", "rail `left` twice"];
     two_trains_at_once:
         with_time(base(), 7, T0 + 30 * SEC)
         => 7, ["two trains in the section at once", "`F-2`", "`F-1`"];
