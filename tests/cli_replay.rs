@@ -8,6 +8,7 @@ use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
 mod common;
+use common::recording::copy_recording;
 use common::{python, tortwin};
 
 fn reference(name: &str) -> PathBuf {
@@ -222,50 +223,23 @@ fn bad_input_exits_2_and_leaves_no_output() {
 fn a_message_error_mid_recording_names_topic_time_and_index() {
     // Rewrite tangent_day with one pulse's mass made negative, half way through.
     let dir = tempfile::tempdir().unwrap();
-    let src = std::fs::read(reference("tangent_day.mcap")).unwrap();
     let bad = dir.path().join("bad.mcap");
-    let mut writer = mcap::Writer::new(std::io::BufWriter::new(
-        std::fs::File::create(&bad).unwrap(),
-    ))
-    .unwrap();
-    let mut channels = std::collections::BTreeMap::new();
+    let mut index = 0;
     let mut pulses = 0;
     let mut spoiled = None;
-    for (index, m) in mcap::MessageStream::new(&src).unwrap().enumerate() {
-        let m = m.unwrap();
-        let id = *channels.entry(m.channel.id).or_insert_with(|| {
-            let schema = m.channel.schema.as_ref().unwrap();
-            let s = writer
-                .add_schema(&schema.name, &schema.encoding, &schema.data)
-                .unwrap();
-            writer
-                .add_channel(
-                    s,
-                    &m.channel.topic,
-                    &m.channel.message_encoding,
-                    &Default::default(),
-                )
-                .unwrap()
-        });
-        let mut data = m.data.to_vec();
-        if m.channel.topic == "/applicator/pulse" {
+    copy_recording(&reference("tangent_day.mcap"), &bad, |m| {
+        if m.topic == "/applicator/pulse" {
             pulses += 1;
             if pulses == 1000 {
-                let mut v: serde_json::Value = serde_json::from_slice(&data).unwrap();
+                let mut v: serde_json::Value = serde_json::from_slice(&m.data).unwrap();
                 v["mass_g"] = serde_json::json!(-0.1);
-                data = serde_json::to_vec(&v).unwrap();
+                m.data = serde_json::to_vec(&v).unwrap();
                 spoiled = Some((index, m.log_time));
             }
         }
-        let header = mcap::records::MessageHeader {
-            channel_id: id,
-            sequence: m.sequence,
-            log_time: m.log_time,
-            publish_time: m.publish_time,
-        };
-        writer.write_to_known_channel(&header, &data).unwrap();
-    }
-    writer.finish().unwrap();
+        index += 1;
+        true
+    });
     let (index, log_time) = spoiled.unwrap();
     let work = dir.path().join("out");
     std::fs::create_dir(&work).unwrap();

@@ -3,121 +3,19 @@
 //! expected files), the replay order over chunk layouts, and one test per
 //! class of bad input.
 
-use std::collections::BTreeMap;
-use std::fs::File;
-use std::io::BufWriter;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
-use mcap::records::MessageHeader;
 use proptest::prelude::*;
 use serde_json::{json, Value};
 use tortwin_recording::error::InputError;
 use tortwin_recording::reader::{ReaderContext, RecordingReader};
 use tortwin_recording::{BogiePosition, Direction, Event, EventKind, Quantity};
 
+mod common;
+use common::recording::{axle, msg, section, write_recording, Layout, Msg, LAYOUTS};
+
 const T0: u64 = 1_712_534_400_000_000_000;
 const SEC: u64 = 1_000_000_000;
-
-// ---------------------------------------------------------------------------
-// Writing test recordings.
-
-#[derive(Debug, Clone)]
-struct Msg {
-    topic: String,
-    log_time: u64,
-    encoding: String,
-    data: Vec<u8>,
-}
-
-fn msg(topic: &str, log_time: u64, value: Value) -> Msg {
-    Msg {
-        topic: topic.to_string(),
-        log_time,
-        encoding: "json".to_string(),
-        data: serde_json::to_vec(&value).unwrap(),
-    }
-}
-
-#[derive(Debug, Clone, Copy, PartialEq)]
-enum Layout {
-    /// Everything in one zstd chunk.
-    OneChunk,
-    /// A chunk per message, so chunk start times jump back and forth.
-    ChunkPerMessage,
-    /// No chunks: the reader's in-memory fallback.
-    Unchunked,
-}
-
-const LAYOUTS: [Layout; 3] = [Layout::OneChunk, Layout::ChunkPerMessage, Layout::Unchunked];
-
-fn write_mcap(path: &Path, msgs: &[Msg], layout: Layout) {
-    let options = mcap::WriteOptions::new()
-        .use_chunks(layout != Layout::Unchunked)
-        .compression(Some(mcap::Compression::Zstd));
-    let mut writer = options
-        .create(BufWriter::new(File::create(path).unwrap()))
-        .unwrap();
-    let mut channels: BTreeMap<(String, String), u16> = BTreeMap::new();
-    for (sequence, m) in msgs.iter().enumerate() {
-        let key = (m.topic.clone(), m.encoding.clone());
-        let channel_id = match channels.get(&key) {
-            Some(&id) => id,
-            None => {
-                let schema = writer
-                    .add_schema(&m.topic, "jsonschema", br#"{"type":"object"}"#)
-                    .unwrap();
-                let id = writer
-                    .add_channel(schema, &m.topic, &m.encoding, &BTreeMap::new())
-                    .unwrap();
-                channels.insert(key, id);
-                id
-            }
-        };
-        let header = MessageHeader {
-            channel_id,
-            sequence: sequence as u32,
-            log_time: m.log_time,
-            publish_time: m.log_time,
-        };
-        writer.write_to_known_channel(&header, &m.data).unwrap();
-        if layout == Layout::ChunkPerMessage {
-            writer.flush().unwrap();
-        }
-    }
-    writer.finish().unwrap();
-}
-
-fn section() -> Value {
-    json!({
-        "section_id": "test-600",
-        "length_m": 600.0,
-        "rails": ["left", "right"],
-        "curve_radius_m": null,
-        "rail_head_radius_m": 0.3,
-        "nominal_wheel_diameter_m": 0.92,
-        "applicators": [
-            {"id": "A1", "position_m": 10.0, "rails": ["left", "right"], "nominal_pulse_g": 0.2}
-        ],
-        "measurement_sites": [
-            {"id": "M1", "position_m": 60.0},
-            {"id": "M2", "position_m": 210.0}
-        ],
-        "operator_note": "unknown extra fields are ignored"
-    })
-}
-
-fn axle(offset_m: f64, bogie_position: &str) -> Value {
-    json!({
-        "offset_m": offset_m,
-        "bogie_position": bogie_position,
-        "wheel_diameter_m": 0.92,
-        "wheel_load_kN": {"left": 100.0, "right": 98.0},
-        "creepage": {
-            "left": {"cx": 0.01, "cy": 0.0, "spin_per_m": 0.1},
-            "right": {"cx": -0.01, "cy": 0.002, "spin_per_m": -0.1}
-        }
-    })
-}
 
 /// A valid recording; the comment gives each message's index in the file.
 /// F-1 (20 m/s, last axle at 2.5 m) occupies the section from 10 s to
@@ -214,7 +112,7 @@ fn read_all(path: &Path, ctx: ReaderContext) -> Result<(RecordingReader, Vec<Eve
 fn read_msgs(msgs: &[Msg], layout: Layout) -> Result<(RecordingReader, Vec<Event>), InputError> {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("recording.mcap");
-    write_mcap(&path, msgs, layout);
+    write_recording(&path, msgs, layout);
     read_all(&path, ReaderContext::default())
 }
 
@@ -225,7 +123,7 @@ fn expect_error(msgs: &[Msg], index: usize, needles: &[&str]) {
     for layout in LAYOUTS {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("bad.mcap");
-        write_mcap(&path, msgs, layout);
+        write_recording(&path, msgs, layout);
         let err = match read_all(&path, ReaderContext::default()) {
             Ok((_, events)) => panic!("{layout:?}: expected an error, read {events:?}"),
             Err(err) => err,
@@ -363,6 +261,13 @@ fn base_recording_replays_in_order_with_si_units_in_every_layout() {
 }
 
 #[test]
+fn an_lz4_chunk_reads_as_a_zstd_one() {
+    let (_, zstd) = read_msgs(&base(), Layout::OneChunk).unwrap();
+    let (_, lz4) = read_msgs(&base(), Layout::OneLz4Chunk).unwrap();
+    assert_eq!(lz4, zstd);
+}
+
+#[test]
 fn ties_go_by_topic_then_file_order() {
     let t = T0 + 5 * SEC;
     let msgs = vec![
@@ -407,7 +312,7 @@ fn ties_go_by_topic_then_file_order() {
 fn context_carries_origin_and_occupation() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("day2.mcap");
-    write_mcap(&path, &base(), Layout::OneChunk);
+    write_recording(&path, &base(), Layout::OneChunk);
     let origin_ns = (T0 - 86_400 * SEC) as i64;
     let ctx = ReaderContext {
         origin_ns: Some(origin_ns),
@@ -509,21 +414,16 @@ proptest! {
 // ---------------------------------------------------------------------------
 // The reference recordings.
 
-fn reference(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("tests/reference/recordings")
-        .join(name)
-}
-
 fn check_reference(name: &str) {
-    let key: Value =
-        serde_json::from_slice(&std::fs::read(reference(&format!("{name}.key.json"))).unwrap())
-            .unwrap();
+    let key: Value = serde_json::from_slice(
+        &std::fs::read(common::reference_recording(&format!("{name}.key.json"))).unwrap(),
+    )
+    .unwrap();
     let counts = &key["counts"];
     let count = |field: &str| counts[field].as_u64().unwrap();
 
     let (reader, events) = read_all(
-        &reference(&format!("{name}.mcap")),
+        &common::reference_recording(&format!("{name}.mcap")),
         ReaderContext::default(),
     )
     .unwrap_or_else(|e| panic!("{e}"));
@@ -590,7 +490,8 @@ fn check_reference(name: &str) {
         );
     }
 
-    let csv = std::fs::read_to_string(reference(&format!("{name}.expected.csv"))).unwrap();
+    let csv = std::fs::read_to_string(common::reference_recording(&format!("{name}.expected.csv")))
+        .unwrap();
     let mut rows = csv.lines();
     assert_eq!(
         rows.next().unwrap(),
@@ -646,7 +547,7 @@ bad_input! {
         => 2, ["missing field `speed_mps`"];
     missing_nested_field:
         with(base(), 2, |v| remove(v, "/axles/1/creepage/right", "cy"))
-        => 2, ["missing field `axles[1].creepage.right.cy`"];
+        => 2, ["`axles[1].creepage.right`", "missing field `cy`"];
     true_is_not_a_number:
         with(base(), 2, |v| v["speed_mps"] = json!(true))
         => 2, ["`speed_mps`", "true"];
@@ -809,6 +710,16 @@ bad_input! {
     applicator_outside_the_section:
         with(base(), 0, |v| v["applicators"][0]["position_m"] = json!(-1.0))
         => 0, ["`applicators[0].position_m`", "outside"];
+    duplicate_field_name:
+        with_raw(base(), 3, r#"{"applicator_id": "A1", "rail": "left", "mass_g": 0.1, "mass_g": 0.2}"#)
+        => 3, ["duplicate field `mass_g`"];
+    per_rail_map_names_a_rail_twice:
+        with_raw(base(), 2, r#"{"train_id": "F-1", "direction": "up", "speed_mps": 20.0, "axles": [
+            {"offset_m": 0.0, "bogie_position": "leading", "wheel_diameter_m": 0.92,
+             "wheel_load_kN": {"left": 100.0, "right": 98.0, "left": 90.0},
+             "creepage": {"left": {"cx": 0.01, "cy": 0.0, "spin_per_m": 0.1},
+                          "right": {"cx": -0.01, "cy": 0.002, "spin_per_m": -0.1}}}]}"#)
+        => 2, ["`axles[0].wheel_load_kN`", "rail `left` twice"];
     two_trains_at_once:
         with_time(base(), 7, T0 + 30 * SEC)
         => 7, ["two trains in the section at once", "`F-2`", "`F-1`"];
@@ -827,7 +738,7 @@ fn unknown_topic_may_use_any_encoding() {
 fn iteration_stops_after_the_first_error() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("bad.mcap");
-    write_mcap(
+    write_recording(
         &path,
         &with_time(base(), 7, T0 + 30 * SEC),
         Layout::OneChunk,
@@ -843,7 +754,7 @@ fn iteration_stops_after_the_first_error() {
 fn recording_without_section() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("nosection.mcap");
-    write_mcap(&path, &base()[1..], Layout::OneChunk);
+    write_recording(&path, &base()[1..], Layout::OneChunk);
     expect_file_error(&path, &["no /section"]);
 }
 
@@ -851,7 +762,7 @@ fn recording_without_section() {
 fn truncated_file() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("whole.mcap");
-    write_mcap(&path, &base(), Layout::OneChunk);
+    write_recording(&path, &base(), Layout::OneChunk);
     let bytes = std::fs::read(&path).unwrap();
     let cut = dir.path().join("cut.mcap");
     std::fs::write(&cut, &bytes[..bytes.len() / 2]).unwrap();
@@ -901,7 +812,7 @@ fn top_level_records(bytes: &[u8]) -> Vec<(u8, usize, usize)> {
 fn corrupt_chunk() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("recording.mcap");
-    write_mcap(&path, &base(), Layout::OneChunk);
+    write_recording(&path, &base(), Layout::OneChunk);
     let bytes = std::fs::read(&path).unwrap();
     let &(_, offset, len) = top_level_records(&bytes)
         .iter()

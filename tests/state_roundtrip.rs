@@ -3,14 +3,12 @@
 //! part's state, gives the same outputs as the whole, bit for bit; and a
 //! state from another section or format version is refused clearly.
 
-use std::borrow::Cow;
-use std::collections::BTreeMap;
-use std::io::BufWriter;
 use std::path::{Path, PathBuf};
 
 use tortwin_studies::jobs::replay::{replay, ReplayArgs};
 
 mod common;
+use common::recording::copy_recording;
 use common::Recorder;
 
 fn reference(name: &str) -> PathBuf {
@@ -94,7 +92,7 @@ fn replay_outputs(a: &ReplayArgs) -> Outputs {
 }
 
 /// Copies the messages of `src` for which `keep(topic, log_time)` holds into
-/// a new MCAP at `dst`, in file order; `/section` is always kept, at
+/// a new recording at `dst`, in file order; `/section` is always kept, at
 /// `section_log_time` if given.
 fn rewrite(
     src: &Path,
@@ -102,48 +100,15 @@ fn rewrite(
     section_log_time: Option<u64>,
     keep: impl Fn(&str, u64) -> bool,
 ) {
-    let bytes = std::fs::read(src).unwrap();
-    let mut writer =
-        mcap::Writer::new(BufWriter::new(std::fs::File::create(dst).unwrap())).unwrap();
-    let mut channels: BTreeMap<u16, u16> = BTreeMap::new();
-    for message in mcap::MessageStream::new(&bytes).unwrap() {
-        let message = message.unwrap();
-        let topic = message.channel.topic.as_str();
-        let is_section = topic == "/section";
-        if !is_section && !keep(topic, message.log_time) {
-            continue;
+    copy_recording(src, dst, |m| {
+        if m.topic != "/section" {
+            return keep(&m.topic, m.log_time);
         }
-        let channel_id = *channels.entry(message.channel.id).or_insert_with(|| {
-            let schema_id = match &message.channel.schema {
-                Some(s) => writer.add_schema(&s.name, &s.encoding, &s.data).unwrap(),
-                None => 0,
-            };
-            writer
-                .add_channel(
-                    schema_id,
-                    topic,
-                    &message.channel.message_encoding,
-                    &BTreeMap::new(),
-                )
-                .unwrap()
-        });
-        let log_time = if is_section {
-            section_log_time.unwrap_or(message.log_time)
-        } else {
-            message.log_time
-        };
-        let header = mcap::records::MessageHeader {
-            channel_id,
-            sequence: message.sequence,
-            log_time,
-            publish_time: log_time,
-        };
-        writer
-            .write_to_known_channel(&header, &message.data)
-            .unwrap();
-        let _: Cow<[u8]> = message.data;
-    }
-    writer.finish().unwrap();
+        if let Some(t) = section_log_time {
+            m.log_time = t;
+        }
+        true
+    });
 }
 
 #[test]

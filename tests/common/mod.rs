@@ -1,7 +1,10 @@
 //! Scaffolding shared by the integration tests: where the reference data
-//! is, the binary, one Python runner and one sink that records what a run
-//! publishes. Each test file uses some of it.
+//! is, the binary, one Python runner, one sink that records what a run
+//! publishes, and ([`recording`]) the one builder of input recordings with
+//! the reader's section fixture. Each test file uses some of it.
 #![allow(dead_code)]
+
+pub mod recording;
 
 use std::ffi::OsStr;
 use std::path::PathBuf;

@@ -1,4 +1,5 @@
-//! A recording (or a state file) that breaks its format.
+//! A recording (or a state file) that breaks its format, and a recording
+//! that cannot be written.
 //!
 //! Bad input is the user's to fix, so it must say where it is: the file, and
 //! for a message the topic, its log_time and its index in the file
@@ -27,7 +28,12 @@ impl fmt::Display for MessageLocation {
 }
 
 /// A recording (or a state file) that breaks its format.
-#[derive(Debug, Clone, PartialEq, Eq)]
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error(
+    "{}: {}{message}",
+    .file.display(),
+    .location.as_ref().map_or(String::new(), |l| format!("{l}: "))
+)]
 pub struct InputError {
     pub file: PathBuf,
     pub location: Option<MessageLocation>,
@@ -56,13 +62,21 @@ impl InputError {
     }
 }
 
-impl fmt::Display for InputError {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        match &self.location {
-            Some(loc) => write!(f, "{}: {}: {}", self.file.display(), loc, self.message),
-            None => write!(f, "{}: {}", self.file.display(), self.message),
-        }
-    }
+/// A recording that could not be written: what was being written, and why.
+#[derive(Debug, thiserror::Error)]
+pub enum WriteError {
+    /// The MCAP layer failed (an I/O error, an unknown channel).
+    #[error("{what}: {source}")]
+    Mcap {
+        what: String,
+        #[source]
+        source: mcap::McapError,
+    },
+    /// A message could not be serialized as JSON.
+    #[error("serializing a {topic} message: {source}")]
+    Json {
+        topic: &'static str,
+        #[source]
+        source: serde_json::Error,
+    },
 }
-
-impl std::error::Error for InputError {}

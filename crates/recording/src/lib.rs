@@ -1,192 +1,38 @@
-//! Recordings of a track section, as typed events.
+//! tortwin's recording format, ../shared/spec/recording-format.md, stated
+//! once:
 //!
-//! The reader ([`reader`]) parses the MCAP JSON messages of
-//! ../shared/spec/recording-format.md once: units converted to SI (g -> kg,
-//! kN -> N), rails, applicators, sites and trains resolved to indices, every
-//! rule of the format checked. Nothing after it handles raw JSON or re-checks
-//! a field: an [`Event`] that exists is valid.
+//! - [`topic`]: the five topics, their tie-break order and their JSON
+//!   Schemas ([`schema`]);
+//! - [`wire`]: each topic's JSON message as a struct (units as on the wire:
+//!   g, kN, rail names), serialized by the writer and deserialized by the
+//!   reader;
+//! - [`event`]: the typed events the engine takes: SI units, rails,
+//!   applicators, sites and trains as indices;
+//! - [`reader`]: MCAP in, events out in replay order, streaming;
+//!   `decode` (private) turns a message's bytes into its wire struct and
+//!   then into an event, checking every rule of the format;
+//! - [`writer`]: the channels and wire messages of a recording, for
+//!   `tortwin synth`, importers and tests;
+//! - [`recording`]: a recording read whole into memory, for the studies
+//!   that replay it many times;
+//! - [`error`]: [`InputError`](error::InputError) names the file and, for
+//!   a message, its topic, log_time and index in the file.
+//!
+//! Nothing after the reader handles raw JSON or re-checks a field: an
+//! [`Event`] that exists is valid.
 
+mod decode;
 pub mod error;
+pub mod event;
 pub mod reader;
+pub mod recording;
+pub mod schema;
+pub mod topic;
+pub mod wire;
+pub mod writer;
 
+pub use event::*;
 pub use reader::{ReaderContext, RecordingReader};
-
-/// The topics of ../shared/spec/recording-format.md, in their tie-break
-/// order (a replay orders equal log_times by this, then by file order).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
-pub enum Topic {
-    Section,
-    Passage,
-    Pulse,
-    Measurement,
-    Weather,
-}
-
-impl Topic {
-    pub const ALL: [Topic; 5] = [
-        Topic::Section,
-        Topic::Passage,
-        Topic::Pulse,
-        Topic::Measurement,
-        Topic::Weather,
-    ];
-
-    /// The topic's name in a recording.
-    pub fn name(self) -> &'static str {
-        match self {
-            Topic::Section => "/section",
-            Topic::Passage => "/train/passage",
-            Topic::Pulse => "/applicator/pulse",
-            Topic::Measurement => "/measurement/friction",
-            Topic::Weather => "/environment/weather",
-        }
-    }
-
-    /// The topic of a channel name; `None` for a topic the format does not know.
-    pub fn from_name(name: &str) -> Option<Topic> {
-        Topic::ALL.into_iter().find(|t| t.name() == name)
-    }
-}
-
-/// The `/section` message: the track section the recording describes.
-#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct Section {
-    pub section_id: String,
-    pub length_m: f64,
-    /// Rail names; every rail index in an event points into this list.
-    pub rails: Vec<String>,
-    /// `None` on tangent track.
-    pub curve_radius_m: Option<f64>,
-    pub rail_head_radius_m: f64,
-    pub nominal_wheel_diameter_m: f64,
-    pub applicators: Vec<Applicator>,
-    pub sites: Vec<Site>,
-}
-
-#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct Applicator {
-    pub id: String,
-    pub position_m: f64,
-    /// Indices into [`Section::rails`], in the order the recording lists them.
-    pub rails: Vec<usize>,
-    pub nominal_pulse_kg: f64,
-}
-
-#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct Site {
-    pub id: String,
-    pub position_m: f64,
-}
-
-#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
-pub enum Direction {
-    /// Towards increasing `d`; enters at `d = 0`.
-    Up,
-    /// Towards decreasing `d`; enters at `d = length_m`.
-    Down,
-}
-
-#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
-pub enum BogiePosition {
-    Leading,
-    Trailing,
-}
-
-/// A wheel's creepages on one rail, exactly as recorded.
-#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct Creepage {
-    pub cx: f64,
-    pub cy: f64,
-    pub spin_per_m: f64,
-}
-
-#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct Axle {
-    /// Distance behind the train front; non-decreasing along the train.
-    pub offset_m: f64,
-    pub bogie_position: BogiePosition,
-    pub wheel_diameter_m: f64,
-    /// Vertical wheel force Q per rail index, in N.
-    pub wheel_load_n: Vec<f64>,
-    /// Creepages per rail index.
-    pub creepage: Vec<Creepage>,
-}
-
-/// A `/train/passage` message.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Passage {
-    pub train_id: String,
-    /// 0-based count of passages in this recording, in log_time order.
-    pub train_seq: usize,
-    pub direction: Direction,
-    pub speed_mps: f64,
-    /// Never empty.
-    pub axles: Vec<Axle>,
-}
-
-/// An `/applicator/pulse` message: checked to be on a rail its applicator lists.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Pulse {
-    pub applicator: usize,
-    pub rail: usize,
-    pub mass_kg: f64,
-}
-
-pub use tortwin_model::Quantity;
-
-/// Which wheel a `mu`/`adhesion` measurement saw.
-#[derive(Debug, Clone, PartialEq)]
-pub struct AxleRef {
-    pub train_id: String,
-    /// The passage's [`Passage::train_seq`].
-    pub train_seq: usize,
-    /// Checked to be in range of that train's axles.
-    pub axle_index: usize,
-}
-
-/// A `/measurement/friction` message.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Measurement {
-    pub site: usize,
-    pub rail: usize,
-    pub quantity: Quantity,
-    /// `Some` for `mu` and `adhesion`, `None` for `rail_mu`.
-    pub axle: Option<AxleRef>,
-    pub value: f64,
-}
-
-/// An `/environment/weather` message, in effect until the next one.
-#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct Weather {
-    pub air_temperature_c: f64,
-    pub relative_humidity: f64,
-    pub precipitation_mm_h: f64,
-}
-
-impl Default for Weather {
-    /// The values in effect before the first weather message.
-    fn default() -> Self {
-        Self {
-            air_temperature_c: 20.0,
-            relative_humidity: 0.5,
-            precipitation_mm_h: 0.0,
-        }
-    }
-}
-
-#[derive(Debug, Clone, PartialEq)]
-pub enum EventKind {
-    Passage(Passage),
-    Pulse(Pulse),
-    Measurement(Measurement),
-    Weather(Weather),
-}
-
-/// One message of the recording after `/section`, in replay order.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Event {
-    pub log_time_ns: u64,
-    /// 0-based index of the message in the file (every message counted).
-    pub index_in_file: u64,
-    pub kind: EventKind,
-}
+pub use recording::Recording;
+pub use topic::Topic;
+pub use writer::RecordingWriter;

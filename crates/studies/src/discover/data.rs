@@ -19,8 +19,7 @@ use tortwin_engine::weather::WeatherState;
 use tortwin_engine::{Engine, EngineOptions};
 use tortwin_model::config::ModelConfig;
 use tortwin_recording::{
-    BogiePosition, Direction, Event, EventKind, Passage, Quantity, ReaderContext, RecordingReader,
-    Section,
+    BogiePosition, Direction, Event, EventKind, Passage, Quantity, Recording, Section,
 };
 
 pub const DAY_NS: u64 = 86_400_000_000_000;
@@ -103,16 +102,16 @@ pub struct PassageFacts {
 impl Dataset {
     /// Reads the whole recording.
     pub fn read(path: &Path) -> Result<Self> {
-        let mut reader = RecordingReader::open(path, ReaderContext::default())?;
-        let section = reader.section().clone();
-        let origin_ns = reader.origin_ns();
-        let mut events = Vec::new();
-        for event in reader.by_ref() {
-            events.push(event?);
-        }
-        let unknown = reader.unknown_topic_messages();
-        let day0_ns = (reader.section_log_time_ns() / DAY_NS) * DAY_NS;
-        Self::from_events(path, section, origin_ns, day0_ns, events, unknown)
+        let r = Recording::read(path)?;
+        let day0_ns = (r.section_log_time_ns / DAY_NS) * DAY_NS;
+        Self::from_events(
+            &r.path,
+            r.section,
+            r.origin_ns,
+            day0_ns,
+            r.events,
+            r.unknown_topic_messages,
+        )
     }
 
     /// Builds the rows and covariates of events already in replay order.

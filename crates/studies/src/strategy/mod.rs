@@ -28,9 +28,7 @@ use tortwin_engine::sink::{Fanout, Sink};
 use tortwin_engine::{Engine, EngineOptions, Grid};
 use tortwin_model::config::ModelConfig;
 use tortwin_model::error::UsageError;
-use tortwin_recording::{
-    Applicator, Direction, Event, EventKind, Pulse, ReaderContext, RecordingReader, Section,
-};
+use tortwin_recording::{Applicator, Direction, Event, EventKind, Pulse, Recording, Section};
 
 pub use metrics::{Band, Figures, Target};
 
@@ -60,25 +58,14 @@ pub struct Traffic {
 impl Traffic {
     /// Reads a recording (every input error names where it is).
     pub fn read(path: &Path) -> Result<Self> {
-        let mut reader = RecordingReader::open(path, ReaderContext::default())?;
-        let section = reader.section().clone();
-        let origin_ns = reader.origin_ns();
-        let first_ns = reader.section_log_time_ns();
-        let mut events = Vec::new();
-        let mut last_ns = first_ns;
-        for event in reader.by_ref() {
-            let event = event?;
-            last_ns = last_ns.max(event.log_time_ns);
-            if !matches!(event.kind, EventKind::Measurement(_)) {
-                events.push(event);
-            }
-        }
-        let span_s = (last_ns - first_ns) as f64 * 1e-9;
+        let r = Recording::read(path)?;
+        // The span counts the measurements too, which `new` then drops.
+        let span_s = (r.last_log_time_ns() - r.section_log_time_ns) as f64 * 1e-9;
         Ok(Self::new(
             path.display().to_string(),
-            section,
-            origin_ns,
-            events,
+            r.section,
+            r.origin_ns,
+            r.events,
             span_s,
         ))
     }

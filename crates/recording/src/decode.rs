@@ -1,0 +1,472 @@
+//! A message's bytes -> its wire struct -> a typed event.
+//!
+//! [`parse`] is the grammar: serde turns the JSON into the topic's wire
+//! struct ([`crate::wire`]), and a failure names the field by its path
+//! (serde_path_to_error), e.g. `axles[1].creepage.right`. [`section`] and
+//! [`Decoder`] are the rules of ../shared/spec/recording-format.md that
+//! span fields, messages or the section: values in range, units converted
+//! (g -> kg, kN -> N), rails, applicators, sites and trains resolved to
+//! indices, train ids unique and one train in the section at a time.
+//!
+//! Errors are sentences without a location; the reader adds the file,
+//! topic, log_time and message index.
+
+use std::collections::HashMap;
+
+use serde_json::Value;
+
+use crate::event::{
+    Applicator, Axle, AxleRef, Creepage, Measurement, Passage, Pulse, Quantity, Section, Site,
+    Weather,
+};
+use crate::wire::json::FromJson;
+use crate::wire::{MeasurementMsg, PassageMsg, PerRail, PulseMsg, SectionMsg, WeatherMsg};
+
+/// A message's JSON as the wire struct `T`, or why not.
+pub fn parse<'de, T: FromJson<'de>>(data: &'de [u8]) -> Result<T, String> {
+    let mut json = serde_json::Deserializer::from_slice(data);
+    let mut track = serde_path_to_error::Track::new();
+    let parsed = T::from_json(serde_path_to_error::Deserializer::new(
+        &mut json, &mut track,
+    ))
+    .and_then(|value| json.end().map(|()| value));
+    parsed.map_err(|e| describe(data, track.path(), e))
+}
+
+/// The sentence for a message that does not parse as its wire struct.
+fn describe(data: &[u8], path: serde_path_to_error::Path, e: serde_json::Error) -> String {
+    if !e.is_data() {
+        return format!(
+            "the message is not valid JSON ({e}); NaN and infinity are not JSON numbers"
+        );
+    }
+    // serde names an array or object only by its kind ("sequence", "map"):
+    // show it, shortened. Only on this error path is the JSON parsed again.
+    let root = serde_json::from_slice::<Value>(data).ok();
+    let shown = root
+        .as_ref()
+        .and_then(|root| {
+            path.iter().try_fold(root, |value, segment| match segment {
+                serde_path_to_error::Segment::Seq { index } => value.get(*index),
+                serde_path_to_error::Segment::Map { key } => value.get(key),
+                _ => None,
+            })
+        })
+        .filter(|v| v.is_array() || v.is_object())
+        .map_or(String::new(), |v| format!(" (got {})", show(v)));
+    if path.iter().next().is_none() {
+        format!("{e}{shown}")
+    } else {
+        format!("field `{path}`: {e}{shown}")
+    }
+}
+
+/// A JSON value for a message, shortened so a huge value cannot flood it.
+fn show(value: &Value) -> String {
+    const MAX_CHARS: usize = 60;
+    let text = value.to_string();
+    if text.chars().count() > MAX_CHARS {
+        let short: String = text.chars().take(MAX_CHARS).collect();
+        format!("{short}...")
+    } else {
+        text
+    }
+}
+
+fn positive(name: impl FnOnce() -> String, x: f64) -> Result<f64, String> {
+    if x > 0.0 {
+        Ok(x)
+    } else {
+        Err(format!("field `{}` must be positive, got {x}", name()))
+    }
+}
+
+fn non_negative(name: impl FnOnce() -> String, x: f64) -> Result<f64, String> {
+    if x >= 0.0 {
+        Ok(x)
+    } else {
+        Err(format!("field `{}` must not be negative, got {x}", name()))
+    }
+}
+
+fn non_empty<T>(name: &str, items: &[T]) -> Result<(), String> {
+    if items.is_empty() {
+        Err(format!("field `{name}` must not be empty"))
+    } else {
+        Ok(())
+    }
+}
+
+/// The index of a rail name of the section.
+fn resolve_rail(rails: &[String], name: &str, field: &str) -> Result<usize, String> {
+    rails.iter().position(|r| r == name).ok_or_else(|| {
+        format!(
+            "field `{field}`: rail `{name}` is not a rail of the section (rails: {})",
+            rails.join(", ")
+        )
+    })
+}
+
+/// A per-rail map as one value per rail of the section, in rail order: it
+/// must name every rail once and no other.
+fn per_rail<T: Copy>(map: &PerRail<T>, rails: &[String], name: &str) -> Result<Vec<T>, String> {
+    let mut values: Vec<Option<T>> = vec![None; rails.len()];
+    for (rail, value) in &map.0 {
+        let Some(index) = rails.iter().position(|r| r == rail) else {
+            return Err(format!(
+                "`{name}` names rail `{rail}`, which the section does not have (rails: {})",
+                rails.join(", ")
+            ));
+        };
+        if let Some(slot) = values.get_mut(index) {
+            if slot.replace(*value).is_some() {
+                return Err(format!("`{name}` names rail `{rail}` twice"));
+            }
+        }
+    }
+    values
+        .into_iter()
+        .zip(rails)
+        .map(|(value, rail)| value.ok_or_else(|| format!("`{name}` lacks rail `{rail}`")))
+        .collect()
+}
+
+/// The `/section` message as the typed [`Section`].
+pub fn section(msg: &SectionMsg) -> Result<Section, String> {
+    let length_m = positive(|| "length_m".into(), msg.length_m)?;
+
+    non_empty("rails", &msg.rails)?;
+    let mut rails: Vec<String> = Vec::with_capacity(msg.rails.len());
+    for name in &msg.rails {
+        if rails.contains(name) {
+            return Err(format!("duplicate rail `{name}` in `rails`"));
+        }
+        rails.push(name.clone());
+    }
+
+    let curve_radius_m = msg
+        .curve_radius_m
+        .map(|r| positive(|| "curve_radius_m".into(), r))
+        .transpose()?;
+
+    let in_section = |name: &dyn Fn() -> String, x: f64| -> Result<f64, String> {
+        if (0.0..=length_m).contains(&x) {
+            Ok(x)
+        } else {
+            Err(format!(
+                "field `{}` = {x} is outside the section (0 to {length_m} m)",
+                name()
+            ))
+        }
+    };
+
+    non_empty("applicators", &msg.applicators)?;
+    let mut applicators: Vec<Applicator> = Vec::with_capacity(msg.applicators.len());
+    for (i, a) in msg.applicators.iter().enumerate() {
+        if applicators.iter().any(|known| known.id == a.id) {
+            return Err(format!("duplicate applicator id `{}`", a.id));
+        }
+        let field = format!("applicators[{i}].rails");
+        non_empty(&field, &a.rails)?;
+        let mut applicator_rails = Vec::with_capacity(a.rails.len());
+        for (j, name) in a.rails.iter().enumerate() {
+            let index = resolve_rail(&rails, name, &format!("{field}[{j}]"))?;
+            if applicator_rails.contains(&index) {
+                return Err(format!("duplicate rail `{name}` in `{field}`"));
+            }
+            applicator_rails.push(index);
+        }
+        applicators.push(Applicator {
+            id: a.id.clone(),
+            position_m: in_section(&|| format!("applicators[{i}].position_m"), a.position_m)?,
+            rails: applicator_rails,
+            nominal_pulse_kg: non_negative(
+                || format!("applicators[{i}].nominal_pulse_g"),
+                a.nominal_pulse_g,
+            )? * 1e-3,
+        });
+    }
+
+    let mut sites: Vec<Site> = Vec::with_capacity(msg.measurement_sites.len());
+    for (i, s) in msg.measurement_sites.iter().enumerate() {
+        if sites.iter().any(|known| known.id == s.id) {
+            return Err(format!("duplicate measurement site id `{}`", s.id));
+        }
+        sites.push(Site {
+            id: s.id.clone(),
+            position_m: in_section(
+                &|| format!("measurement_sites[{i}].position_m"),
+                s.position_m,
+            )?,
+        });
+    }
+
+    Ok(Section {
+        section_id: msg.section_id.clone(),
+        length_m,
+        rails,
+        curve_radius_m,
+        rail_head_radius_m: positive(|| "rail_head_radius_m".into(), msg.rail_head_radius_m)?,
+        nominal_wheel_diameter_m: positive(
+            || "nominal_wheel_diameter_m".into(),
+            msg.nominal_wheel_diameter_m,
+        )?,
+        applicators,
+        sites,
+    })
+}
+
+/// A train the replay has seen, for measurements and the duplicate check.
+#[derive(Debug, Clone, Copy)]
+struct TrainSeen {
+    train_seq: usize,
+    axle_count: usize,
+    log_time_ns: u64,
+}
+
+/// The rules that need what came before in the replay: the section, the
+/// trains seen so far (their number grows with the recording, one entry a
+/// train) and the section's occupation.
+#[derive(Debug, Clone)]
+pub struct Decoder {
+    section: Section,
+    origin_ns: i64,
+    trains: HashMap<String, TrainSeen>,
+    /// `train_id` of the last passage, for the two-trains message.
+    last_train_id: Option<String>,
+    occupied_until_s: f64,
+}
+
+impl Decoder {
+    /// `occupied_until_s`: when the last train before this recording left
+    /// the section (s from `origin_ns`; `NEG_INFINITY` for none).
+    pub fn new(section: Section, origin_ns: i64, occupied_until_s: f64) -> Self {
+        Self {
+            section,
+            origin_ns,
+            trains: HashMap::new(),
+            last_train_id: None,
+            occupied_until_s,
+        }
+    }
+
+    pub fn section(&self) -> &Section {
+        &self.section
+    }
+
+    pub fn origin_ns(&self) -> i64 {
+        self.origin_ns
+    }
+
+    pub fn occupied_until_s(&self) -> f64 {
+        self.occupied_until_s
+    }
+
+    /// Time in s from the origin, as model.md "Units and time" defines it.
+    fn time_s(&self, log_time_ns: u64) -> Option<f64> {
+        let t = i64::try_from(log_time_ns).ok()?;
+        Some(t.checked_sub(self.origin_ns)? as f64 * 1e-9)
+    }
+
+    /// A `/train/passage` at `log_time_ns`; it becomes the next train.
+    pub fn passage(&mut self, msg: PassageMsg, log_time_ns: u64) -> Result<Passage, String> {
+        let rails = &self.section.rails;
+        let speed_mps = positive(|| "speed_mps".into(), msg.speed_mps)?;
+        non_empty("axles", &msg.axles)?;
+        let mut axles: Vec<Axle> = Vec::with_capacity(msg.axles.len());
+        for (i, a) in msg.axles.iter().enumerate() {
+            let offset_m = non_negative(|| format!("axles[{i}].offset_m"), a.offset_m)?;
+            if let Some(previous) = axles.last() {
+                if offset_m < previous.offset_m {
+                    return Err(format!(
+                        "field `axles[{i}].offset_m` = {offset_m} is less than the previous \
+                         axle's {}; offsets never decrease along the train",
+                        previous.offset_m
+                    ));
+                }
+            }
+            let loads_kn = per_rail(
+                &a.wheel_load_kn,
+                rails,
+                &format!("axles[{i}].wheel_load_kN"),
+            )?;
+            let mut wheel_load_n = Vec::with_capacity(loads_kn.len());
+            for (kn, rail) in loads_kn.into_iter().zip(rails) {
+                wheel_load_n
+                    .push(positive(|| format!("axles[{i}].wheel_load_kN.{rail}"), kn)? * 1e3);
+            }
+            let creepage = per_rail(&a.creepage, rails, &format!("axles[{i}].creepage"))?
+                .into_iter()
+                .map(|c| Creepage {
+                    cx: c.cx,
+                    cy: c.cy,
+                    spin_per_m: c.spin_per_m,
+                })
+                .collect();
+            axles.push(Axle {
+                offset_m,
+                bogie_position: a.bogie_position,
+                wheel_diameter_m: positive(
+                    || format!("axles[{i}].wheel_diameter_m"),
+                    a.wheel_diameter_m,
+                )?,
+                wheel_load_n,
+                creepage,
+            });
+        }
+
+        let train_seq = self.trains.len();
+        if let Some(seen) = self.trains.get(&msg.train_id) {
+            return Err(format!(
+                "duplicate train_id `{}`: passage {} at log_time {} ns already has it",
+                msg.train_id, seen.train_seq, seen.log_time_ns
+            ));
+        }
+        let t_passage_s = self.time_s(log_time_ns).ok_or_else(|| {
+            format!(
+                "log_time {log_time_ns} ns is out of range for the time origin {} ns",
+                self.origin_ns
+            )
+        })?;
+        if t_passage_s < self.occupied_until_s {
+            let previous = match &self.last_train_id {
+                Some(id) => format!("train `{id}`"),
+                None => "the last train of the previous recording".to_string(),
+            };
+            return Err(format!(
+                "two trains in the section at once: train `{}` enters at {t_passage_s} s, \
+                 before {previous} has left it at {} s",
+                msg.train_id, self.occupied_until_s
+            ));
+        }
+        let last_offset_m = axles.last().map_or(0.0, |a| a.offset_m);
+        self.occupied_until_s = t_passage_s + (self.section.length_m + last_offset_m) / speed_mps;
+        self.trains.insert(
+            msg.train_id.clone(),
+            TrainSeen {
+                train_seq,
+                axle_count: axles.len(),
+                log_time_ns,
+            },
+        );
+        self.last_train_id = Some(msg.train_id.clone());
+        Ok(Passage {
+            train_id: msg.train_id,
+            train_seq,
+            direction: msg.direction,
+            speed_mps,
+            axles,
+        })
+    }
+
+    /// An `/applicator/pulse`: on a rail its applicator lists.
+    pub fn pulse(&self, msg: &PulseMsg) -> Result<Pulse, String> {
+        let section = &self.section;
+        let id = msg.applicator_id.as_str();
+        let Some((applicator, a)) = section
+            .applicators
+            .iter()
+            .enumerate()
+            .find(|(_, a)| a.id == id)
+        else {
+            return Err(format!("field `applicator_id`: unknown applicator `{id}`"));
+        };
+        let rail = resolve_rail(&section.rails, &msg.rail, "rail")?;
+        if !a.rails.contains(&rail) {
+            let listed: Vec<&str> = a
+                .rails
+                .iter()
+                .filter_map(|&r| section.rails.get(r).map(String::as_str))
+                .collect();
+            return Err(format!(
+                "field `rail`: applicator `{id}` does not apply to rail `{}` (its rails: {})",
+                msg.rail,
+                listed.join(", ")
+            ));
+        }
+        Ok(Pulse {
+            applicator,
+            rail,
+            mass_kg: non_negative(|| "mass_g".into(), msg.mass_g)? * 1e-3,
+        })
+    }
+
+    /// A `/measurement/friction`: a `mu` or `adhesion` measurement names a
+    /// train already seen and one of its axles.
+    pub fn measurement(&self, msg: MeasurementMsg) -> Result<Measurement, String> {
+        let section = &self.section;
+        let site = section
+            .sites
+            .iter()
+            .position(|s| s.id == msg.site_id)
+            .ok_or_else(|| {
+                format!(
+                    "field `site_id`: unknown measurement site `{}`",
+                    msg.site_id
+                )
+            })?;
+        let rail = resolve_rail(&section.rails, &msg.rail, "rail")?;
+        let axle = match msg.quantity {
+            Quantity::RailMu => {
+                if let Some(train_id) = &msg.train_id {
+                    return Err(format!(
+                        "a `rail_mu` measurement is of the rail alone, but it has `train_id` = {}",
+                        Value::from(train_id.as_str())
+                    ));
+                }
+                if let Some(axle_index) = msg.axle_index {
+                    return Err(format!(
+                        "a `rail_mu` measurement is of the rail alone, but it has \
+                         `axle_index` = {axle_index}"
+                    ));
+                }
+                None
+            }
+            Quantity::Mu | Quantity::Adhesion => {
+                let what = msg.quantity.as_str();
+                let train_id = msg.train_id.ok_or_else(|| {
+                    format!("missing field `train_id` (a `{what}` measurement names its train)")
+                })?;
+                let axle_index = msg.axle_index.ok_or_else(|| {
+                    format!("missing field `axle_index` (a `{what}` measurement names its axle)")
+                })?;
+                let Some(train) = self.trains.get(&train_id) else {
+                    return Err(format!(
+                        "train_id `{train_id}` is unknown: no /train/passage with it \
+                         comes before this measurement"
+                    ));
+                };
+                if axle_index >= train.axle_count {
+                    return Err(format!(
+                        "axle_index {axle_index} is out of range: train `{train_id}` has {} axles",
+                        train.axle_count
+                    ));
+                }
+                Some(AxleRef {
+                    train_id,
+                    train_seq: train.train_seq,
+                    axle_index,
+                })
+            }
+        };
+        Ok(Measurement {
+            site,
+            rail,
+            quantity: msg.quantity,
+            axle,
+            value: msg.value,
+        })
+    }
+
+    /// An `/environment/weather`.
+    pub fn weather(&self, msg: &WeatherMsg) -> Result<Weather, String> {
+        Ok(Weather {
+            air_temperature_c: msg.air_temperature_c,
+            relative_humidity: msg.relative_humidity,
+            precipitation_mm_h: non_negative(
+                || "precipitation_mm_h".into(),
+                msg.precipitation_mm_h,
+            )?,
+        })
+    }
+}

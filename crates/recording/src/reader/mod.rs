@@ -1,0 +1,220 @@
+//! MCAP -> typed events, in replay order, streaming.
+//!
+//! The replay order of ../shared/spec/recording-format.md is by `log_time`,
+//! ties by topic (`/section`, `/train/passage`, `/applicator/pulse`,
+//! `/measurement/friction`, `/environment/weather`, then unknown topics),
+//! then by the message's index in the file. Files are not written in that
+//! order (the reference recordings append tribometer readings at the end), so
+//! the reader merges, and it must do so without holding the whole recording:
+//! a recording grows with the days it covers, the engine's state only with
+//! the section.
+//!
+//! Three parts, each in its file:
+//!
+//! 1. `layout`: one pass over the data section learns where the chunks
+//!    and messages are, and checks every chunk, without keeping messages.
+//! 2. `replay`: the messages in replay order, a chunk decompressed only
+//!    when the time frontier reaches it: memory is a few chunks, not the
+//!    recording.
+//! 3. `decode`: each message parsed once into its wire struct and
+//!    then into an [`Event`], every rule of the format checked. The
+//!    `train_id`s seen so far (for the duplicate check and measurements)
+//!    grow with the recording, by one entry a train.
+//!
+//! An error names the file and, for a message, its topic, log_time and
+//! index in the file, and ends the iteration.
+
+mod layout;
+mod replay;
+
+use std::fs::File;
+use std::io::BufReader;
+use std::path::Path;
+
+use crate::decode::{self, Decoder};
+use crate::error::{InputError, MessageLocation};
+use crate::event::{Event, EventKind, Section};
+use crate::topic::Topic;
+use crate::wire::{MeasurementMsg, PassageMsg, PulseMsg, SectionMsg, WeatherMsg};
+use layout::TopicRank;
+use replay::{PendingMessage, ReplayQueue};
+
+/// What a recording needs from the replay before it: a recording continues
+/// the time axis and the occupation of the section where the previous day's
+/// state left them.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ReaderContext {
+    /// The time origin of the replay; `None` takes this recording's `/section`
+    /// log_time.
+    pub origin_ns: Option<i64>,
+    /// Time (s from the origin) at which the last train of the previous
+    /// recording had left the section; `NEG_INFINITY` if there was none.
+    pub occupied_until_s: f64,
+}
+
+impl Default for ReaderContext {
+    fn default() -> Self {
+        Self {
+            origin_ns: None,
+            occupied_until_s: f64::NEG_INFINITY,
+        }
+    }
+}
+
+/// Reads a recording as validated [`Event`]s in replay order; see the module
+/// documentation for how it bounds memory. The iterator stops after the first
+/// error.
+pub struct RecordingReader {
+    queue: ReplayQueue,
+    decoder: Decoder,
+    section_log_time_ns: u64,
+    unknown_topic_messages: u64,
+    finished: bool,
+}
+
+impl RecordingReader {
+    /// Opens a recording, lays out its chunks and reads and checks its
+    /// `/section` message, which must be the first message in replay order
+    /// and the only one of its topic.
+    pub fn open(path: &Path, ctx: ReaderContext) -> Result<Self, InputError> {
+        let file = File::open(path)
+            .map_err(|e| InputError::file(path, format!("cannot open the recording: {e}")))?;
+        let mut file = BufReader::new(file);
+        let layout = layout::scan_layout(path, &mut file)?;
+        let no_section = || InputError::file(path, "the recording has no /section message");
+        let Some(&first_section) = layout.sections.first() else {
+            return Err(no_section());
+        };
+        let mut queue = ReplayQueue::new(path, file, layout.channels, layout.chunks, layout.loose);
+
+        let Some(first) = queue.next_message()? else {
+            return Err(no_section());
+        };
+        let at_first = |message: String| InputError::at(path, queue.location(&first), message);
+        if first.key != first_section {
+            return Err(at_first(format!(
+                "log_time {} ns is earlier than the /section message's ({} ns); \
+                 /section must be the first message of a recording",
+                first.key.log_time_ns, first_section.log_time_ns
+            )));
+        }
+        queue.check_json(&first)?;
+        let msg: SectionMsg = decode::parse(&first.data).map_err(at_first)?;
+        if let Some(second) = layout.sections.get(1) {
+            return Err(InputError::at(
+                path,
+                MessageLocation {
+                    topic: Topic::Section.name().to_string(),
+                    log_time_ns: second.log_time_ns,
+                    index_in_file: second.index_in_file,
+                },
+                format!(
+                    "a second /section message (the first is message {} at log_time {} ns); \
+                     a recording has exactly one",
+                    first_section.index_in_file, first_section.log_time_ns
+                ),
+            ));
+        }
+        let section = decode::section(&msg).map_err(at_first)?;
+        let origin_ns = match ctx.origin_ns {
+            Some(origin_ns) => origin_ns,
+            None => i64::try_from(first.key.log_time_ns).map_err(|_| {
+                at_first("log_time does not fit a signed 64-bit nanosecond count".to_string())
+            })?,
+        };
+        Ok(Self {
+            queue,
+            decoder: Decoder::new(section, origin_ns, ctx.occupied_until_s),
+            section_log_time_ns: first.key.log_time_ns,
+            unknown_topic_messages: 0,
+            finished: false,
+        })
+    }
+
+    pub fn section(&self) -> &Section {
+        self.decoder.section()
+    }
+
+    pub fn section_log_time_ns(&self) -> u64 {
+        self.section_log_time_ns
+    }
+
+    /// The replay's time origin: the context's, or this `/section` log_time.
+    pub fn origin_ns(&self) -> i64 {
+        self.decoder.origin_ns()
+    }
+
+    /// Messages on unknown topics skipped so far.
+    pub fn unknown_topic_messages(&self) -> u64 {
+        self.unknown_topic_messages
+    }
+
+    /// Time (s from the origin) at which the last train read so far leaves
+    /// the section: its `t_passage + (length_m + offset of its last axle) /
+    /// speed_mps`; the context's value before the first passage.
+    pub fn occupied_until_s(&self) -> f64 {
+        self.decoder.occupied_until_s()
+    }
+
+    fn decode(&mut self, message: PendingMessage) -> Result<Option<Event>, InputError> {
+        let TopicRank::Known(topic) = message.key.topic else {
+            self.unknown_topic_messages += 1;
+            return Ok(None);
+        };
+        self.queue.check_json(&message)?;
+        let log_time_ns = message.key.log_time_ns;
+        let data = message.data.as_slice();
+        let decoder = &mut self.decoder;
+        let kind = match topic {
+            Topic::Section => Err(format!(
+                "a second /section message (the first is at log_time {} ns); \
+                 a recording has exactly one",
+                self.section_log_time_ns
+            )),
+            Topic::Passage => decode::parse::<PassageMsg>(data)
+                .and_then(|msg| decoder.passage(msg, log_time_ns))
+                .map(EventKind::Passage),
+            Topic::Pulse => decode::parse::<PulseMsg>(data)
+                .and_then(|msg| decoder.pulse(&msg))
+                .map(EventKind::Pulse),
+            Topic::Measurement => decode::parse::<MeasurementMsg>(data)
+                .and_then(|msg| decoder.measurement(msg))
+                .map(EventKind::Measurement),
+            Topic::Weather => decode::parse::<WeatherMsg>(data)
+                .and_then(|msg| decoder.weather(&msg))
+                .map(EventKind::Weather),
+        }
+        .map_err(|m| InputError::at(self.queue.path(), self.queue.location(&message), m))?;
+        Ok(Some(Event {
+            log_time_ns,
+            index_in_file: message.key.index_in_file,
+            kind,
+        }))
+    }
+}
+
+impl Iterator for RecordingReader {
+    type Item = Result<Event, InputError>;
+
+    fn next(&mut self) -> Option<Self::Item> {
+        while !self.finished {
+            let step = match self.queue.next_message() {
+                Ok(Some(message)) => self.decode(message),
+                Ok(None) => {
+                    self.finished = true;
+                    return None;
+                }
+                Err(e) => Err(e),
+            };
+            match step {
+                Ok(Some(event)) => return Some(Ok(event)),
+                Ok(None) => continue,
+                Err(e) => {
+                    self.finished = true;
+                    return Some(Err(e));
+                }
+            }
+        }
+        None
+    }
+}
