@@ -280,7 +280,7 @@ fn a_site_bias_is_found_as_a_measurement_offset() {
         .cloned()
         .map(|mut e| {
             if let EventKind::Measurement(m) = &mut e.kind {
-                if m.site == biased_site && m.quantity == Quantity::Mu {
+                if m.site == biased_site && m.quantity() == Quantity::Mu {
                     m.value += 0.03;
                 }
             }

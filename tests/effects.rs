@@ -13,8 +13,8 @@ use tortwin_engine::{Engine, EngineOptions};
 use tortwin_model::config::ModelConfig;
 use tortwin_model::{contact, product};
 use tortwin_recording::{
-    Applicator, Axle, AxleRef, BogiePosition, Creepage, Direction, Event, EventKind, Measurement,
-    Passage, Pulse, Quantity, RecordingReader, Section, Site, Weather,
+    Applicator, Axle, AxleRef, BogiePosition, Creepage, Direction, Event, EventKind, Measured,
+    Measurement, Passage, Pulse, Quantity, RecordingReader, Section, Site, Weather,
 };
 use tortwin_studies::jobs::replay::{replay, ReplayArgs};
 
@@ -79,8 +79,7 @@ fn reading(t_s: u64, site: usize, rail: usize) -> Event {
         EventKind::Measurement(Measurement {
             site,
             rail,
-            quantity: Quantity::RailMu,
-            axle: None,
+            of: Measured::RailMu,
             value: 0.0,
         }),
     )
@@ -134,8 +133,7 @@ fn mu_of(t_s: u64, train_at_s: u64, site: usize, rail: usize, axle_index: usize)
         EventKind::Measurement(Measurement {
             site,
             rail,
-            quantity: Quantity::Mu,
-            axle: Some(AxleRef {
+            of: Measured::Mu(AxleRef {
                 train_id: format!("T{train_at_s}"),
                 train_seq: 0,
                 axle_index,

@@ -227,8 +227,8 @@ fn base_recording_replays_in_order_with_si_units_in_every_layout() {
         let EventKind::Measurement(mu) = &events[3].kind else {
             panic!("{:?}", events[3])
         };
-        assert_eq!((mu.site, mu.rail, mu.quantity), (0, 1, Quantity::Mu));
-        let axle = mu.axle.as_ref().unwrap();
+        assert_eq!((mu.site, mu.rail, mu.quantity()), (0, 1, Quantity::Mu));
+        let axle = mu.axle().unwrap();
         assert_eq!(
             (axle.train_id.as_str(), axle.train_seq, axle.axle_index),
             ("F-1", 0, 1)
@@ -239,7 +239,7 @@ fn base_recording_replays_in_order_with_si_units_in_every_layout() {
             panic!("{:?}", events[4])
         };
         assert_eq!(
-            (rail_mu.quantity, rail_mu.axle.is_none()),
+            (rail_mu.quantity(), rail_mu.axle().is_none()),
             (Quantity::RailMu, true)
         );
 
@@ -250,8 +250,8 @@ fn base_recording_replays_in_order_with_si_units_in_every_layout() {
         let EventKind::Measurement(adhesion) = &events[6].kind else {
             panic!("{:?}", events[6])
         };
-        assert_eq!(adhesion.quantity, Quantity::Adhesion);
-        assert_eq!(adhesion.axle.as_ref().unwrap().train_seq, 1);
+        assert_eq!(adhesion.quantity(), Quantity::Adhesion);
+        assert_eq!(adhesion.axle().unwrap().train_seq, 1);
 
         let EventKind::Weather(weather) = &events[0].kind else {
             panic!("{:?}", events[0])
@@ -482,7 +482,7 @@ fn check_reference(name: &str) {
     for quantity in [Quantity::Mu, Quantity::Adhesion, Quantity::RailMu] {
         let n = measurements
             .iter()
-            .filter(|(_, m)| m.quantity == quantity)
+            .filter(|(_, m)| m.quantity() == quantity)
             .count() as u64;
         assert_eq!(
             n,
@@ -501,13 +501,13 @@ fn check_reference(name: &str) {
     assert_eq!(rows.len(), measurements.len());
     for (row, (event, m)) in rows.iter().zip(&measurements) {
         let f: Vec<&str> = row.split(',').collect();
-        let axle = m.axle.as_ref();
+        let axle = m.axle();
         let got = [
             event.index_in_file.to_string(),
             event.log_time_ns.to_string(),
             section.sites[m.site].id.clone(),
             section.rails[m.rail].clone(),
-            m.quantity.as_str().to_string(),
+            m.quantity().as_str().to_string(),
             axle.map_or(String::new(), |a| a.train_id.clone()),
             axle.map_or(String::new(), |a| a.axle_index.to_string()),
         ];

@@ -36,8 +36,8 @@ use tortwin_model::effects::TimeEffects;
 use tortwin_model::generic::{ActsOn, Driver};
 use tortwin_model::product;
 use tortwin_recording::{
-    Axle, BogiePosition, Creepage, Direction, Event, EventKind, Measurement, Passage, Quantity,
-    Section,
+    Axle, AxleRef, BogiePosition, Creepage, Direction, Event, EventKind, Measured, Measurement,
+    Passage, Quantity, Section,
 };
 
 use generic::{GenericSet, WheelDrivers};
@@ -608,14 +608,16 @@ impl Engine {
                 self.emit_pulse(event.log_time_ns, pulse, sink)
             }
             EventKind::Measurement(m) => {
-                let simulated = match m.quantity {
-                    Quantity::RailMu => {
+                let simulated = match &m.of {
+                    Measured::RailMu => {
                         let track = self.reading_track[m.rail];
                         let point = self.site_points[m.site];
                         let weather = self.weather;
                         self.read_rail(track, point, time_s, &weather)
                     }
-                    _ => self.contact_value(event, m)?,
+                    Measured::Mu(axle) | Measured::Adhesion(axle) => {
+                        self.contact_value(event, m, axle)?
+                    }
                 };
                 self.emit_measurement(event, m, simulated, sink)
             }
@@ -815,7 +817,7 @@ impl Engine {
                         self.pending_at[track][point] += 1;
                     }
                 }
-                EventKind::Measurement(m) if m.quantity == Quantity::RailMu => {
+                EventKind::Measurement(m) if m.of == Measured::RailMu => {
                     let track = self.reading_track[m.rail];
                     let point = self.site_points[m.site];
                     self.point_events[track].push(PointEvent {
@@ -852,17 +854,19 @@ impl Engine {
             match &buffered.event.kind {
                 EventKind::Pulse(p) => self.emit_pulse(buffered.event.log_time_ns, p, sink)?,
                 EventKind::Measurement(m) => {
-                    let simulated = match (m.quantity, buffered.reading) {
-                        (Quantity::RailMu, Some(v)) => v,
-                        (Quantity::RailMu, None) => {
+                    let simulated = match (&m.of, buffered.reading) {
+                        (Measured::RailMu, Some(v)) => v,
+                        (Measured::RailMu, None) => {
                             unreachable!("every reading in a window is run while rolling or after")
                         }
-                        _ if m.axle.as_ref().map(|a| a.train_seq)
-                            == Some(record.passage.train_seq) =>
+                        (Measured::Mu(axle) | Measured::Adhesion(axle), _)
+                            if axle.train_seq == record.passage.train_seq =>
                         {
-                            self.value_from(&record, m)
+                            self.value_from(&record, m, axle)
                         }
-                        _ => self.contact_value(&buffered.event, m)?,
+                        (Measured::Mu(axle) | Measured::Adhesion(axle), _) => {
+                            self.contact_value(&buffered.event, m, axle)?
+                        }
                     };
                     self.emit_measurement(&buffered.event, m, simulated, sink)?;
                 }
@@ -879,17 +883,19 @@ impl Engine {
 
     /// The simulated `mu` or `adhesion` of a contact of a train kept in
     /// [`Engine::recent`].
-    fn contact_value(&self, event: &Event, m: &Measurement) -> Result<f64, EngineError> {
-        let Some(axle) = &m.axle else {
-            unreachable!("the reader gives mu/adhesion measurements an axle");
-        };
+    fn contact_value(
+        &self,
+        event: &Event,
+        m: &Measurement,
+        axle: &AxleRef,
+    ) -> Result<f64, EngineError> {
         match self
             .recent
             .iter()
             .rev()
             .find(|r| r.passage.train_seq == axle.train_seq)
         {
-            Some(record) => Ok(self.value_from(record, m)),
+            Some(record) => Ok(self.value_from(record, m, axle)),
             None => Err(EngineError::MeasurementTooLate {
                 train_id: axle.train_id.clone(),
                 log_time_ns: event.log_time_ns,
@@ -898,10 +904,9 @@ impl Engine {
         }
     }
 
-    fn value_from(&self, record: &TrainRecord, m: &Measurement) -> f64 {
-        let Some(axle) = &m.axle else {
-            unreachable!("the reader gives mu/adhesion measurements an axle");
-        };
+    /// The simulated `mu` or `adhesion` of `axle`'s contact at `m`'s site
+    /// and rail, from the train's record.
+    fn value_from(&self, record: &TrainRecord, m: &Measurement, axle: &AxleRef) -> f64 {
         let rails = self.section.rails.len();
         let sites = self.section.sites.len();
         let k = (axle.axle_index * rails + m.rail) * sites + m.site;
@@ -910,12 +915,12 @@ impl Engine {
             Some(&levels) => self.friction_at(levels, mass),
             None => product::friction(&self.cfg.product, mass),
         };
-        match m.quantity {
-            Quantity::Mu => mu,
-            _ => {
+        match m.of {
+            Measured::Adhesion(_) => {
                 let wheel = &record.wheels[axle.axle_index * rails + m.rail];
                 self.adhesion(wheel, record.passage.speed_mps, mu)
             }
+            _ => mu,
         }
     }
 
@@ -1080,8 +1085,10 @@ impl Engine {
         simulated: f64,
         sink: &mut dyn Sink,
     ) -> Result<(), EngineError> {
-        let simulated = self.generic.measured(simulated, m.site, m.rail, m.quantity);
-        let q = match m.quantity {
+        let simulated = self
+            .generic
+            .measured(simulated, m.site, m.rail, m.quantity());
+        let q = match m.quantity() {
             Quantity::Mu => 0,
             Quantity::Adhesion => 1,
             Quantity::RailMu => 2,
@@ -1096,9 +1103,9 @@ impl Engine {
             site: m.site,
             rail_name: &self.section.rails[m.rail],
             rail: m.rail,
-            quantity: m.quantity,
-            train_id: m.axle.as_ref().map(|a| a.train_id.as_str()),
-            axle_index: m.axle.as_ref().map(|a| a.axle_index),
+            quantity: m.quantity(),
+            train_id: m.axle().map(|a| a.train_id.as_str()),
+            axle_index: m.axle().map(|a| a.axle_index),
             measured: m.value,
             simulated,
         })?;

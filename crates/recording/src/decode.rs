@@ -16,8 +16,8 @@ use std::collections::HashMap;
 use serde_json::Value;
 
 use crate::event::{
-    Applicator, Axle, AxleRef, Creepage, Measurement, Passage, Pulse, Quantity, Section, Site,
-    Weather,
+    Applicator, Axle, AxleRef, Creepage, Measured, Measurement, Passage, Pulse, Quantity, Section,
+    Site, Weather,
 };
 use crate::wire::json::FromJson;
 use crate::wire::{MeasurementMsg, PassageMsg, PerRail, PulseMsg, SectionMsg, WeatherMsg};
@@ -406,7 +406,7 @@ impl Decoder {
                 )
             })?;
         let rail = resolve_rail(&section.rails, &msg.rail, "rail")?;
-        let axle = match msg.quantity {
+        let of = match msg.quantity {
             Quantity::RailMu => {
                 if let Some(train_id) = &msg.train_id {
                     return Err(format!(
@@ -420,7 +420,7 @@ impl Decoder {
                          `axle_index` = {axle_index}"
                     ));
                 }
-                None
+                Measured::RailMu
             }
             Quantity::Mu | Quantity::Adhesion => {
                 let what = msg.quantity.as_str();
@@ -442,18 +442,22 @@ impl Decoder {
                         train.axle_count
                     ));
                 }
-                Some(AxleRef {
+                let axle = AxleRef {
                     train_id,
                     train_seq: train.train_seq,
                     axle_index,
-                })
+                };
+                if msg.quantity == Quantity::Mu {
+                    Measured::Mu(axle)
+                } else {
+                    Measured::Adhesion(axle)
+                }
             }
         };
         Ok(Measurement {
             site,
             rail,
-            quantity: msg.quantity,
-            axle,
+            of,
             value: msg.value,
         })
     }

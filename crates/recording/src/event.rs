@@ -106,10 +106,35 @@ pub struct AxleRef {
 pub struct Measurement {
     pub site: usize,
     pub rail: usize,
-    pub quantity: Quantity,
-    /// `Some` for `mu` and `adhesion`, `None` for `rail_mu`.
-    pub axle: Option<AxleRef>,
+    pub of: Measured,
     pub value: f64,
+}
+
+/// What a measurement measured: a contact of one axle (`mu`, `adhesion`),
+/// or the rail alone (`rail_mu`, a hand tribometer, no train).
+#[derive(Debug, Clone, PartialEq)]
+pub enum Measured {
+    Mu(AxleRef),
+    Adhesion(AxleRef),
+    RailMu,
+}
+
+impl Measurement {
+    pub fn quantity(&self) -> Quantity {
+        match self.of {
+            Measured::Mu(_) => Quantity::Mu,
+            Measured::Adhesion(_) => Quantity::Adhesion,
+            Measured::RailMu => Quantity::RailMu,
+        }
+    }
+
+    /// The axle a `mu`/`adhesion` measurement saw (`None` for `rail_mu`).
+    pub fn axle(&self) -> Option<&AxleRef> {
+        match &self.of {
+            Measured::Mu(axle) | Measured::Adhesion(axle) => Some(axle),
+            Measured::RailMu => None,
+        }
+    }
 }
 
 /// An `/environment/weather` message, in effect until the next one.

@@ -14,8 +14,8 @@ use super::params::SynthParams;
 use super::traffic::{creepages, freight_consist, passenger_consist, TrainKind, TrainPlan};
 use super::{round_dp, stream, uniform, Stream, DAY_NS, HOUR_NS, NS_PER_S};
 use tortwin_recording::{
-    Axle, AxleRef, BogiePosition, Direction, EventKind, Measurement, Passage, Pulse, Quantity,
-    Section,
+    Axle, AxleRef, BogiePosition, Direction, EventKind, Measured, Measurement, Passage, Pulse,
+    Quantity, Section,
 };
 
 /// Standard gravity, m/s², for the cant deficiency of a curve.
@@ -368,12 +368,17 @@ impl<'p> Planner<'p> {
                             EventKind::Measurement(Measurement {
                                 site,
                                 rail,
-                                quantity,
-                                axle: Some(AxleRef {
-                                    train_id: train.passage.train_id.clone(),
-                                    train_seq: train.passage.train_seq,
-                                    axle_index,
-                                }),
+                                of: {
+                                    let axle = AxleRef {
+                                        train_id: train.passage.train_id.clone(),
+                                        train_seq: train.passage.train_seq,
+                                        axle_index,
+                                    };
+                                    match quantity {
+                                        Quantity::Adhesion => Measured::Adhesion(axle),
+                                        _ => Measured::Mu(axle),
+                                    }
+                                },
                                 value: 0.0,
                             }),
                         );
@@ -445,8 +450,7 @@ impl<'p> Planner<'p> {
                 EventKind::Measurement(Measurement {
                     site,
                     rail,
-                    quantity: Quantity::RailMu,
-                    axle: None,
+                    of: Measured::RailMu,
                     value: 0.0,
                 }),
             );

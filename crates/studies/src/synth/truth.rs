@@ -157,9 +157,9 @@ pub fn generate(params: &SynthParams, truth: &ModelConfig, out: &Path) -> Result
                         0.0
                     };
                     let measured = round_dp(truth + noise + gross, 1e5);
-                    stats.add(m.quantity, truth, baseline, measured);
+                    stats.add(m.quantity(), truth, baseline, measured);
                     counts.measurements += 1;
-                    *counts.by_quantity.get_mut(m.quantity) += 1;
+                    *counts.by_quantity.get_mut(m.quantity()) += 1;
                     let message = writing::measurement_msg(&section, m, measured)?;
                     if item.at_end {
                         at_end.push((item.log_time_ns, message, gross != 0.0));

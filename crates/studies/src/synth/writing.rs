@@ -187,15 +187,15 @@ pub(super) fn measurement_msg(
     if !value.is_finite() {
         return Err(anyhow!(
             "a {} measurement is {value}, which JSON cannot hold",
-            m.quantity.as_str()
+            m.quantity().as_str()
         ));
     }
     Ok(MeasurementMsg {
         site_id: section.sites[m.site].id.clone(),
         rail: section.rails[m.rail].clone(),
-        quantity: m.quantity,
-        train_id: m.axle.as_ref().map(|a| a.train_id.clone()),
-        axle_index: m.axle.as_ref().map(|a| a.axle_index),
+        quantity: m.quantity(),
+        train_id: m.axle().map(|a| a.train_id.clone()),
+        axle_index: m.axle().map(|a| a.axle_index),
         value,
     })
 }
