@@ -8,8 +8,9 @@
 //! (g -> kg, kN -> N), rails, applicators, sites and trains resolved to
 //! indices, train ids unique and one train in the section at a time.
 //!
-//! Errors are sentences without a location; the reader adds the file,
-//! topic, log_time and message index.
+//! Errors are sentences without a location ([`DecodeError`]); the reader
+//! adds the file, topic, log_time and message index, and the CSV import
+//! (`tables`) the file, line and column of the field the error names.
 
 use std::collections::HashMap;
 
@@ -22,19 +23,60 @@ use crate::event::{
 use crate::wire::json::FromJson;
 use crate::wire::{MeasurementMsg, PassageMsg, PerRail, PulseMsg, SectionMsg, WeatherMsg};
 
+/// Why a message breaks the format: a sentence, and the field it is about
+/// (its path in the message, e.g. `axles[3].offset_m`; `log_time` for the
+/// message's time) where there is one.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct DecodeError {
+    pub field: Option<String>,
+    pub message: String,
+}
+
+impl DecodeError {
+    fn at(field: impl Into<String>, message: String) -> Self {
+        Self {
+            field: Some(field.into()),
+            message,
+        }
+    }
+}
+
+impl std::fmt::Display for DecodeError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.message)
+    }
+}
+
+impl From<String> for DecodeError {
+    /// A sentence about the whole message.
+    fn from(message: String) -> Self {
+        Self {
+            field: None,
+            message,
+        }
+    }
+}
+
 /// A message's JSON as the wire struct `T`, or why not.
-pub fn parse<'de, T: FromJson<'de>>(data: &'de [u8]) -> Result<T, String> {
+pub fn parse<'de, T: FromJson<'de>>(data: &'de [u8]) -> Result<T, DecodeError> {
     let mut json = serde_json::Deserializer::from_slice(data);
     let mut track = serde_path_to_error::Track::new();
     let parsed = T::from_json(serde_path_to_error::Deserializer::new(
         &mut json, &mut track,
     ))
     .and_then(|value| json.end().map(|()| value));
-    parsed.map_err(|e| describe(data, track.path(), e))
+    parsed.map_err(|e| {
+        let path = track.path();
+        let field = path.iter().next().is_some().then(|| path.to_string());
+        DecodeError {
+            field,
+            message: describe(data, &path, e),
+        }
+    })
 }
 
 /// The sentence for a message that does not parse as its wire struct.
-fn describe(data: &[u8], path: serde_path_to_error::Path, e: serde_json::Error) -> String {
+fn describe(data: &[u8], path: &serde_path_to_error::Path, e: serde_json::Error) -> String {
     if !e.is_data() {
         return format!(
             "the message is not valid JSON ({e}); NaN and infinity are not JSON numbers"
@@ -73,73 +115,103 @@ fn show(value: &Value) -> String {
     }
 }
 
-fn positive(name: impl FnOnce() -> String, x: f64) -> Result<f64, String> {
+fn positive(name: impl FnOnce() -> String, x: f64) -> Result<f64, DecodeError> {
     if x > 0.0 {
         Ok(x)
     } else {
-        Err(format!("field `{}` must be positive, got {x}", name()))
+        let name = name();
+        let message = format!("field `{name}` must be positive, got {x}");
+        Err(DecodeError::at(name, message))
     }
 }
 
-fn non_negative(name: impl FnOnce() -> String, x: f64) -> Result<f64, String> {
+fn non_negative(name: impl FnOnce() -> String, x: f64) -> Result<f64, DecodeError> {
     if x >= 0.0 {
         Ok(x)
     } else {
-        Err(format!("field `{}` must not be negative, got {x}", name()))
+        let name = name();
+        let message = format!("field `{name}` must not be negative, got {x}");
+        Err(DecodeError::at(name, message))
     }
 }
 
-fn non_empty<T>(name: &str, items: &[T]) -> Result<(), String> {
+fn non_empty<T>(name: &str, items: &[T]) -> Result<(), DecodeError> {
     if items.is_empty() {
-        Err(format!("field `{name}` must not be empty"))
+        Err(DecodeError::at(
+            name,
+            format!("field `{name}` must not be empty"),
+        ))
     } else {
         Ok(())
     }
 }
 
 /// The index of a rail name of the section.
-fn resolve_rail(rails: &[String], name: &str, field: &str) -> Result<usize, String> {
+fn resolve_rail(rails: &[String], name: &str, field: &str) -> Result<usize, DecodeError> {
     rails.iter().position(|r| r == name).ok_or_else(|| {
-        format!(
-            "field `{field}`: rail `{name}` is not a rail of the section (rails: {})",
-            rails.join(", ")
+        DecodeError::at(
+            field,
+            format!(
+                "field `{field}`: rail `{name}` is not a rail of the section (rails: {})",
+                rails.join(", ")
+            ),
         )
     })
 }
 
 /// A per-rail map as one value per rail of the section, in rail order: it
 /// must name every rail once and no other.
-fn per_rail<T: Copy>(map: &PerRail<T>, rails: &[String], name: &str) -> Result<Vec<T>, String> {
+fn per_rail<T: Copy>(
+    map: &PerRail<T>,
+    rails: &[String],
+    name: &str,
+) -> Result<Vec<T>, DecodeError> {
     let mut values: Vec<Option<T>> = vec![None; rails.len()];
     for (rail, value) in &map.0 {
         let Some(index) = rails.iter().position(|r| r == rail) else {
-            return Err(format!(
-                "`{name}` names rail `{rail}`, which the section does not have (rails: {})",
-                rails.join(", ")
+            return Err(DecodeError::at(
+                format!("{name}.{rail}"),
+                format!(
+                    "`{name}` names rail `{rail}`, which the section does not have (rails: {})",
+                    rails.join(", ")
+                ),
             ));
         };
         if let Some(slot) = values.get_mut(index) {
             if slot.replace(*value).is_some() {
-                return Err(format!("`{name}` names rail `{rail}` twice"));
+                return Err(DecodeError::at(
+                    format!("{name}.{rail}"),
+                    format!("`{name}` names rail `{rail}` twice"),
+                ));
             }
         }
     }
     values
         .into_iter()
         .zip(rails)
-        .map(|(value, rail)| value.ok_or_else(|| format!("`{name}` lacks rail `{rail}`")))
+        .map(|(value, rail)| {
+            value.ok_or_else(|| {
+                DecodeError::at(
+                    format!("{name}.{rail}"),
+                    format!("`{name}` lacks rail `{rail}`"),
+                )
+            })
+        })
         .collect()
 }
 
 /// The `/section` message as the typed [`Section`].
-pub fn section(msg: &SectionMsg) -> Result<Section, String> {
+pub fn section(msg: &SectionMsg) -> Result<Section, DecodeError> {
     let length_m = positive(|| "length_m".into(), msg.length_m)?;
 
     non_empty("rails", &msg.rails)?;
     let mut rails: Vec<String> = Vec::with_capacity(msg.rails.len());
-    for name in &msg.rails {
+    for (j, name) in msg.rails.iter().enumerate() {
         if rails.contains(name) {
-            return Err(format!("duplicate rail `{name}` in `rails`"));
+            return Err(DecodeError::at(
+                format!("rails[{j}]"),
+                format!("duplicate rail `{name}` in `rails`"),
+            ));
         }
         rails.push(name.clone());
     }
@@ -149,14 +221,14 @@ pub fn section(msg: &SectionMsg) -> Result<Section, String> {
         .map(|r| positive(|| "curve_radius_m".into(), r))
         .transpose()?;
 
-    let in_section = |name: &dyn Fn() -> String, x: f64| -> Result<f64, String> {
+    let in_section = |name: &dyn Fn() -> String, x: f64| -> Result<f64, DecodeError> {
         if (0.0..=length_m).contains(&x) {
             Ok(x)
         } else {
-            Err(format!(
-                "field `{}` = {x} is outside the section (0 to {length_m} m)",
-                name()
-            ))
+            let name = name();
+            let message =
+                format!("field `{name}` = {x} is outside the section (0 to {length_m} m)");
+            Err(DecodeError::at(name, message))
         }
     };
 
@@ -164,7 +236,10 @@ pub fn section(msg: &SectionMsg) -> Result<Section, String> {
     let mut applicators: Vec<Applicator> = Vec::with_capacity(msg.applicators.len());
     for (i, a) in msg.applicators.iter().enumerate() {
         if applicators.iter().any(|known| known.id == a.id) {
-            return Err(format!("duplicate applicator id `{}`", a.id));
+            return Err(DecodeError::at(
+                format!("applicators[{i}].id"),
+                format!("duplicate applicator id `{}`", a.id),
+            ));
         }
         let field = format!("applicators[{i}].rails");
         non_empty(&field, &a.rails)?;
@@ -172,7 +247,10 @@ pub fn section(msg: &SectionMsg) -> Result<Section, String> {
         for (j, name) in a.rails.iter().enumerate() {
             let index = resolve_rail(&rails, name, &format!("{field}[{j}]"))?;
             if applicator_rails.contains(&index) {
-                return Err(format!("duplicate rail `{name}` in `{field}`"));
+                return Err(DecodeError::at(
+                    format!("{field}[{j}]"),
+                    format!("duplicate rail `{name}` in `{field}`"),
+                ));
             }
             applicator_rails.push(index);
         }
@@ -190,7 +268,10 @@ pub fn section(msg: &SectionMsg) -> Result<Section, String> {
     let mut sites: Vec<Site> = Vec::with_capacity(msg.measurement_sites.len());
     for (i, s) in msg.measurement_sites.iter().enumerate() {
         if sites.iter().any(|known| known.id == s.id) {
-            return Err(format!("duplicate measurement site id `{}`", s.id));
+            return Err(DecodeError::at(
+                format!("measurement_sites[{i}].id"),
+                format!("duplicate measurement site id `{}`", s.id),
+            ));
         }
         sites.push(Site {
             id: s.id.clone(),
@@ -269,7 +350,7 @@ impl Decoder {
     }
 
     /// A `/train/passage` at `log_time_ns`; it becomes the next train.
-    pub fn passage(&mut self, msg: PassageMsg, log_time_ns: u64) -> Result<Passage, String> {
+    pub fn passage(&mut self, msg: PassageMsg, log_time_ns: u64) -> Result<Passage, DecodeError> {
         let rails = &self.section.rails;
         let speed_mps = positive(|| "speed_mps".into(), msg.speed_mps)?;
         non_empty("axles", &msg.axles)?;
@@ -278,10 +359,13 @@ impl Decoder {
             let offset_m = non_negative(|| format!("axles[{i}].offset_m"), a.offset_m)?;
             if let Some(previous) = axles.last() {
                 if offset_m < previous.offset_m {
-                    return Err(format!(
-                        "field `axles[{i}].offset_m` = {offset_m} is less than the previous \
-                         axle's {}; offsets never decrease along the train",
-                        previous.offset_m
+                    return Err(DecodeError::at(
+                        format!("axles[{i}].offset_m"),
+                        format!(
+                            "field `axles[{i}].offset_m` = {offset_m} is less than the previous \
+                             axle's {}; offsets never decrease along the train",
+                            previous.offset_m
+                        ),
                     ));
                 }
             }
@@ -317,15 +401,21 @@ impl Decoder {
 
         let train_seq = self.trains.len();
         if let Some(seen) = self.trains.get(&msg.train_id) {
-            return Err(format!(
-                "duplicate train_id `{}`: passage {} at log_time {} ns already has it",
-                msg.train_id, seen.train_seq, seen.log_time_ns
+            return Err(DecodeError::at(
+                "train_id",
+                format!(
+                    "duplicate train_id `{}`: passage {} at log_time {} ns already has it",
+                    msg.train_id, seen.train_seq, seen.log_time_ns
+                ),
             ));
         }
         let t_passage_s = self.time_s(log_time_ns).ok_or_else(|| {
-            format!(
-                "log_time {log_time_ns} ns is out of range for the time origin {} ns",
-                self.origin_ns
+            DecodeError::at(
+                "log_time",
+                format!(
+                    "log_time {log_time_ns} ns is out of range for the time origin {} ns",
+                    self.origin_ns
+                ),
             )
         })?;
         if t_passage_s < self.occupied_until_s {
@@ -333,10 +423,13 @@ impl Decoder {
                 Some(id) => format!("train `{id}`"),
                 None => "the last train of the previous recording".to_string(),
             };
-            return Err(format!(
-                "two trains in the section at once: train `{}` enters at {t_passage_s} s, \
-                 before {previous} has left it at {} s",
-                msg.train_id, self.occupied_until_s
+            return Err(DecodeError::at(
+                "log_time",
+                format!(
+                    "two trains in the section at once: train `{}` enters at {t_passage_s} s, \
+                     before {previous} has left it at {} s",
+                    msg.train_id, self.occupied_until_s
+                ),
             ));
         }
         let last_offset_m = axles.last().map_or(0.0, |a| a.offset_m);
@@ -360,7 +453,7 @@ impl Decoder {
     }
 
     /// An `/applicator/pulse`: on a rail its applicator lists.
-    pub fn pulse(&self, msg: &PulseMsg) -> Result<Pulse, String> {
+    pub fn pulse(&self, msg: &PulseMsg) -> Result<Pulse, DecodeError> {
         let section = &self.section;
         let id = msg.applicator_id.as_str();
         let Some((applicator, a)) = section
@@ -369,7 +462,10 @@ impl Decoder {
             .enumerate()
             .find(|(_, a)| a.id == id)
         else {
-            return Err(format!("field `applicator_id`: unknown applicator `{id}`"));
+            return Err(DecodeError::at(
+                "applicator_id",
+                format!("field `applicator_id`: unknown applicator `{id}`"),
+            ));
         };
         let rail = resolve_rail(&section.rails, &msg.rail, "rail")?;
         if !a.rails.contains(&rail) {
@@ -378,10 +474,13 @@ impl Decoder {
                 .iter()
                 .filter_map(|&r| section.rails.get(r).map(String::as_str))
                 .collect();
-            return Err(format!(
-                "field `rail`: applicator `{id}` does not apply to rail `{}` (its rails: {})",
-                msg.rail,
-                listed.join(", ")
+            return Err(DecodeError::at(
+                "rail",
+                format!(
+                    "field `rail`: applicator `{id}` does not apply to rail `{}` (its rails: {})",
+                    msg.rail,
+                    listed.join(", ")
+                ),
             ));
         }
         Ok(Pulse {
@@ -393,31 +492,41 @@ impl Decoder {
 
     /// A `/measurement/friction`: a `mu` or `adhesion` measurement names a
     /// train already seen and one of its axles.
-    pub fn measurement(&self, msg: MeasurementMsg) -> Result<Measurement, String> {
+    pub fn measurement(&self, msg: MeasurementMsg) -> Result<Measurement, DecodeError> {
         let section = &self.section;
         let site = section
             .sites
             .iter()
             .position(|s| s.id == msg.site_id)
             .ok_or_else(|| {
-                format!(
-                    "field `site_id`: unknown measurement site `{}`",
-                    msg.site_id
+                DecodeError::at(
+                    "site_id",
+                    format!(
+                        "field `site_id`: unknown measurement site `{}`",
+                        msg.site_id
+                    ),
                 )
             })?;
         let rail = resolve_rail(&section.rails, &msg.rail, "rail")?;
         let of = match msg.quantity {
             Quantity::RailMu => {
                 if let Some(train_id) = &msg.train_id {
-                    return Err(format!(
-                        "a `rail_mu` measurement is of the rail alone, but it has `train_id` = {}",
-                        Value::from(train_id.as_str())
+                    return Err(DecodeError::at(
+                        "train_id",
+                        format!(
+                            "a `rail_mu` measurement is of the rail alone, but it has \
+                             `train_id` = {}",
+                            Value::from(train_id.as_str())
+                        ),
                     ));
                 }
                 if let Some(axle_index) = msg.axle_index {
-                    return Err(format!(
-                        "a `rail_mu` measurement is of the rail alone, but it has \
-                         `axle_index` = {axle_index}"
+                    return Err(DecodeError::at(
+                        "axle_index",
+                        format!(
+                            "a `rail_mu` measurement is of the rail alone, but it has \
+                             `axle_index` = {axle_index}"
+                        ),
                     ));
                 }
                 Measured::RailMu
@@ -425,21 +534,38 @@ impl Decoder {
             Quantity::Mu | Quantity::Adhesion => {
                 let what = msg.quantity.as_str();
                 let train_id = msg.train_id.ok_or_else(|| {
-                    format!("missing field `train_id` (a `{what}` measurement names its train)")
+                    DecodeError::at(
+                        "train_id",
+                        format!(
+                            "missing field `train_id` (a `{what}` measurement names its train)"
+                        ),
+                    )
                 })?;
                 let axle_index = msg.axle_index.ok_or_else(|| {
-                    format!("missing field `axle_index` (a `{what}` measurement names its axle)")
+                    DecodeError::at(
+                        "axle_index",
+                        format!(
+                            "missing field `axle_index` (a `{what}` measurement names its axle)"
+                        ),
+                    )
                 })?;
                 let Some(train) = self.trains.get(&train_id) else {
-                    return Err(format!(
-                        "train_id `{train_id}` is unknown: no /train/passage with it \
-                         comes before this measurement"
+                    return Err(DecodeError::at(
+                        "train_id",
+                        format!(
+                            "train_id `{train_id}` is unknown: no /train/passage with it \
+                             comes before this measurement"
+                        ),
                     ));
                 };
                 if axle_index >= train.axle_count {
-                    return Err(format!(
-                        "axle_index {axle_index} is out of range: train `{train_id}` has {} axles",
-                        train.axle_count
+                    return Err(DecodeError::at(
+                        "axle_index",
+                        format!(
+                            "axle_index {axle_index} is out of range: train `{train_id}` has {} \
+                             axles",
+                            train.axle_count
+                        ),
                     ));
                 }
                 let axle = AxleRef {
@@ -463,7 +589,7 @@ impl Decoder {
     }
 
     /// An `/environment/weather`.
-    pub fn weather(&self, msg: &WeatherMsg) -> Result<Weather, String> {
+    pub fn weather(&self, msg: &WeatherMsg) -> Result<Weather, DecodeError> {
         Ok(Weather {
             air_temperature_c: msg.air_temperature_c,
             relative_humidity: msg.relative_humidity,

@@ -32,7 +32,7 @@ pub mod wire;
 pub mod writer;
 
 pub use event::*;
-pub use reader::{ReaderContext, RecordingReader};
+pub use reader::{ReaderContext, RecordingReader, Wire};
 pub use recording::Recording;
 pub use topic::Topic;
 pub use writer::RecordingWriter;

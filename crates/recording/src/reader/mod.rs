@@ -67,6 +67,8 @@ impl Default for ReaderContext {
 pub struct RecordingReader {
     queue: ReplayQueue,
     decoder: Decoder,
+    /// The `/section` message as written (g, rail names).
+    section_msg: SectionMsg,
     section_log_time_ns: u64,
     unknown_topic_messages: u64,
     finished: bool,
@@ -99,7 +101,7 @@ impl RecordingReader {
             )));
         }
         queue.check_json(&first)?;
-        let msg: SectionMsg = decode::parse(&first.data).map_err(at_first)?;
+        let msg: SectionMsg = decode::parse(&first.data).map_err(|e| at_first(e.message))?;
         if let Some(second) = layout.sections.get(1) {
             return Err(InputError::at(
                 path,
@@ -115,7 +117,7 @@ impl RecordingReader {
                 ),
             ));
         }
-        let section = decode::section(&msg).map_err(at_first)?;
+        let section = decode::section(&msg).map_err(|e| at_first(e.message))?;
         let origin_ns = match ctx.origin_ns {
             Some(origin_ns) => origin_ns,
             None => i64::try_from(first.key.log_time_ns).map_err(|_| {
@@ -125,10 +127,16 @@ impl RecordingReader {
         Ok(Self {
             queue,
             decoder: Decoder::new(section, origin_ns, ctx.occupied_until_s),
+            section_msg: msg,
             section_log_time_ns: first.key.log_time_ns,
             unknown_topic_messages: 0,
             finished: false,
         })
+    }
+
+    /// The `/section` message as it is on the wire (grams, rail names).
+    pub fn section_msg(&self) -> &SectionMsg {
+        &self.section_msg
     }
 
     pub fn section(&self) -> &Section {
@@ -156,7 +164,37 @@ impl RecordingReader {
         self.decoder.occupied_until_s()
     }
 
-    fn decode(&mut self, message: PendingMessage) -> Result<Option<Event>, InputError> {
+    /// The next message of the format as written, with its event: every
+    /// rule checked as for the events alone. What `tortwin export` writes
+    /// back as tables, in the recording's own units and digits (converting
+    /// an event's kg back to g need not give the same number).
+    pub fn next_with_wire(&mut self) -> Option<Result<(Event, Wire), InputError>> {
+        while !self.finished {
+            let step = match self.queue.next_message() {
+                Ok(Some(message)) => self.decode(message, true),
+                Ok(None) => {
+                    self.finished = true;
+                    return None;
+                }
+                Err(e) => Err(e),
+            };
+            match step {
+                Ok(Some((event, Some(wire)))) => return Some(Ok((event, wire))),
+                Ok(_) => continue,
+                Err(e) => {
+                    self.finished = true;
+                    return Some(Err(e));
+                }
+            }
+        }
+        None
+    }
+
+    fn decode(
+        &mut self,
+        message: PendingMessage,
+        keep_wire: bool,
+    ) -> Result<Option<(Event, Option<Wire>)>, InputError> {
         let TopicRank::Known(topic) = message.key.topic else {
             self.unknown_topic_messages += 1;
             return Ok(None);
@@ -165,32 +203,57 @@ impl RecordingReader {
         let log_time_ns = message.key.log_time_ns;
         let data = message.data.as_slice();
         let decoder = &mut self.decoder;
-        let kind = match topic {
+        let keep = |wire: Wire| keep_wire.then_some(wire);
+        let decoded = match topic {
             Topic::Section => Err(format!(
                 "a second /section message (the first is at log_time {} ns); \
                  a recording has exactly one",
                 self.section_log_time_ns
-            )),
-            Topic::Passage => decode::parse::<PassageMsg>(data)
-                .and_then(|msg| decoder.passage(msg, log_time_ns))
-                .map(EventKind::Passage),
-            Topic::Pulse => decode::parse::<PulseMsg>(data)
-                .and_then(|msg| decoder.pulse(&msg))
-                .map(EventKind::Pulse),
-            Topic::Measurement => decode::parse::<MeasurementMsg>(data)
-                .and_then(|msg| decoder.measurement(msg))
-                .map(EventKind::Measurement),
-            Topic::Weather => decode::parse::<WeatherMsg>(data)
-                .and_then(|msg| decoder.weather(&msg))
-                .map(EventKind::Weather),
+            )
+            .into()),
+            Topic::Passage => decode::parse::<PassageMsg>(data).and_then(|msg| {
+                let wire = keep(Wire::Passage(msg.clone()));
+                decoder
+                    .passage(msg, log_time_ns)
+                    .map(|p| (EventKind::Passage(p), wire))
+            }),
+            Topic::Pulse => decode::parse::<PulseMsg>(data).and_then(|msg| {
+                let p = decoder.pulse(&msg)?;
+                Ok((EventKind::Pulse(p), keep(Wire::Pulse(msg))))
+            }),
+            Topic::Measurement => decode::parse::<MeasurementMsg>(data).and_then(|msg| {
+                let wire = keep(Wire::Measurement(msg.clone()));
+                decoder
+                    .measurement(msg)
+                    .map(|m| (EventKind::Measurement(m), wire))
+            }),
+            Topic::Weather => decode::parse::<WeatherMsg>(data).and_then(|msg| {
+                let w = decoder.weather(&msg)?;
+                Ok((EventKind::Weather(w), keep(Wire::Weather(msg))))
+            }),
         }
-        .map_err(|m| InputError::at(self.queue.path(), self.queue.location(&message), m))?;
-        Ok(Some(Event {
-            log_time_ns,
-            index_in_file: message.key.index_in_file,
-            kind,
-        }))
+        .map_err(|e: decode::DecodeError| {
+            InputError::at(self.queue.path(), self.queue.location(&message), e.message)
+        })?;
+        let (kind, wire) = decoded;
+        Ok(Some((
+            Event {
+                log_time_ns,
+                index_in_file: message.key.index_in_file,
+                kind,
+            },
+            wire,
+        )))
     }
+}
+
+/// A message of the format other than `/section`, as it is on the wire.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Wire {
+    Passage(PassageMsg),
+    Pulse(PulseMsg),
+    Measurement(MeasurementMsg),
+    Weather(WeatherMsg),
 }
 
 impl Iterator for RecordingReader {
@@ -199,7 +262,7 @@ impl Iterator for RecordingReader {
     fn next(&mut self) -> Option<Self::Item> {
         while !self.finished {
             let step = match self.queue.next_message() {
-                Ok(Some(message)) => self.decode(message),
+                Ok(Some(message)) => self.decode(message, false),
                 Ok(None) => {
                     self.finished = true;
                     return None;
@@ -207,7 +270,7 @@ impl Iterator for RecordingReader {
                 Err(e) => Err(e),
             };
             match step {
-                Ok(Some(event)) => return Some(Ok(event)),
+                Ok(Some((event, _))) => return Some(Ok(event)),
                 Ok(None) => continue,
                 Err(e) => {
                     self.finished = true;
