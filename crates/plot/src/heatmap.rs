@@ -346,7 +346,10 @@ impl Heatmap {
         let svg = self
             .render_svg()
             .with_context(|| format!("cannot write {}", path.display()))?;
-        tortwin_outputs::files::write_atomically(path, svg.as_bytes())
+        Ok(tortwin_outputs::files::write_atomically(
+            path,
+            svg.as_bytes(),
+        )?)
     }
 
     /// Checks the grid's shape and the highlighted cell, and gives the

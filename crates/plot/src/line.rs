@@ -298,7 +298,10 @@ impl LinePlot {
     /// Writes the figure as an SVG file.
     pub fn write_svg(&self, path: &Path) -> Result<()> {
         let svg = self.render_svg()?;
-        tortwin_outputs::files::write_atomically(path, svg.as_bytes())
+        Ok(tortwin_outputs::files::write_atomically(
+            path,
+            svg.as_bytes(),
+        )?)
     }
 }
 
