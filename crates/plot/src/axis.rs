@@ -1,7 +1,7 @@
 //! The numbers along an axis: ranges from the data (padded, or checked when
 //! given) and tick labels without float noise.
 
-use anyhow::{bail, Result};
+use crate::error::PlotError;
 
 /// A tick value without float noise: 500 not 500.0, 0.3 not
 /// 0.30000000000000004, and very small or large values in e notation.
@@ -39,9 +39,28 @@ pub(crate) fn pad(lo: f64, hi: f64) -> (f64, f64) {
     (lo - 0.05 * span, hi + 0.05 * span)
 }
 
-pub(crate) fn checked_range((lo, hi): (f64, f64), axis: &str, title: &str) -> Result<(f64, f64)> {
+/// From the smallest to the largest of `values`; padded when they are all
+/// equal, 0..1 when there are none.
+pub(crate) fn data_range(values: impl Iterator<Item = f64>) -> (f64, f64) {
+    min_max(values).map_or(
+        (0.0, 1.0),
+        |(lo, hi)| if lo < hi { (lo, hi) } else { pad(lo, hi) },
+    )
+}
+
+/// A range given for `axis` of the plot titled `title`, if it can be drawn.
+pub(crate) fn checked_range(
+    (lo, hi): (f64, f64),
+    axis: &'static str,
+    title: &str,
+) -> Result<(f64, f64), PlotError> {
     if !(lo.is_finite() && hi.is_finite() && lo < hi) {
-        bail!("plot \"{title}\": the {axis} range {lo}..{hi} is empty or not finite");
+        return Err(PlotError::Range {
+            title: title.to_owned(),
+            axis,
+            lo,
+            hi,
+        });
     }
     Ok((lo, hi))
 }

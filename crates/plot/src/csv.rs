@@ -4,7 +4,7 @@
 use std::fmt::Write as _;
 use std::path::Path;
 
-use anyhow::{bail, Context, Result};
+use crate::error::PlotError;
 
 /// CSV text: the header, then one line per row, each value in Rust's
 /// shortest round-trip form (`{}` of f64), so reading the file back gives
@@ -12,18 +12,18 @@ use anyhow::{bail, Context, Result};
 pub fn csv_text<R: AsRef<[f64]>>(
     header: &[&str],
     rows: impl IntoIterator<Item = R>,
-) -> Result<String> {
+) -> Result<String, PlotError> {
     let mut out = header.join(",");
     out.push('\n');
     for (k, row) in rows.into_iter().enumerate() {
         let row = row.as_ref();
         if row.len() != header.len() {
-            bail!(
-                "CSV row {k} has {} values for {} columns ({})",
-                row.len(),
-                header.len(),
-                header.join(",")
-            );
+            return Err(PlotError::CsvRow {
+                row: k,
+                values: row.len(),
+                columns: header.len(),
+                header: header.join(","),
+            });
         }
         for (j, v) in row.iter().enumerate() {
             if j > 0 {
@@ -37,26 +37,28 @@ pub fn csv_text<R: AsRef<[f64]>>(
     Ok(out)
 }
 
-/// Writes [`csv_text`] to `path`.
+/// Writes [`csv_text`] to `path` (whole or not at all, see
+/// [`tortwin_outputs::files`]).
 pub fn write_csv<R: AsRef<[f64]>>(
     path: &Path,
     header: &[&str],
     rows: impl IntoIterator<Item = R>,
-) -> Result<()> {
-    let text =
-        csv_text(header, rows).with_context(|| format!("cannot write {}", path.display()))?;
-    std::fs::write(path, text).with_context(|| format!("cannot write {}", path.display()))
+) -> Result<(), PlotError> {
+    let text = csv_text(header, rows).map_err(|e| e.for_file(path))?;
+    tortwin_outputs::files::write_atomically(path, text.as_bytes())?;
+    Ok(())
 }
 
 /// Writes columns of equal length as a CSV file: `(name, values)` in order.
-pub fn write_csv_columns(path: &Path, columns: &[(&str, &[f64])]) -> Result<()> {
+pub fn write_csv_columns(path: &Path, columns: &[(&str, &[f64])]) -> Result<(), PlotError> {
     let len = columns.first().map_or(0, |(_, c)| c.len());
     if let Some((name, c)) = columns.iter().find(|(_, c)| c.len() != len) {
-        bail!(
-            "cannot write {}: column {name} has {} values, the first has {len}",
-            path.display(),
-            c.len()
-        );
+        let uneven = PlotError::CsvColumn {
+            name: (*name).to_owned(),
+            values: c.len(),
+            first: len,
+        };
+        return Err(uneven.for_file(path));
     }
     let header: Vec<&str> = columns.iter().map(|(name, _)| *name).collect();
     let rows = (0..len).map(|i| columns.iter().map(|(_, c)| c[i]).collect::<Vec<f64>>());
@@ -87,6 +89,29 @@ mod tests {
 
     #[test]
     fn csv_refuses_ragged_rows() {
-        assert!(csv_text(&["a", "b"], [vec![1.0]]).is_err());
+        assert!(matches!(
+            csv_text(&["a", "b"], [vec![1.0]]),
+            Err(PlotError::CsvRow { row: 0, .. })
+        ));
+    }
+
+    #[test]
+    fn a_table_that_cannot_be_written_names_the_file_and_leaves_none() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("fig.csv");
+        let err = write_csv_columns(&path, &[("d_m", &[0.0, 1.0]), ("mu", &[0.3])]).unwrap_err();
+        let text = format!("{err}: {}", std::error::Error::source(&err).unwrap());
+        assert!(
+            text.contains("fig.csv") && text.contains("column mu"),
+            "{text}"
+        );
+        assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0);
+
+        write_csv_columns(&path, &[("d_m", &[0.0, 1.0]), ("mu", &[0.3, 0.4])]).unwrap();
+        assert_eq!(
+            std::fs::read_to_string(&path).unwrap(),
+            "d_m,mu\n0,0.3\n1,0.4\n"
+        );
+        assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1);
     }
 }

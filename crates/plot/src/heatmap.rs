@@ -4,12 +4,12 @@
 
 use std::path::Path;
 
-use anyhow::{bail, Context, Result};
 use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
 
-use crate::axis::{checked_range, min_max, pad, snap_to_zero};
+use crate::axis::{checked_range, data_range, snap_to_zero};
 use crate::colour::{text_colour_on, viridis, Colour};
+use crate::error::{DrawError, PlotError};
 use crate::layout::{
     text_height_px, text_width_px, PixelBox, AXIS_DESC_PX, FONT, LABEL_PX, TICK_PX, TITLE_AREA_PX,
     TITLE_PX, X_DESC_AREA_PX,
@@ -35,7 +35,7 @@ use crate::layout::{
 ///     .cell_text(|v| format!("{:.0}", 100.0 * v))
 ///     .highlight(1, 0)
 ///     .write_svg("coverage.svg".as_ref())?;
-/// # Ok::<(), anyhow::Error>(())
+/// # Ok::<(), tortwin_plot::PlotError>(())
 /// ```
 #[derive(Debug, Clone)]
 pub struct Heatmap {
@@ -142,275 +142,280 @@ impl Heatmap {
     /// The figure as SVG text. An error says what is wrong with the grid
     /// (its shape, the range, the highlighted cell, or a picture too small
     /// for it).
-    pub fn render_svg(&self) -> Result<String> {
+    pub fn render_svg(&self) -> Result<String, PlotError> {
         let (lo, hi) = self.colour_range()?;
         let grid = self.layout(lo, hi)?;
+        let mut svg = String::new();
+        self.draw(&mut svg, (lo, hi), &grid)
+            .map_err(|source| PlotError::Draw {
+                title: self.title.clone(),
+                source,
+            })?;
+        Ok(svg)
+    }
+
+    /// Draws the checked grid, laid out by [`Heatmap::layout`], with colours
+    /// over `lo..hi`.
+    fn draw(
+        &self,
+        svg: &mut String,
+        (lo, hi): (f64, f64),
+        grid: &HeatmapGrid,
+    ) -> Result<(), DrawError> {
         let (w, h) = (self.width_px as i32, self.height_px as i32);
         let n_rows = self.y_categories.len();
         let n_cols = self.x_categories.len();
         let colour_of = |v: f64| viridis((v - lo) / (hi - lo));
 
-        let mut svg = String::new();
-        {
-            let root = SVGBackend::with_string(&mut svg, (self.width_px, self.height_px))
-                .into_drawing_area();
-            root.fill(&WHITE)?;
-            let centred = Pos::new(HPos::Center, VPos::Center);
-            root.draw(&Text::new(
-                self.title.clone(),
-                (w / 2, TITLE_AREA_PX as i32 / 2 + 4),
-                TextStyle::from((FONT, TITLE_PX).into_font()).pos(centred),
-            ))?;
+        let root =
+            SVGBackend::with_string(svg, (self.width_px, self.height_px)).into_drawing_area();
+        root.fill(&WHITE)?;
+        let centred = Pos::new(HPos::Center, VPos::Center);
+        root.draw(&Text::new(
+            self.title.clone(),
+            (w / 2, TITLE_AREA_PX as i32 / 2 + 4),
+            TextStyle::from((FONT, TITLE_PX).into_font()).pos(centred),
+        ))?;
 
-            // The cells, then their values in a size that fits the longest.
-            let texts: Vec<Vec<Option<String>>> = self
-                .values
-                .iter()
-                .map(|row| {
-                    row.iter()
-                        .map(|&v| (!v.is_nan()).then(|| (self.cell_text)(v)))
-                        .collect()
-                })
-                .collect();
-            let longest = texts
-                .iter()
-                .flatten()
-                .flatten()
-                .max_by_key(|t| t.chars().count())
-                .map_or("", String::as_str);
-            let cell_text_px = (MIN_CELL_TEXT_PX..=LABEL_PX)
-                .rev()
-                .find(|&size| {
-                    text_width_px(longest, size) <= grid.cell_w - 6
-                        && text_height_px(size) <= grid.cell_h - 4
-                })
-                .unwrap_or(MIN_CELL_TEXT_PX);
-            for (row, (values, texts)) in self.values.iter().zip(&texts).enumerate() {
-                for (col, (&v, text)) in values.iter().zip(texts).enumerate() {
-                    let b = grid.cell(row, col);
-                    let fill = if v.is_nan() {
-                        NOT_EVALUATED
-                    } else {
-                        colour_of(v)
-                    };
-                    root.draw(&Rectangle::new(
-                        [(b.x0, b.y0), (b.x1, b.y1)],
-                        fill.rgb().filled(),
-                    ))?;
-                    if let Some(text) = text {
-                        let text_colour = text_colour_on(fill).rgb();
-                        let style = TextStyle::from((FONT, cell_text_px).into_font())
-                            .color(&text_colour)
-                            .pos(centred);
-                        root.draw(&Text::new(
-                            text.clone(),
-                            ((b.x0 + b.x1) / 2, (b.y0 + b.y1) / 2),
-                            style,
-                        ))?;
-                    }
-                }
-            }
-            if let Some((row, col)) = self.highlight {
-                // Black outside, a white line inside: the frame stands out
-                // on the dark cells as well as on the light ones.
+        // The cells, then their values in a size that fits the longest.
+        let texts: Vec<Vec<Option<String>>> = self
+            .values
+            .iter()
+            .map(|row| {
+                row.iter()
+                    .map(|&v| (!v.is_nan()).then(|| (self.cell_text)(v)))
+                    .collect()
+            })
+            .collect();
+        let longest = texts
+            .iter()
+            .flatten()
+            .flatten()
+            .max_by_key(|t| t.chars().count())
+            .map_or("", String::as_str);
+        let cell_text_px = (MIN_CELL_TEXT_PX..=LABEL_PX)
+            .rev()
+            .find(|&size| {
+                text_width_px(longest, size) <= grid.cell_w - 6
+                    && text_height_px(size) <= grid.cell_h - 4
+            })
+            .unwrap_or(MIN_CELL_TEXT_PX);
+        for (row, (values, texts)) in self.values.iter().zip(&texts).enumerate() {
+            for (col, (&v, text)) in values.iter().zip(texts).enumerate() {
                 let b = grid.cell(row, col);
-                for (inset, thickness, colour) in [(0, 3, BLACK), (3, 1, WHITE)] {
-                    let (x0, y0, x1, y1) = (b.x0 + inset, b.y0 + inset, b.x1 - inset, b.y1 - inset);
-                    for [a, z] in [
-                        [(x0, y0), (x1, y0 + thickness)],
-                        [(x0, y1 - thickness), (x1, y1)],
-                        [(x0, y0), (x0 + thickness, y1)],
-                        [(x1 - thickness, y0), (x1, y1)],
-                    ] {
-                        root.draw(&Rectangle::new([a, z], colour.filled()))?;
-                    }
+                let fill = if v.is_nan() {
+                    NOT_EVALUATED
+                } else {
+                    colour_of(v)
+                };
+                root.draw(&Rectangle::new(
+                    [(b.x0, b.y0), (b.x1, b.y1)],
+                    fill.rgb().filled(),
+                ))?;
+                if let Some(text) = text {
+                    let text_colour = text_colour_on(fill).rgb();
+                    let style = TextStyle::from((FONT, cell_text_px).into_font())
+                        .color(&text_colour)
+                        .pos(centred);
+                    root.draw(&Text::new(
+                        text.clone(),
+                        ((b.x0 + b.x1) / 2, (b.y0 + b.y1) / 2),
+                        style,
+                    ))?;
                 }
             }
-
-            // Category labels: y at the left of their row; x under their
-            // column, turned to read upwards when they would not fit across.
-            let tick_font = (FONT, TICK_PX).into_font();
-            let grid_bottom = grid.y0 + grid.cell_h * n_rows as i32;
-            let grid_right = grid.x0 + grid.cell_w * n_cols as i32;
-            for (row, label) in self.y_categories.iter().enumerate() {
-                let b = grid.cell(row, 0);
-                root.draw(&Text::new(
-                    fit_text(label, TICK_PX, MAX_CATEGORY_LABEL_PX),
-                    (grid.x0 - 8, (b.y0 + b.y1) / 2),
-                    TextStyle::from(tick_font.clone()).pos(Pos::new(HPos::Right, VPos::Center)),
-                ))?;
-            }
-            for (col, label) in self.x_categories.iter().enumerate() {
-                let b = grid.cell(0, col);
-                let x = (b.x0 + b.x1) / 2;
-                let (font, pos) = if grid.x_labels_across {
-                    (tick_font.clone(), Pos::new(HPos::Center, VPos::Top))
-                } else {
-                    (
-                        tick_font.transform(FontTransform::Rotate270),
-                        Pos::new(HPos::Right, VPos::Center),
-                    )
-                };
-                root.draw(&Text::new(
-                    fit_text(label, TICK_PX, MAX_CATEGORY_LABEL_PX),
-                    (x, grid_bottom + 6),
-                    TextStyle::from(font).pos(pos),
-                ))?;
-            }
-            let desc_font = (FONT, AXIS_DESC_PX).into_font();
-            root.draw(&Text::new(
-                self.x_label.clone(),
-                (
-                    (grid.x0 + grid_right) / 2,
-                    h - X_DESC_AREA_PX as i32 / 2 - 4,
-                ),
-                TextStyle::from(desc_font.clone()).pos(centred),
-            ))?;
-            root.draw(&Text::new(
-                self.y_label.clone(),
-                (
-                    12 + text_height_px(AXIS_DESC_PX) / 2,
-                    (grid.y0 + grid_bottom) / 2,
-                ),
-                TextStyle::from(desc_font.transform(FontTransform::Rotate270)).pos(centred),
-            ))?;
-
-            // The colour bar: 2 px slices from lo at the bottom to hi at the
-            // top, ticks at round values, and the grey of "not evaluated"
-            // under it when a cell has that.
-            let bar_x0 = grid_right + COLOUR_BAR_GAP_PX;
-            let bar_x1 = bar_x0 + COLOUR_BAR_PX;
-            let bar_top = grid.y0;
-            let bar_bottom = if grid.any_not_evaluated {
-                grid_bottom - grid.swatch_h - 12
-            } else {
-                grid_bottom
-            };
-            let bar_h = bar_bottom - bar_top;
-            let mut y = bar_bottom;
-            while y > bar_top {
-                let top = (y - 2).max(bar_top);
-                let t = f64::from(bar_bottom - (y + top) / 2) / f64::from(bar_h);
-                root.draw(&Rectangle::new(
-                    [(bar_x0, top), (bar_x1, y)],
-                    viridis(t).rgb().filled(),
-                ))?;
-                y = top;
-            }
-            root.draw(&Rectangle::new(
-                [(bar_x0, bar_top), (bar_x1, bar_bottom)],
-                BLACK.mix(0.5),
-            ))?;
-            let tick_style =
-                TextStyle::from(tick_font.clone()).pos(Pos::new(HPos::Left, VPos::Center));
-            for (v, label) in &grid.ticks {
-                let y = bar_bottom - ((v - lo) / (hi - lo) * f64::from(bar_h)).round() as i32;
-                root.draw(&PathElement::new(
-                    vec![(bar_x1, y), (bar_x1 + 5, y)],
-                    ShapeStyle::from(BLACK).stroke_width(1),
-                ))?;
-                root.draw(&Text::new(
-                    label.clone(),
-                    (bar_x1 + 9, y),
-                    tick_style.clone(),
-                ))?;
-            }
-            if grid.any_not_evaluated {
-                root.draw(&Rectangle::new(
-                    [(bar_x0, grid_bottom - grid.swatch_h), (bar_x1, grid_bottom)],
-                    NOT_EVALUATED.rgb().filled(),
-                ))?;
-                root.draw(&Text::new(
-                    self.missing_label.as_str(),
-                    (bar_x1 + 9, grid_bottom - grid.swatch_h / 2),
-                    TextStyle::from((FONT, LABEL_PX).into_font())
-                        .pos(Pos::new(HPos::Left, VPos::Center)),
-                ))?;
-            }
-            root.draw(&Text::new(
-                self.value_label.clone(),
-                (
-                    bar_x1 + 9 + grid.bar_labels_w + 10 + text_height_px(AXIS_DESC_PX) / 2,
-                    (bar_top + bar_bottom) / 2,
-                ),
-                TextStyle::from(desc_font.transform(FontTransform::Rotate270)).pos(centred),
-            ))?;
-            root.present()?;
         }
-        Ok(svg)
+        if let Some((row, col)) = self.highlight {
+            // Black outside, a white line inside: the frame stands out
+            // on the dark cells as well as on the light ones.
+            let b = grid.cell(row, col);
+            for (inset, thickness, colour) in [(0, 3, BLACK), (3, 1, WHITE)] {
+                let (x0, y0, x1, y1) = (b.x0 + inset, b.y0 + inset, b.x1 - inset, b.y1 - inset);
+                for [a, z] in [
+                    [(x0, y0), (x1, y0 + thickness)],
+                    [(x0, y1 - thickness), (x1, y1)],
+                    [(x0, y0), (x0 + thickness, y1)],
+                    [(x1 - thickness, y0), (x1, y1)],
+                ] {
+                    root.draw(&Rectangle::new([a, z], colour.filled()))?;
+                }
+            }
+        }
+
+        // Category labels: y at the left of their row; x under their
+        // column, turned to read upwards when they would not fit across.
+        let tick_font = (FONT, TICK_PX).into_font();
+        let grid_bottom = grid.y0 + grid.cell_h * n_rows as i32;
+        let grid_right = grid.x0 + grid.cell_w * n_cols as i32;
+        for (row, label) in self.y_categories.iter().enumerate() {
+            let b = grid.cell(row, 0);
+            root.draw(&Text::new(
+                fit_text(label, TICK_PX, MAX_CATEGORY_LABEL_PX),
+                (grid.x0 - 8, (b.y0 + b.y1) / 2),
+                TextStyle::from(tick_font.clone()).pos(Pos::new(HPos::Right, VPos::Center)),
+            ))?;
+        }
+        for (col, label) in self.x_categories.iter().enumerate() {
+            let b = grid.cell(0, col);
+            let x = (b.x0 + b.x1) / 2;
+            let (font, pos) = if grid.x_labels_across {
+                (tick_font.clone(), Pos::new(HPos::Center, VPos::Top))
+            } else {
+                (
+                    tick_font.transform(FontTransform::Rotate270),
+                    Pos::new(HPos::Right, VPos::Center),
+                )
+            };
+            root.draw(&Text::new(
+                fit_text(label, TICK_PX, MAX_CATEGORY_LABEL_PX),
+                (x, grid_bottom + 6),
+                TextStyle::from(font).pos(pos),
+            ))?;
+        }
+        let desc_font = (FONT, AXIS_DESC_PX).into_font();
+        root.draw(&Text::new(
+            self.x_label.clone(),
+            (
+                (grid.x0 + grid_right) / 2,
+                h - X_DESC_AREA_PX as i32 / 2 - 4,
+            ),
+            TextStyle::from(desc_font.clone()).pos(centred),
+        ))?;
+        root.draw(&Text::new(
+            self.y_label.clone(),
+            (
+                12 + text_height_px(AXIS_DESC_PX) / 2,
+                (grid.y0 + grid_bottom) / 2,
+            ),
+            TextStyle::from(desc_font.transform(FontTransform::Rotate270)).pos(centred),
+        ))?;
+
+        // The colour bar: 2 px slices from lo at the bottom to hi at the
+        // top, ticks at round values, and the grey of "not evaluated"
+        // under it when a cell has that.
+        let bar_x0 = grid_right + COLOUR_BAR_GAP_PX;
+        let bar_x1 = bar_x0 + COLOUR_BAR_PX;
+        let bar_top = grid.y0;
+        let bar_bottom = if grid.any_not_evaluated {
+            grid_bottom - grid.swatch_h - 12
+        } else {
+            grid_bottom
+        };
+        let bar_h = bar_bottom - bar_top;
+        let mut y = bar_bottom;
+        while y > bar_top {
+            let top = (y - 2).max(bar_top);
+            let t = f64::from(bar_bottom - (y + top) / 2) / f64::from(bar_h);
+            root.draw(&Rectangle::new(
+                [(bar_x0, top), (bar_x1, y)],
+                viridis(t).rgb().filled(),
+            ))?;
+            y = top;
+        }
+        root.draw(&Rectangle::new(
+            [(bar_x0, bar_top), (bar_x1, bar_bottom)],
+            BLACK.mix(0.5),
+        ))?;
+        let tick_style = TextStyle::from(tick_font.clone()).pos(Pos::new(HPos::Left, VPos::Center));
+        for (v, label) in &grid.ticks {
+            let y = bar_bottom - ((v - lo) / (hi - lo) * f64::from(bar_h)).round() as i32;
+            root.draw(&PathElement::new(
+                vec![(bar_x1, y), (bar_x1 + 5, y)],
+                ShapeStyle::from(BLACK).stroke_width(1),
+            ))?;
+            root.draw(&Text::new(
+                label.clone(),
+                (bar_x1 + 9, y),
+                tick_style.clone(),
+            ))?;
+        }
+        if grid.any_not_evaluated {
+            root.draw(&Rectangle::new(
+                [(bar_x0, grid_bottom - grid.swatch_h), (bar_x1, grid_bottom)],
+                NOT_EVALUATED.rgb().filled(),
+            ))?;
+            root.draw(&Text::new(
+                self.missing_label.as_str(),
+                (bar_x1 + 9, grid_bottom - grid.swatch_h / 2),
+                TextStyle::from((FONT, LABEL_PX).into_font())
+                    .pos(Pos::new(HPos::Left, VPos::Center)),
+            ))?;
+        }
+        root.draw(&Text::new(
+            self.value_label.clone(),
+            (
+                bar_x1 + 9 + grid.bar_labels_w + 10 + text_height_px(AXIS_DESC_PX) / 2,
+                (bar_top + bar_bottom) / 2,
+            ),
+            TextStyle::from(desc_font.transform(FontTransform::Rotate270)).pos(centred),
+        ))?;
+        root.present()
     }
 
     /// Writes the figure as an SVG file (whole or not at all, see
     /// [`tortwin_outputs::files`]).
-    pub fn write_svg(&self, path: &Path) -> Result<()> {
-        let svg = self
-            .render_svg()
-            .with_context(|| format!("cannot write {}", path.display()))?;
-        Ok(tortwin_outputs::files::write_atomically(
-            path,
-            svg.as_bytes(),
-        )?)
+    pub fn write_svg(&self, path: &Path) -> Result<(), PlotError> {
+        let svg = self.render_svg().map_err(|e| e.for_file(path))?;
+        tortwin_outputs::files::write_atomically(path, svg.as_bytes())?;
+        Ok(())
     }
 
     /// Checks the grid's shape and the highlighted cell, and gives the
     /// colour range.
-    fn colour_range(&self) -> Result<(f64, f64)> {
-        let title = &self.title;
+    fn colour_range(&self) -> Result<(f64, f64), PlotError> {
+        let title = || self.title.clone();
         let (n_rows, n_cols) = (self.y_categories.len(), self.x_categories.len());
         if n_rows == 0 || n_cols == 0 {
-            bail!(
-                "heatmap \"{title}\" needs at least one category on each axis, \
-                 has {n_cols} x and {n_rows} y categories"
-            );
+            return Err(PlotError::NoCategories {
+                title: title(),
+                x: n_cols,
+                y: n_rows,
+            });
         }
         if self.values.len() != n_rows {
-            bail!(
-                "heatmap \"{title}\": {} rows of values for {n_rows} y categories",
-                self.values.len()
-            );
+            return Err(PlotError::RowCount {
+                title: title(),
+                rows: self.values.len(),
+                y: n_rows,
+            });
         }
         for (row, (values, name)) in self.values.iter().zip(&self.y_categories).enumerate() {
             if values.len() != n_cols {
-                bail!(
-                    "heatmap \"{title}\": row {row} ({name}) has {} values for {n_cols} x categories",
-                    values.len()
-                );
+                return Err(PlotError::RowLength {
+                    title: title(),
+                    row,
+                    name: name.clone(),
+                    values: values.len(),
+                    x: n_cols,
+                });
             }
         }
         if let Some((row, col)) = self.highlight {
             if row >= n_rows || col >= n_cols {
-                bail!(
-                    "heatmap \"{title}\": the highlighted cell (row {row}, col {col}) \
-                     is outside the grid of {n_rows} rows and {n_cols} columns"
-                );
+                return Err(PlotError::HighlightOutside {
+                    title: title(),
+                    row,
+                    col,
+                    rows: n_rows,
+                    cols: n_cols,
+                });
             }
         }
         match self.range {
-            Some(r) => checked_range(r, "colour", title),
-            None => {
-                let finite = self
-                    .values
+            Some(r) => checked_range(r, "colour", &self.title),
+            None => Ok(data_range(
+                self.values
                     .iter()
                     .flatten()
                     .copied()
-                    .filter(|v| v.is_finite());
-                Ok(min_max(finite).map_or(
-                    (0.0, 1.0),
-                    |(lo, hi)| {
-                        if lo < hi {
-                            (lo, hi)
-                        } else {
-                            pad(lo, hi)
-                        }
-                    },
-                ))
-            }
+                    .filter(|v| v.is_finite()),
+            )),
         }
     }
 
     /// Where everything goes: the margins take what the labels need, the
     /// cells share the rest equally.
-    fn layout(&self, lo: f64, hi: f64) -> Result<HeatmapGrid> {
+    fn layout(&self, lo: f64, hi: f64) -> Result<HeatmapGrid, PlotError> {
         let (w, h) = (self.width_px as i32, self.height_px as i32);
         let (n_rows, n_cols) = (
             self.y_categories.len() as i32,
@@ -455,13 +460,15 @@ impl Heatmap {
         // are unreadable and the picture should be made larger.
         let min_cell_h = text_height_px(MIN_CELL_TEXT_PX) + 2;
         if cell_w < 2 * min_cell_h || cell_h < min_cell_h {
-            bail!(
-                "heatmap \"{}\": {}x{} px is too small for {n_cols} x {n_rows} categories \
-                 (cells of {cell_w}x{cell_h} px)",
-                self.title,
-                self.width_px,
-                self.height_px
-            );
+            return Err(PlotError::TooSmall {
+                title: self.title.clone(),
+                width_px: self.width_px,
+                height_px: self.height_px,
+                cols: self.x_categories.len(),
+                rows: self.y_categories.len(),
+                cell_w_px: cell_w,
+                cell_h_px: cell_h,
+            });
         }
         Ok(HeatmapGrid {
             x0,

@@ -29,22 +29,27 @@
 //!         .y_range(0.0, 0.6),
 //! );
 //! plot.write_svg("friction.svg".as_ref())?;
-//! # Ok::<(), anyhow::Error>(())
+//! # Ok::<(), tortwin_plot::PlotError>(())
 //! ```
 //!
 //! The files: `line.rs` the line plots, `heatmap.rs` the heatmaps, `csv.rs`
 //! the tables; what both kinds of figure share is in `colour.rs` (the
 //! palette, the colour map, text on a fill), `axis.rs` (ranges and tick
 //! labels) and `layout.rs` (fonts, text sizes, boxes in pixels).
+//! `error.rs`: [`PlotError`], what cannot be drawn or written, naming the
+//! plot by its title and a file by its path. Files are written whole or
+//! not at all ([`tortwin_outputs::files`]).
 
 mod axis;
 mod colour;
 mod csv;
+mod error;
 mod heatmap;
 mod layout;
 mod line;
 
 pub use colour::Colour;
 pub use csv::{csv_text, write_csv, write_csv_columns};
+pub use error::{DrawError, PlotError};
 pub use heatmap::Heatmap;
 pub use line::{Legend, LinePlot, Panel, ReferenceLine, Series, Stroke};

@@ -7,13 +7,13 @@
 
 use std::path::Path;
 
-use anyhow::{bail, Result};
 use plotters::element::DashedPathElement;
 use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
 
-use crate::axis::{checked_range, min_max, pad, snap_to_zero, tick_label};
+use crate::axis::{checked_range, data_range, min_max, pad, snap_to_zero, tick_label};
 use crate::colour::Colour;
+use crate::error::{DrawError, PlotError};
 use crate::layout::{
     text_height_px, text_width_px, PixelBox, AXIS_DESC_PX, FONT, LABEL_PX, LEGEND_PX, TICK_PX,
     TITLE_AREA_PX, TITLE_PX, X_DESC_AREA_PX,
@@ -227,81 +227,95 @@ impl LinePlot {
         self
     }
 
-    /// The figure as SVG text.
-    pub fn render_svg(&self) -> Result<String> {
+    /// The figure as SVG text. An error says what cannot be drawn (no
+    /// panels, a series with more x than y values, an empty range).
+    pub fn render_svg(&self) -> Result<String, PlotError> {
         if self.panels.is_empty() {
-            bail!("plot \"{}\" has no panels", self.title);
+            return Err(PlotError::NoPanels {
+                title: self.title.clone(),
+            });
         }
         for s in self.panels.iter().flat_map(|p| &p.series) {
             if s.x.len() != s.y.len() {
-                bail!(
-                    "series \"{}\" of plot \"{}\": {} x values but {} y values",
-                    s.name,
-                    self.title,
-                    s.x.len(),
-                    s.y.len()
-                );
+                return Err(PlotError::SeriesLengths {
+                    title: self.title.clone(),
+                    series: s.name.clone(),
+                    x: s.x.len(),
+                    y: s.y.len(),
+                });
             }
         }
         let x_range = match self.x_range {
             Some(r) => checked_range(r, "x", &self.title)?,
-            None => {
-                let xs = self
-                    .panels
+            None => data_range(
+                self.panels
                     .iter()
                     .flat_map(|p| &p.series)
-                    .flat_map(|s| finite_points(s).map(|(x, _)| x));
-                min_max(xs).map_or(
-                    (0.0, 1.0),
-                    |(lo, hi)| if lo < hi { (lo, hi) } else { pad(lo, hi) },
-                )
-            }
+                    .flat_map(|s| finite_points(s).map(|(x, _)| x)),
+            ),
         };
-
-        let n = self.panels.len() as u32;
-        let height_px = TITLE_AREA_PX + n * self.panel_height_px + X_DESC_AREA_PX;
+        let y_ranges = self
+            .panels
+            .iter()
+            .map(|panel| match panel.y_range {
+                Some(r) => checked_range(r, "y", &self.title),
+                None => Ok(panel.data_y_range().unwrap_or((0.0, 1.0))),
+            })
+            .collect::<Result<Vec<_>, _>>()?;
         let mut svg = String::new();
-        {
-            let root =
-                SVGBackend::with_string(&mut svg, (self.width_px, height_px)).into_drawing_area();
-            root.fill(&WHITE)?;
-            let (title_area, mut rest) = root.split_vertically(TITLE_AREA_PX);
-            let title_style = TextStyle::from((FONT, TITLE_PX).into_font())
-                .pos(Pos::new(HPos::Center, VPos::Center));
-            title_area.draw(&Text::new(
-                self.title.clone(),
-                (self.width_px as i32 / 2, TITLE_AREA_PX as i32 / 2 + 4),
-                title_style,
-            ))?;
-            for (k, panel) in self.panels.iter().enumerate() {
-                let area = if k + 1 == self.panels.len() {
-                    rest.clone()
-                } else {
-                    let (top, below) = rest.split_vertically(self.panel_height_px);
-                    rest = below;
-                    top
-                };
-                // Only the bottom panel has the x axis label; the others
-                // share it.
-                let x_label = if k + 1 == self.panels.len() {
-                    Some(self.x_label.as_str())
-                } else {
-                    None
-                };
-                draw_panel(&area, panel, x_range, x_label, &self.title)?;
-            }
-            root.present()?;
-        }
+        self.draw(&mut svg, x_range, &y_ranges)
+            .map_err(|source| PlotError::Draw {
+                title: self.title.clone(),
+                source,
+            })?;
         Ok(svg)
     }
 
-    /// Writes the figure as an SVG file.
-    pub fn write_svg(&self, path: &Path) -> Result<()> {
-        let svg = self.render_svg()?;
-        Ok(tortwin_outputs::files::write_atomically(
-            path,
-            svg.as_bytes(),
-        )?)
+    /// Writes the figure as an SVG file (whole or not at all, see
+    /// [`tortwin_outputs::files`]).
+    pub fn write_svg(&self, path: &Path) -> Result<(), PlotError> {
+        let svg = self.render_svg().map_err(|e| e.for_file(path))?;
+        tortwin_outputs::files::write_atomically(path, svg.as_bytes())?;
+        Ok(())
+    }
+
+    /// Draws the checked figure: the title, then the panels top to bottom.
+    fn draw(
+        &self,
+        svg: &mut String,
+        x_range: (f64, f64),
+        y_ranges: &[(f64, f64)],
+    ) -> Result<(), DrawError> {
+        let n = self.panels.len() as u32;
+        let height_px = TITLE_AREA_PX + n * self.panel_height_px + X_DESC_AREA_PX;
+        let root = SVGBackend::with_string(svg, (self.width_px, height_px)).into_drawing_area();
+        root.fill(&WHITE)?;
+        let (title_area, mut rest) = root.split_vertically(TITLE_AREA_PX);
+        let title_style =
+            TextStyle::from((FONT, TITLE_PX).into_font()).pos(Pos::new(HPos::Center, VPos::Center));
+        title_area.draw(&Text::new(
+            self.title.clone(),
+            (self.width_px as i32 / 2, TITLE_AREA_PX as i32 / 2 + 4),
+            title_style,
+        ))?;
+        for (k, (panel, &y_range)) in self.panels.iter().zip(y_ranges).enumerate() {
+            let area = if k + 1 == self.panels.len() {
+                rest.clone()
+            } else {
+                let (top, below) = rest.split_vertically(self.panel_height_px);
+                rest = below;
+                top
+            };
+            // Only the bottom panel has the x axis label; the others
+            // share it.
+            let x_label = if k + 1 == self.panels.len() {
+                Some(self.x_label.as_str())
+            } else {
+                None
+            };
+            draw_panel(&area, panel, x_range, y_range, x_label)?;
+        }
+        root.present()
     }
 }
 
@@ -311,13 +325,9 @@ fn draw_panel(
     area: &DrawingArea<SVGBackend<'_>, plotters::coord::Shift>,
     panel: &Panel,
     (x0, x1): (f64, f64),
+    (y0, y1): (f64, f64),
     x_label: Option<&str>,
-    title: &str,
-) -> Result<()> {
-    let (y0, y1) = match panel.y_range {
-        Some(r) => checked_range(r, "y", title)?,
-        None => panel.data_y_range().unwrap_or((0.0, 1.0)),
-    };
+) -> Result<(), DrawError> {
     let extra_px = if x_label.is_some() { X_DESC_AREA_PX } else { 0 };
     let mut chart = ChartBuilder::on(area)
         .margin_top(10)
