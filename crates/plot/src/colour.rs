@@ -1,6 +1,7 @@
 //! Colours: the palette of line plots, the heatmaps' colour map, and the
 //! text colour that reads on a given fill.
 
+use plotters::style::colors::colormaps::ViridisRGB;
 use plotters::style::RGBColor;
 
 /// A colour of a line. [`Colour::palette`] gives distinct colours in turn.
@@ -37,30 +38,13 @@ impl Colour {
     }
 }
 
-/// viridis at 0, 1/8, ..., 1 (R's `viridis(9)`, the same map as
-/// matplotlib's); linear interpolation between neighbours stays within a
-/// unit or two of the full 256-entry table.
-const VIRIDIS: [Colour; 9] = [
-    Colour(0x44, 0x01, 0x54),
-    Colour(0x47, 0x2D, 0x7B),
-    Colour(0x3B, 0x52, 0x8B),
-    Colour(0x2C, 0x72, 0x8E),
-    Colour(0x21, 0x90, 0x8C),
-    Colour(0x27, 0xAD, 0x81),
-    Colour(0x5D, 0xC8, 0x63),
-    Colour(0xAA, 0xDC, 0x32),
-    Colour(0xFD, 0xE7, 0x25),
-];
-
-/// viridis at `t` in 0..=1 (clamped; NaN gives the low end).
+/// viridis at `t` in 0..=1 (clamped; NaN gives the low end): plotters'
+/// `ViridisRGB`, matplotlib's map through eight stops.
 pub(crate) fn viridis(t: f64) -> Colour {
+    // plotters cannot place NaN on its map (it indexes with it).
     let t = if t.is_nan() { 0.0 } else { t.clamp(0.0, 1.0) };
-    let x = t * (VIRIDIS.len() - 1) as f64;
-    let i = (x.floor() as usize).min(VIRIDIS.len() - 2);
-    let f = x - i as f64;
-    let (a, b) = (VIRIDIS[i], VIRIDIS[i + 1]);
-    let mix = |p: u8, q: u8| (f64::from(p) + f * (f64::from(q) - f64::from(p))).round() as u8;
-    Colour(mix(a.0, b.0), mix(a.1, b.1), mix(a.2, b.2))
+    let RGBColor(r, g, b) = ViridisRGB::get_color(t);
+    Colour(r, g, b)
 }
 
 /// Black or white, whichever contrasts more with `background` (WCAG's
@@ -91,8 +75,10 @@ mod tests {
     #[test]
     fn viridis_ends_and_text_contrast() {
         assert_eq!(viridis(0.0), Colour(68, 1, 84));
-        assert_eq!(viridis(1.0), Colour(253, 231, 37));
-        assert_eq!(viridis(0.5), Colour(0x21, 0x90, 0x8C));
+        assert_eq!(viridis(1.0), Colour(254, 232, 37));
+        // Halfway between plotters' stops 4 and 5 (of 8).
+        assert_eq!(viridis(0.5), Colour(35, 145, 140));
+        assert_eq!(viridis(f64::NAN), viridis(0.0));
         assert_eq!(viridis(-3.0), viridis(0.0));
         assert_eq!(viridis(f64::INFINITY), viridis(1.0));
         // Perceptually ordered: lightness (here luminance) rises throughout.

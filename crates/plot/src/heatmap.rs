@@ -737,7 +737,7 @@ mod tests {
             assert_eq!(inside[0].fill, hex(text_colour_on(viridis(v / 1.2))));
         }
         assert_eq!(at(0.00).fill, "#440154");
-        assert_eq!(at(1.20).fill, "#FDE725");
+        assert_eq!(at(1.20).fill, "#FEE825");
         // The colour bar's ticks speak the cells' unit.
         for tick in ["0.0%", "50.0%", "100.0%"] {
             assert!(
