@@ -10,7 +10,7 @@
 //! the x axis (the paper's Figure 13: masses on one panel, mu on the
 //! other). A panel holds [`Series`] (solid or dashed, in a colour), thin
 //! horizontal [`ReferenceLine`]s (mu_C and mu_D in Figure 7) and a legend.
-//! Units belong in the axis labels: "distance from applicator d [m]".
+//! Units belong in the axis labels: "distance from applicator d \[m\]".
 //!
 //! A [`Heatmap`] shows one value per pair of categories (coverage over
 //! pulse mass × pulse interval in a strategy report), each cell coloured
