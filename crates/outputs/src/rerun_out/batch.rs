@@ -8,7 +8,7 @@ use std::collections::VecDeque;
 
 use rerun::datatypes::{TensorBuffer, TensorData};
 use rerun::external::arrow::datatypes::{ArrowPrimitiveType, Float16Type};
-use rerun::{EntityPath, RecordingStream, TimeColumn};
+use rerun::{EntityPath, RecordingStream, RecordingStreamError, TimeColumn};
 
 use super::entities::TrackEntities;
 use super::{TIMELINE_TIME, TIMELINE_WHEEL_PASS};
@@ -60,7 +60,10 @@ pub(super) struct Series {
 }
 
 /// Sends a track's buffered profiles, a chunk per quantity.
-pub(super) fn send_profiles(rec: &RecordingStream, track: &mut TrackState) -> anyhow::Result<()> {
+pub(super) fn send_profiles(
+    rec: &RecordingStream,
+    track: &mut TrackState,
+) -> Result<(), RecordingStreamError> {
     let pending = std::mem::take(&mut track.pending);
     if pending.times_ns.is_empty() {
         return Ok(());
@@ -89,7 +92,7 @@ pub(super) fn log_history(
     rec: &RecordingStream,
     track: &mut TrackState,
     grid_len: usize,
-) -> anyhow::Result<()> {
+) -> Result<(), RecordingStreamError> {
     let rows = track.history.len();
     let flat: Vec<F16> = track.history.iter().flatten().copied().collect();
     let heatmap = TensorData::new(
@@ -110,7 +113,7 @@ pub(super) fn send_series(
     rec: &RecordingStream,
     path: EntityPath,
     series: Series,
-) -> anyhow::Result<()> {
+) -> Result<(), RecordingStreamError> {
     let time = TimeColumn::new_timestamp_nanos_since_epoch(TIMELINE_TIME, series.times_ns);
     rec.send_columns(
         path,

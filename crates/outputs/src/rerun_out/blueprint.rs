@@ -19,6 +19,7 @@ use rerun::external::re_sdk_types::blueprint::archetypes::{
 use rerun::external::re_sdk_types::external::uuid::Uuid;
 use rerun::{
     ApplicationId, Archetype, AsComponents, EntityPath, RecordingStream, RecordingStreamBuilder,
+    RecordingStreamError,
 };
 use tortwin_recording::Quantity;
 
@@ -59,7 +60,7 @@ pub(super) struct Run<'a> {
 /// Picks one of a track's entities.
 type TrackEntity = fn(&TrackEntities) -> &EntityPath;
 
-pub(super) fn blueprint(run: &Run<'_>) -> anyhow::Result<Vec<LogMsg>> {
+pub(super) fn blueprint(run: &Run<'_>) -> Result<Vec<LogMsg>, RecordingStreamError> {
     let layout = run.layout;
     let (rec, storage) = RecordingStreamBuilder::new(run.application_id.clone())
         .recording_id(RecordingId::random())
@@ -75,17 +76,18 @@ pub(super) fn blueprint(run: &Run<'_>) -> anyhow::Result<Vec<LogMsg>> {
     // A time series over the whole run, whatever the time cursor: the
     // default x range of 0.36 is a window of +-30 s (or +-1000 passes)
     // around the cursor once the data spans more.
-    let whole_run = |bp: &BlueprintWriter<'_>, view: &BlueprintItem| -> anyhow::Result<()> {
-        bp.property(view, &VisibleTimeRanges::new(everything.clone()))?;
-        bp.property(
-            view,
-            &TimeAxis::update_fields().with_view_range(TimeRange::EVERYTHING),
-        )?;
-        bp.property(
-            view,
-            &PlotLegend::update_fields().with_corner(Corner2D::LeftTop),
-        )
-    };
+    let whole_run =
+        |bp: &BlueprintWriter<'_>, view: &BlueprintItem| -> Result<(), RecordingStreamError> {
+            bp.property(view, &VisibleTimeRanges::new(everything.clone()))?;
+            bp.property(
+                view,
+                &TimeAxis::update_fields().with_view_range(TimeRange::EVERYTHING),
+            )?;
+            bp.property(
+                view,
+                &PlotLegend::update_fields().with_corner(Corner2D::LeftTop),
+            )
+        };
 
     // Left: a column per track, a row per quantity along d, and the
     // mu history below them (its columns are the same grid points).
@@ -269,7 +271,7 @@ impl BlueprintWriter<'_> {
         class: &str,
         name: &str,
         queries: impl IntoIterator<Item = impl Into<String>>,
-    ) -> anyhow::Result<BlueprintItem> {
+    ) -> Result<BlueprintItem, RecordingStreamError> {
         let id = Uuid::new_v4();
         let path = format!("view/{id}");
         self.rec.log(
@@ -290,7 +292,7 @@ impl BlueprintWriter<'_> {
         &self,
         view: &BlueprintItem,
         property: &A,
-    ) -> anyhow::Result<()> {
+    ) -> Result<(), RecordingStreamError> {
         self.rec.log(
             format!("{}/{}", view.path, A::name().short_name()),
             property,
@@ -304,7 +306,7 @@ impl BlueprintWriter<'_> {
         name: &str,
         children: Vec<BlueprintItem>,
         extra: impl FnOnce(ContainerBlueprint) -> ContainerBlueprint,
-    ) -> anyhow::Result<BlueprintItem> {
+    ) -> Result<BlueprintItem, RecordingStreamError> {
         let id = Uuid::new_v4();
         let path = format!("container/{id}");
         let contents: Vec<IncludedContent> = children

@@ -135,7 +135,7 @@
 //! file.
 //!
 //! The code: `sink.rs` the [`RerunSink`] (time, the engine's events, finish);
-//! `batch.rs` what it holds back and sends as columns (profiles, series,
+//! `error.rs` [`RerunError`]; `batch.rs` what it holds back and sends as columns (profiles, series,
 //! heatmaps); `entities.rs` the entity paths, labels and colours;
 //! `section.rs` what is logged once at the start (the section page and
 //! map); `summary.rs` the run summary page; `blueprint.rs` the layout.
@@ -150,10 +150,12 @@
 mod batch;
 mod blueprint;
 mod entities;
+mod error;
 mod section;
 mod sink;
 mod summary;
 
+pub use error::RerunError;
 pub use sink::RerunSink;
 
 /// Name of the sequence timeline: wheel passes so far.

@@ -5,7 +5,7 @@ use std::fmt::Write as _;
 
 use rerun::components::{Color, Radius, ValueRange};
 use rerun::datatypes::TensorData;
-use rerun::RecordingStream;
+use rerun::{RecordingStream, RecordingStreamError};
 use tortwin_engine::sink::SectionInfo;
 
 use super::batch::TrackState;
@@ -19,7 +19,7 @@ pub(super) fn log_section(
     info: &SectionInfo<'_>,
     tracks: &[TrackState],
     mu_color_range: Option<[f64; 2]>,
-) -> anyhow::Result<()> {
+) -> Result<(), RecordingStreamError> {
     let section = info.section;
     rec.log_static(
         "section/description",

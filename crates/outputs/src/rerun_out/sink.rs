@@ -5,7 +5,6 @@ use std::collections::{BTreeMap, BTreeSet, HashSet};
 use std::path::Path;
 use std::time::Duration;
 
-use anyhow::{anyhow, Context};
 use rerun::components::{MarkerShape, TextLogLevel, ValueRange};
 use rerun::external::re_log_types::BlueprintActivationCommand;
 use rerun::log::ChunkBatcherConfig;
@@ -13,14 +12,15 @@ use rerun::{
     ApplicationId, AsComponents, EntityPath, RecordingStream, RecordingStreamBuilder, TimeCell,
 };
 use tortwin_engine::sink::{
-    FieldSnapshot, MeasurementOutput, PulseEvent, RunSummary, SectionInfo, Sink, SnapshotKind,
-    TrainEvent,
+    FieldSnapshot, MeasurementOutput, PulseEvent, RunSummary, SectionInfo, Sink, SinkResult,
+    SnapshotKind, TrainEvent,
 };
 use tortwin_recording::Direction;
 
 use super::batch::{log_history, send_profiles, send_series, Series, TrackState, F16};
 use super::blueprint::{blueprint, Layout, Measured, Run};
 use super::entities::{entity, lighten, rail_color, TrackEntities, QUANTITIES};
+use super::error::{sdk_error, RerunError};
 use super::section::log_section;
 use super::summary::summarize;
 use super::{
@@ -64,19 +64,24 @@ pub struct RerunSink {
 
 impl RerunSink {
     /// Opens `.NAME.partial-XXXXXX` next to `path` as the recording's file.
-    pub fn create(path: &Path, options: RerunOptions) -> anyhow::Result<RerunSink> {
+    pub fn create(path: &Path, options: RerunOptions) -> Result<RerunSink, RerunError> {
         let file = PartialFile::beside(path)?;
-        let temp_path = file.temp_path().to_path_buf();
         let file_name = path.file_name().unwrap_or_default();
 
         let recording_name = options
             .recording_name
             .clone()
             .unwrap_or_else(|| file_name.to_string_lossy().into_owned());
+        let application_id =
+            ApplicationId::try_new(options.application_id.as_str()).map_err(|source| {
+                RerunError::ApplicationId {
+                    path: path.to_path_buf(),
+                    id: options.application_id.clone(),
+                    source,
+                }
+            })?;
         // `enabled(true)`: the user asked for this file, so the `RERUN=off`
         // environment switch must not silently drop it.
-        let application_id = ApplicationId::try_new(options.application_id.as_str())
-            .map_err(|err| anyhow!("rerun output {}: {err}", path.display()))?;
         let rec = RecordingStreamBuilder::new(application_id.clone())
             .recording_name(recording_name)
             .enabled(true)
@@ -87,8 +92,8 @@ impl RerunSink {
                 max_bytes_in_flight: MAX_BYTES_IN_FLIGHT,
                 ..ChunkBatcherConfig::DEFAULT
             })
-            .save(&temp_path)
-            .with_context(|| format!("creating rerun output {}", temp_path.display()))?;
+            .save(file.temp_path())
+            .map_err(sdk_error(path, || "starting the recording".to_owned()))?;
         rec.set_log_time_enabled(false);
         rec.set_log_tick_enabled(false);
 
@@ -111,23 +116,23 @@ impl RerunSink {
         })
     }
 
-    fn rec(&self) -> anyhow::Result<&RecordingStream> {
-        self.rec.as_ref().ok_or_else(|| {
-            anyhow!(
-                "rerun output {}: already finished",
-                self.file.final_path().display()
-            )
+    /// The output's final path, which the errors name.
+    fn path(&self) -> &Path {
+        self.file.final_path()
+    }
+
+    fn rec(&self) -> Result<&RecordingStream, RerunError> {
+        self.rec.as_ref().ok_or_else(|| RerunError::Finished {
+            path: self.path().to_path_buf(),
         })
     }
 
     /// Sets the calling thread's time: `time` always, `wheel_pass` if given
     /// (else that timeline is cleared). The next logs land there. Returns
     /// the time as rerun takes it.
-    fn set_time(&mut self, log_time_ns: u64, wheel_pass: Option<u64>) -> anyhow::Result<i64> {
+    fn set_time(&mut self, log_time_ns: u64, wheel_pass: Option<u64>) -> Result<i64, RerunError> {
         let time_ns = self.note_time(log_time_ns)?;
-        let wheel_pass = wheel_pass
-            .map(|w| i64::try_from(w).with_context(|| format!("wheel_pass {w} out of range")))
-            .transpose()?;
+        let wheel_pass = wheel_pass.map(|w| self.sequence(w)).transpose()?;
         let rec = self.rec()?;
         match wheel_pass {
             Some(wheel_pass) => {
@@ -142,10 +147,22 @@ impl RerunSink {
         Ok(time_ns)
     }
 
+    /// A wheel pass count as the `wheel_pass` timeline takes it.
+    fn sequence(&self, wheel_pass: u64) -> Result<i64, RerunError> {
+        i64::try_from(wheel_pass).map_err(|_| RerunError::OutOfRange {
+            path: self.path().to_path_buf(),
+            what: "wheel_pass",
+            value: wheel_pass,
+        })
+    }
+
     /// Checks a log_time and widens the run's time span by it.
-    fn note_time(&mut self, log_time_ns: u64) -> anyhow::Result<i64> {
-        let time_ns = i64::try_from(log_time_ns)
-            .with_context(|| format!("log_time {log_time_ns} ns out of range"))?;
+    fn note_time(&mut self, log_time_ns: u64) -> Result<i64, RerunError> {
+        let time_ns = i64::try_from(log_time_ns).map_err(|_| RerunError::OutOfRange {
+            path: self.path().to_path_buf(),
+            what: "log_time (ns)",
+            value: log_time_ns,
+        })?;
         self.time_span_ns = Some(match self.time_span_ns {
             Some([first, last]) => [first.min(log_time_ns), last.max(log_time_ns)],
             None => [log_time_ns, log_time_ns],
@@ -154,35 +171,37 @@ impl RerunSink {
     }
 
     /// Adds a value to the series at `path` on `time`; sends the series once
-    /// it holds [`SERIES_CHUNK_ROWS`] values.
+    /// it holds [`SERIES_CHUNK_ROWS`] values. `what` names the event in an
+    /// error.
     fn push_series(
         &mut self,
         path: EntityPath,
         log_time_ns: u64,
         value: f64,
-    ) -> anyhow::Result<()> {
+        what: impl FnOnce() -> String,
+    ) -> Result<(), RerunError> {
         let time_ns = self.note_time(log_time_ns)?;
         let series = self.series.entry(path.clone()).or_default();
         series.times_ns.push(time_ns);
         series.values.push(value);
         if series.values.len() >= SERIES_CHUNK_ROWS {
             let series = std::mem::take(series);
-            send_series(self.rec()?, path, series)?;
+            send_series(self.rec()?, path, series).map_err(sdk_error(self.path(), what))?;
         }
         Ok(())
     }
 
     /// Sends every buffered series.
-    fn flush_series(&mut self) -> anyhow::Result<()> {
-        let rec = self.rec.as_ref().ok_or_else(|| {
-            anyhow!(
-                "rerun output {}: already finished",
-                self.file.final_path().display()
-            )
+    fn flush_series(&mut self) -> Result<(), RerunError> {
+        let rec = self.rec.as_ref().ok_or_else(|| RerunError::Finished {
+            path: self.file.final_path().to_path_buf(),
         })?;
         for (path, series) in std::mem::take(&mut self.series) {
             if !series.values.is_empty() {
-                send_series(rec, path, series)?;
+                send_series(rec, path, series)
+                    .map_err(sdk_error(self.file.final_path(), || {
+                        "pulses and measurements".to_owned()
+                    }))?;
             }
         }
         Ok(())
@@ -193,12 +212,14 @@ impl RerunSink {
         &mut self,
         path: &EntityPath,
         styles: &[&dyn AsComponents],
-    ) -> anyhow::Result<()> {
+    ) -> Result<(), RerunError> {
         if self.styled.contains(path) {
             return Ok(());
         }
         for style in styles {
-            self.rec()?.log_static(path.clone(), *style)?;
+            self.rec()?
+                .log_static(path.clone(), *style)
+                .map_err(sdk_error(self.path(), || format!("style of {path}")))?;
         }
         self.styled.insert(path.clone());
         Ok(())
@@ -219,10 +240,102 @@ impl RerunSink {
             None => [0.0, 0.6],
         }
     }
+
+    /// Sends what is still buffered, the last heatmaps, the summary and the
+    /// blueprint; closes the stream and moves the file into place.
+    fn finish_run(&mut self, summary: &RunSummary) -> Result<(), RerunError> {
+        self.flush_series()?;
+        if let Some(rec) = self.rec.as_ref() {
+            for track in &mut self.tracks {
+                send_profiles(rec, track)
+                    .map_err(sdk_error(self.file.final_path(), || "profiles".to_owned()))?;
+            }
+        }
+        // The last train's heatmap, where its snapshot was, if not yet logged.
+        for index in 0..self.tracks.len() {
+            let track = &self.tracks[index];
+            let Some((log_time_ns, wheel_pass)) = track.last_train else {
+                continue;
+            };
+            if track.history_unlogged == 0 {
+                continue;
+            }
+            self.set_time(log_time_ns, Some(wheel_pass))?;
+            let rec = self.rec.as_ref().ok_or_else(|| RerunError::Finished {
+                path: self.file.final_path().to_path_buf(),
+            })?;
+            log_history(rec, &mut self.tracks[index], self.grid_len)
+                .map_err(sdk_error(self.file.final_path(), || {
+                    "last heatmap".to_owned()
+                }))?;
+        }
+        let [low, high] = self.mu_color_range();
+        let rec = self.rec()?;
+        let history = (self.options.history_rows, self.options.history_every.max(1));
+        rec.log_static(
+            "run/summary",
+            &rerun::TextDocument::from_markdown(summarize(summary, [low, high], history)),
+        )
+        .map_err(sdk_error(self.path(), || "summary".to_owned()))?;
+        if self.options.mu_color_range.is_none() {
+            for track in &self.tracks {
+                rec.log_static(
+                    track.entities.mu_history.clone(),
+                    &rerun::Tensor::update_fields().with_value_range(ValueRange::new(low, high)),
+                )
+                .map_err(sdk_error(self.path(), || "heatmap colour range".to_owned()))?;
+            }
+        }
+        if self.options.blueprint {
+            let Some(layout) = &self.layout else {
+                return Err(RerunError::NotBegun {
+                    path: self.path().to_path_buf(),
+                });
+            };
+            let blueprint = blueprint(&Run {
+                application_id: &self.application_id,
+                layout,
+                tracks: self.tracks.iter().map(|t| &t.entities).collect(),
+                measured: &self.measured,
+                pulsed: &self.pulsed,
+                history_rows: self.options.history_rows,
+                mu_color_range: [low, high],
+                time_span_ns: self.time_span_ns,
+                wheel_pass: self.wheel_pass,
+            })
+            .map_err(sdk_error(self.path(), || "blueprint".to_owned()))?;
+            let Some(blueprint_id) = blueprint.first().map(|msg| msg.store_id().clone()) else {
+                return Err(RerunError::EmptyBlueprint {
+                    path: self.path().to_path_buf(),
+                });
+            };
+            rec.send_blueprint(
+                blueprint,
+                BlueprintActivationCommand {
+                    blueprint_id,
+                    make_active: true,
+                    make_default: true,
+                },
+            );
+        }
+
+        let rec = self.rec.take().ok_or_else(|| RerunError::Finished {
+            path: self.file.final_path().to_path_buf(),
+        })?;
+        rec.flush_blocking().map_err(|source| RerunError::Flush {
+            path: self.path().to_path_buf(),
+            source,
+        })?;
+        // Dropping the only handle joins the SDK's threads; the file sink
+        // writes the rrd footer and closes the file before this returns.
+        drop(rec);
+        Ok(self.file.commit()?)
+    }
 }
 
+/// Every method's error is a [`RerunError`].
 impl Sink for RerunSink {
-    fn begin(&mut self, info: &SectionInfo<'_>) -> tortwin_engine::sink::SinkResult {
+    fn begin(&mut self, info: &SectionInfo<'_>) -> SinkResult {
         self.grid_len = info.grid_d_m.len();
         self.profile_chunk_rows = (BATCH_CHUNK_BYTES as usize
             / (self.grid_len * std::mem::size_of::<f32>()).max(1))
@@ -241,13 +354,12 @@ impl Sink for RerunSink {
             .iter()
             .map(|t| TrackState::new(TrackEntities::new(t, info.tracks)))
             .collect();
-        Ok(
-            log_section(self.rec()?, info, &self.tracks, self.options.mu_color_range)
-                .with_context(|| format!("rerun output {}", self.file.temp_path().display()))?,
-        )
+        log_section(self.rec()?, info, &self.tracks, self.options.mu_color_range)
+            .map_err(sdk_error(self.path(), || "section".to_owned()))?;
+        Ok(())
     }
 
-    fn train(&mut self, train: &TrainEvent<'_>) -> tortwin_engine::sink::SinkResult {
+    fn train(&mut self, train: &TrainEvent<'_>) -> SinkResult {
         self.set_time(train.log_time_ns, Some(self.wheel_pass))?;
         let direction = match train.direction {
             Direction::Up => "up (d increasing)",
@@ -265,11 +377,13 @@ impl Sink for RerunSink {
                 "trains",
                 &rerun::TextLog::new(text).with_level(TextLogLevel::INFO),
             )
-            .with_context(|| format!("rerun output: train {}", train.train_id))?;
+            .map_err(sdk_error(self.path(), || {
+                format!("train {}", train.train_id)
+            }))?;
         Ok(())
     }
 
-    fn pulse(&mut self, pulse: &PulseEvent<'_>) -> tortwin_engine::sink::SinkResult {
+    fn pulse(&mut self, pulse: &PulseEvent<'_>) -> SinkResult {
         let path = entity(&["applicator", pulse.applicator_id, pulse.rail_name]);
         let name = format!("{} on {} rail (g)", pulse.applicator_id, pulse.rail_name);
         self.style_once(
@@ -281,12 +395,13 @@ impl Sink for RerunSink {
                 .with_marker_sizes([3.0])],
         )?;
         self.pulsed.insert(path.clone());
-        Ok(self
-            .push_series(path, pulse.log_time_ns, pulse.mass_kg * G_PER_KG)
-            .with_context(|| format!("rerun output: pulse of {}", pulse.applicator_id))?)
+        self.push_series(path, pulse.log_time_ns, pulse.mass_kg * G_PER_KG, || {
+            format!("pulse of {}", pulse.applicator_id)
+        })?;
+        Ok(())
     }
 
-    fn measurement(&mut self, m: &MeasurementOutput<'_>) -> tortwin_engine::sink::SinkResult {
+    fn measurement(&mut self, m: &MeasurementOutput<'_>) -> SinkResult {
         let quantity = m.quantity.as_str();
         let base = ["sites", m.site_id, m.rail_name, quantity];
         let measured = entity(&[&base[..], &["measured"]].concat());
@@ -327,18 +442,13 @@ impl Sink for RerunSink {
             .or_insert_with(|| (m.quantity, BTreeSet::new()))
             .1
             .insert(m.rail);
-        Ok(self
-            .push_series(measured, m.log_time_ns, m.measured)
-            .and_then(|()| self.push_series(simulated, m.log_time_ns, m.simulated))
-            .with_context(|| {
-                format!(
-                    "rerun output: measurement {} at site {}",
-                    m.index_in_file, m.site_id
-                )
-            })?)
+        let what = || format!("measurement {} at site {}", m.index_in_file, m.site_id);
+        self.push_series(measured, m.log_time_ns, m.measured, what)?;
+        self.push_series(simulated, m.log_time_ns, m.simulated, what)?;
+        Ok(())
     }
 
-    fn field(&mut self, f: &FieldSnapshot<'_>) -> tortwin_engine::sink::SinkResult {
+    fn field(&mut self, f: &FieldSnapshot<'_>) -> SinkResult {
         let grid_len = self.grid_len;
         let lengths = [
             ("d_m", f.d_m.len()),
@@ -347,28 +457,32 @@ impl Sink for RerunSink {
             ("rail_mass_kg", f.rail_mass_kg.len()),
             ("wheel_mass_kg", f.wheel_mass_kg.len()),
         ];
-        if let Some((name, len)) = lengths.iter().find(|(_, len)| *len != grid_len) {
-            return Err(anyhow!(
-                "rerun output: field snapshot of train {} on {}/{}: {name} has {len} points, the grid {grid_len}",
-                f.train_id,
-                f.rail_name,
-                f.band
-            ).into());
+        if let Some(&(field, len)) = lengths.iter().find(|(_, len)| *len != grid_len) {
+            return Err(RerunError::SnapshotLength {
+                path: self.path().to_path_buf(),
+                train_id: f.train_id.to_owned(),
+                rail: f.rail_name.to_owned(),
+                band: f.band.to_owned(),
+                field,
+                len,
+                grid: grid_len,
+            }
+            .into());
         }
+        // Checked before the sink's time and wheel passes move.
         if f.track >= self.tracks.len() {
-            return Err(anyhow!(
-                "rerun output: field snapshot for track {} but the section has {} tracks",
-                f.track,
-                self.tracks.len()
-            )
+            return Err(RerunError::NoTrack {
+                path: self.path().to_path_buf(),
+                track: f.track,
+                tracks: self.tracks.len(),
+            }
             .into());
         }
 
         self.wheel_pass = self.wheel_pass.max(f.wheel_pass);
         let wheel_pass = self.wheel_pass;
         let time_ns = self.set_time(f.log_time_ns, Some(wheel_pass))?;
-        let wheel_pass_seq = i64::try_from(wheel_pass)
-            .with_context(|| format!("wheel_pass {wheel_pass} out of range"))?;
+        let wheel_pass_seq = self.sequence(wheel_pass)?;
         let history_rows = self.options.history_rows;
         if f.kind == SnapshotKind::Train && history_rows > 0 {
             for &mu in f.mu.iter().filter(|mu| mu.is_finite()) {
@@ -378,18 +492,24 @@ impl Sink for RerunSink {
                 });
             }
         }
+        let path = self.file.final_path();
         let Some(rec) = self.rec.as_ref() else {
-            return Err(anyhow!(
-                "rerun output {}: already finished",
-                self.file.final_path().display()
-            )
+            return Err(RerunError::Finished {
+                path: path.to_path_buf(),
+            }
             .into());
         };
+        let tracks = self.tracks.len();
         let Some(track) = self.tracks.get_mut(f.track) else {
-            return Err(anyhow!("rerun output: no track {}", f.track).into());
+            return Err(RerunError::NoTrack {
+                path: path.to_path_buf(),
+                track: f.track,
+                tracks,
+            }
+            .into());
         };
         let label = track.entities.label.clone();
-        let context = || format!("rerun output: field of train {} on {label}", f.train_id);
+        let what = || format!("field of train {} on {label}", f.train_id);
         let pending = &mut track.pending;
         pending.times_ns.push(time_ns);
         pending.wheel_passes.push(wheel_pass_seq);
@@ -403,7 +523,7 @@ impl Sink for RerunSink {
             rows.push(values.iter().map(|&v| (v * scale) as f32).collect());
         }
         if pending.times_ns.len() >= self.profile_chunk_rows {
-            send_profiles(rec, track).with_context(context)?;
+            send_profiles(rec, track).map_err(sdk_error(path, what))?;
         }
 
         if f.kind == SnapshotKind::Train && history_rows > 0 {
@@ -416,98 +536,14 @@ impl Sink for RerunSink {
             track.history_unlogged += 1;
             track.last_train = Some((f.log_time_ns, wheel_pass));
             if track.history_unlogged >= self.options.history_every.max(1) {
-                log_history(rec, track, grid_len).with_context(context)?;
+                log_history(rec, track, grid_len).map_err(sdk_error(path, what))?;
             }
         }
         Ok(())
     }
 
-    fn finish(&mut self, summary: &RunSummary) -> tortwin_engine::sink::SinkResult {
-        let temp_path = self.file.temp_path().to_path_buf();
-        let context = || format!("rerun output {}", temp_path.display());
-        self.flush_series()
-            .with_context(|| format!("{}: pulses and measurements", context()))?;
-        if let Some(rec) = self.rec.as_ref() {
-            for track in &mut self.tracks {
-                send_profiles(rec, track).with_context(|| format!("{}: profiles", context()))?;
-            }
-        }
-        // The last train's heatmap, where its snapshot was, if not yet logged.
-        for index in 0..self.tracks.len() {
-            let track = &self.tracks[index];
-            let Some((log_time_ns, wheel_pass)) = track.last_train else {
-                continue;
-            };
-            if track.history_unlogged == 0 {
-                continue;
-            }
-            self.set_time(log_time_ns, Some(wheel_pass))?;
-            let rec = self
-                .rec
-                .as_ref()
-                .ok_or_else(|| anyhow!("{}: already finished", context()))?;
-            log_history(rec, &mut self.tracks[index], self.grid_len)
-                .with_context(|| format!("{}: last heatmap", context()))?;
-        }
-        let [low, high] = self.mu_color_range();
-        let rec = self.rec()?;
-        let history = (self.options.history_rows, self.options.history_every.max(1));
-        rec.log_static(
-            "run/summary",
-            &rerun::TextDocument::from_markdown(summarize(summary, [low, high], history)),
-        )
-        .with_context(|| format!("{}: summary", context()))?;
-        if self.options.mu_color_range.is_none() {
-            for track in &self.tracks {
-                rec.log_static(
-                    track.entities.mu_history.clone(),
-                    &rerun::Tensor::update_fields().with_value_range(ValueRange::new(low, high)),
-                )
-                .with_context(|| format!("{}: heatmap colour range", context()))?;
-            }
-        }
-        if self.options.blueprint {
-            let Some(layout) = &self.layout else {
-                return Err(anyhow!("{}: no section: the sink was never begun", context()).into());
-            };
-            let blueprint = blueprint(&Run {
-                application_id: &self.application_id,
-                layout,
-                tracks: self.tracks.iter().map(|t| &t.entities).collect(),
-                measured: &self.measured,
-                pulsed: &self.pulsed,
-                history_rows: self.options.history_rows,
-                mu_color_range: [low, high],
-                time_span_ns: self.time_span_ns,
-                wheel_pass: self.wheel_pass,
-            })
-            .with_context(|| format!("{}: blueprint", context()))?;
-            let Some(blueprint_id) = blueprint.first().map(|msg| msg.store_id().clone()) else {
-                return Err(anyhow!("{}: blueprint: no messages", context()).into());
-            };
-            self.rec()?.send_blueprint(
-                blueprint,
-                BlueprintActivationCommand {
-                    blueprint_id,
-                    make_active: true,
-                    make_default: true,
-                },
-            );
-        }
-
-        let rec = self.rec.take().ok_or_else(|| {
-            anyhow!(
-                "rerun output {}: already finished",
-                self.file.final_path().display()
-            )
-        })?;
-        rec.flush_blocking().with_context(|| {
-            format!("flushing rerun output {}", self.file.temp_path().display())
-        })?;
-        // Dropping the only handle joins the SDK's threads; the file sink
-        // writes the rrd footer and closes the file before this returns.
-        drop(rec);
-        Ok(self.file.commit()?)
+    fn finish(&mut self, summary: &RunSummary) -> SinkResult {
+        Ok(self.finish_run(summary)?)
     }
 }
 
