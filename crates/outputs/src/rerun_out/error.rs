@@ -26,8 +26,10 @@ pub enum RerunError {
     Sdk {
         path: PathBuf,
         what: String,
+        // Boxed: the SDK's error is large, and every `Result` of the sink
+        // would carry its size.
         #[source]
-        source: RecordingStreamError,
+        source: Box<RecordingStreamError>,
     },
     #[error("rerun output {}: flushing", path.display())]
     Flush {
@@ -49,15 +51,15 @@ pub enum RerunError {
         value: u64,
     },
     #[error(
-        "rerun output {}: field snapshot of train {train_id} on {rail}/{band}: \
+        "rerun output {}: field snapshot of train {train_id} on {track}: \
          {field} has {len} points, the grid {grid}",
         path.display()
     )]
     SnapshotLength {
         path: PathBuf,
         train_id: String,
-        rail: String,
-        band: String,
+        /// "rail/band".
+        track: String,
         field: &'static str,
         len: usize,
         grid: usize,
@@ -82,6 +84,6 @@ pub(super) fn sdk_error<'a>(
     move |source| RerunError::Sdk {
         path: path.to_path_buf(),
         what: what(),
-        source,
+        source: Box::new(source),
     }
 }

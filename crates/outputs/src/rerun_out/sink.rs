@@ -461,8 +461,7 @@ impl Sink for RerunSink {
             return Err(RerunError::SnapshotLength {
                 path: self.path().to_path_buf(),
                 train_id: f.train_id.to_owned(),
-                rail: f.rail_name.to_owned(),
-                band: f.band.to_owned(),
+                track: format!("{}/{}", f.rail_name, f.band),
                 field,
                 len,
                 grid: grid_len,
