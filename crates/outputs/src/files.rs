@@ -1,56 +1,84 @@
 //! Output files that never look complete before they are.
 //!
 //! Every file tortwin writes (MCAP and rerun outputs, synthetic recordings,
-//! states, reports) goes to a temporary name beside its final path,
-//! `.NAME.partial-<pid>`, and is renamed into place only when complete. If
-//! the run fails first, dropping the [`PartialFile`] deletes the temporary
-//! file, so a failed run leaves nothing a user could mistake for a result.
+//! states, reports, figures) is written to a temporary file beside its final
+//! path, `.NAME.partial-XXXXXX`, and moved into place only when complete
+//! (`tempfile`'s `persist`, a rename within the folder). Until then the
+//! temporary file is owned by a `tempfile::TempPath`, which deletes it when
+//! dropped: a failed run leaves nothing a user could mistake for a result.
+//!
+//! An output folder that does not exist yet is made, as a user of
+//! `--out-rrd out/demo.rrd` expects; one that cannot be made is a
+//! [`UsageError`] (exit status 2) under a [`FileError`] that names it.
 
+use std::ffi::OsString;
+use std::io::Write as _;
 use std::path::{Path, PathBuf};
 
-use anyhow::{anyhow, Context, Result};
+use tempfile::{NamedTempFile, TempPath};
+use tortwin_model::error::UsageError;
 
-/// A file being written under a temporary name beside its final path.
+/// Why an output file could not be written; every variant names the path.
+#[derive(Debug, thiserror::Error)]
+pub enum FileError {
+    #[error("{}: not a file name", path.display())]
+    NotAFileName { path: PathBuf },
+    /// The source is a [`UsageError`]: the user asked for a folder that
+    /// cannot be.
+    #[error("cannot create the output folder {}", folder.display())]
+    Folder {
+        folder: PathBuf,
+        #[source]
+        source: UsageError,
+    },
+    /// The folder exists but no file can be made in it (not writable, full).
+    #[error("cannot create a file in the output folder {}", folder.display())]
+    Temporary {
+        folder: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("cannot write {}", path.display())]
+    Write {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("cannot move {} to {}", temp.display(), path.display())]
+    Persist {
+        temp: PathBuf,
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    /// [`PartialFile::commit`] called twice.
+    #[error("{} is already in place", path.display())]
+    AlreadyCommitted { path: PathBuf },
+}
+
+/// A file being written under a temporary name beside its final path, for
+/// writers that open a path themselves (the MCAP and rerun writers).
 #[derive(Debug)]
 pub struct PartialFile {
-    temp_path: PathBuf,
+    /// `None` once moved into place.
+    temp: Option<TempPath>,
     final_path: PathBuf,
-    committed: bool,
 }
 
 impl PartialFile {
-    /// Reserves `.NAME.partial-<pid>` in the directory of `final_path`
-    /// (nothing is created yet: the writer creates `temp_path()`).
-    pub fn beside(final_path: &Path) -> Result<Self> {
-        let file_name = final_path
-            .file_name()
-            .ok_or_else(|| anyhow!("{}: not a file name", final_path.display()))?;
-        let dir = match final_path.parent() {
-            Some(dir) if !dir.as_os_str().is_empty() => dir,
-            _ => Path::new("."),
-        };
-        // An output folder that does not exist yet is made, as a user of
-        // `--out-rrd out/demo.rrd` expects; one that cannot be made is an
-        // error that names it.
-        std::fs::create_dir_all(dir).map_err(|e| {
-            tortwin_model::error::UsageError(format!(
-                "cannot create the output folder {}: {e}",
-                dir.display()
-            ))
-        })?;
-        let mut temp_name = std::ffi::OsString::from(".");
-        temp_name.push(file_name);
-        temp_name.push(format!(".partial-{}", std::process::id()));
+    /// Creates an empty `.NAME.partial-XXXXXX` in the folder of
+    /// `final_path` (made if missing); the writer opens it by
+    /// [`PartialFile::temp_path`] and truncates it.
+    pub fn beside(final_path: &Path) -> Result<Self, FileError> {
         Ok(Self {
-            temp_path: dir.join(temp_name),
+            temp: Some(temporary_beside(final_path)?.into_temp_path()),
             final_path: final_path.to_path_buf(),
-            committed: false,
         })
     }
 
-    /// Where to write.
+    /// Where to write: the temporary file, or the final path once committed.
     pub fn temp_path(&self) -> &Path {
-        &self.temp_path
+        self.temp.as_deref().unwrap_or(&self.final_path)
     }
 
     /// Where the file goes when complete.
@@ -58,40 +86,86 @@ impl PartialFile {
         &self.final_path
     }
 
-    /// The file is complete: renames it into place.
-    pub fn commit(&mut self) -> Result<()> {
-        std::fs::rename(&self.temp_path, &self.final_path).with_context(|| {
-            format!(
-                "cannot move {} to {}",
-                self.temp_path.display(),
-                self.final_path.display()
-            )
+    /// The file is complete: moves it into place (replacing a file there).
+    pub fn commit(&mut self) -> Result<(), FileError> {
+        let temp = self
+            .temp
+            .take()
+            .ok_or_else(|| FileError::AlreadyCommitted {
+                path: self.final_path.clone(),
+            })?;
+        let temp_path = temp.to_path_buf();
+        // On failure the error owns the temporary file and deletes it.
+        temp.persist(&self.final_path)
+            .map_err(|err| FileError::Persist {
+                temp: temp_path,
+                path: self.final_path.clone(),
+                source: err.error,
+            })
+    }
+}
+
+/// Writes `bytes` to `path`, whole or not at all.
+pub fn write_atomically(path: &Path, bytes: &[u8]) -> Result<(), FileError> {
+    let mut temp = temporary_beside(path)?;
+    temp.write_all(bytes).map_err(|source| FileError::Write {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    let temp_path = temp.path().to_path_buf();
+    temp.persist(path).map_err(|err| FileError::Persist {
+        temp: temp_path,
+        path: path.to_path_buf(),
+        source: err.error,
+    })?;
+    Ok(())
+}
+
+/// An empty `.NAME.partial-XXXXXX` in the folder of `final_path`, which is
+/// made if missing.
+fn temporary_beside(final_path: &Path) -> Result<NamedTempFile, FileError> {
+    let file_name = final_path
+        .file_name()
+        .ok_or_else(|| FileError::NotAFileName {
+            path: final_path.to_path_buf(),
         })?;
-        self.committed = true;
-        Ok(())
-    }
-}
-
-impl Drop for PartialFile {
-    fn drop(&mut self) {
-        if !self.committed {
-            // Nothing useful to do if this fails while unwinding from another error.
-            let _ = std::fs::remove_file(&self.temp_path);
-        }
-    }
-}
-
-/// Writes `bytes` to `path` through a [`PartialFile`].
-pub fn write_atomically(path: &Path, bytes: &[u8]) -> Result<()> {
-    let mut file = PartialFile::beside(path)?;
-    std::fs::write(file.temp_path(), bytes)
-        .with_context(|| format!("cannot write {}", file.temp_path().display()))?;
-    file.commit()
+    let folder = match final_path.parent() {
+        Some(folder) if !folder.as_os_str().is_empty() => folder,
+        _ => Path::new("."),
+    };
+    std::fs::create_dir_all(folder).map_err(|err| FileError::Folder {
+        folder: folder.to_path_buf(),
+        source: UsageError(err.to_string()),
+    })?;
+    let mut prefix = OsString::from(".");
+    prefix.push(file_name);
+    prefix.push(".partial-");
+    let mut builder = tempfile::Builder::new();
+    builder.prefix(&prefix);
+    // tempfile makes 0600 files; an output is made like any new file
+    // (0666 less the umask), as it was before it went through a temporary.
+    #[cfg(unix)]
+    builder.permissions(std::os::unix::fs::PermissionsExt::from_mode(0o666));
+    builder
+        .tempfile_in(folder)
+        .map_err(|source| FileError::Temporary {
+            folder: folder.to_path_buf(),
+            source,
+        })
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    fn names_in(dir: &Path) -> Vec<String> {
+        let mut names: Vec<String> = std::fs::read_dir(dir)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
+        names.sort();
+        names
+    }
 
     #[test]
     fn commits_or_leaves_nothing() {
@@ -107,13 +181,63 @@ mod tests {
                 .to_string_lossy()
                 .starts_with(".out.json.partial-"));
         }
-        assert_eq!(
-            std::fs::read_dir(dir.path()).unwrap().count(),
-            0,
-            "dropped: nothing left"
-        );
-        write_atomically(&target, b"whole").unwrap();
+        assert!(names_in(dir.path()).is_empty(), "dropped: nothing left");
+
+        let mut file = PartialFile::beside(&target).unwrap();
+        std::fs::write(file.temp_path(), b"whole").unwrap();
+        file.commit().unwrap();
         assert_eq!(std::fs::read(&target).unwrap(), b"whole");
-        assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1);
+        assert_eq!(file.temp_path(), target);
+        assert!(matches!(
+            file.commit(),
+            Err(FileError::AlreadyCommitted { .. })
+        ));
+        drop(file);
+        assert_eq!(names_in(dir.path()), ["out.json"]);
+
+        write_atomically(&target, b"again").unwrap();
+        assert_eq!(std::fs::read(&target).unwrap(), b"again");
+        assert_eq!(names_in(dir.path()), ["out.json"]);
+    }
+
+    #[test]
+    fn makes_missing_folders_and_names_the_one_it_cannot() {
+        let dir = tempfile::tempdir().unwrap();
+        let nested = dir.path().join("a/b/fig.svg");
+        write_atomically(&nested, b"<svg/>").unwrap();
+        assert_eq!(std::fs::read(&nested).unwrap(), b"<svg/>");
+
+        // A folder where a file is: it cannot be made.
+        let blocked = dir.path().join("fig.svg");
+        std::fs::write(&blocked, b"").unwrap();
+        let err = write_atomically(&blocked.join("x/out.csv"), b"").unwrap_err();
+        assert!(matches!(err, FileError::Folder { .. }), "{err:?}");
+        assert!(err.to_string().contains("fig.svg/x"), "{err}");
+        assert!(std::error::Error::source(&err)
+            .and_then(|s| s.downcast_ref::<UsageError>())
+            .is_some());
+    }
+
+    #[cfg(unix)]
+    #[test]
+    fn outputs_get_the_mode_of_a_new_file_and_unwritable_folders_are_named() {
+        use std::os::unix::fs::PermissionsExt;
+        let dir = tempfile::tempdir().unwrap();
+        let target = dir.path().join("out.mcap");
+        write_atomically(&target, b"x").unwrap();
+        let plain = dir.path().join("plain");
+        std::fs::write(&plain, b"x").unwrap();
+        let mode = |p: &Path| std::fs::metadata(p).unwrap().permissions().mode() & 0o777;
+        assert_eq!(mode(&target), mode(&plain));
+
+        let locked = dir.path().join("locked");
+        std::fs::create_dir(&locked).unwrap();
+        std::fs::set_permissions(&locked, std::fs::Permissions::from_mode(0o555)).unwrap();
+        // Root writes anywhere: the check means nothing then.
+        if std::fs::write(locked.join("probe"), b"").is_err() {
+            let err = write_atomically(&locked.join("out.mcap"), b"x").unwrap_err();
+            assert!(matches!(err, FileError::Temporary { .. }), "{err:?}");
+            assert!(err.to_string().contains("locked"), "{err}");
+        }
     }
 }

@@ -15,25 +15,25 @@
 //! | `/twin/measurement` | input measurement, at its own log_time        |
 //! | `/twin/field`       | train field snapshot ([`SnapshotKind::Train`]) |
 //!
-//! The file is written as `.NAME.partial-<pid>` next to the target and only
+//! The file is written as `.NAME.partial-XXXXXX` next to the target and only
 //! [`Sink::finish`] writes the summary and renames it into place; a sink
 //! dropped without `finish` (the run failed) deletes its temporary file, so a
 //! file under the final name is always complete.
 //!
 //! JSON has no NaN or infinity and serde_json would quietly write `null`, so
 //! every float is checked first and a non-finite one is a [`NonFiniteValue`]
-//! error that names the topic, the field and the log_time.
+//! error that names the topic, the field and the log_time. Every other
+//! failure is a [`McapError`] that names the file.
 
 use std::collections::BTreeMap;
 use std::fs::File;
 use std::io::BufWriter;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
-use anyhow::{anyhow, Context};
 use serde::ser::{SerializeSeq, Serializer};
 use serde::Serialize;
 
-use crate::files::PartialFile;
+use crate::files::{FileError, PartialFile};
 use tortwin_engine::sink::{
     FieldSnapshot, MeasurementOutput, PulseEvent, RunSummary, SectionInfo, Sink, SnapshotKind,
     TrainEvent,
@@ -52,6 +52,46 @@ pub struct NonFiniteValue {
     pub value: f64,
 }
 
+/// Why the MCAP output could not be written (a float JSON cannot hold is a
+/// [`NonFiniteValue`] instead); every variant names the output by its final
+/// path.
+#[derive(Debug, thiserror::Error)]
+pub enum McapError {
+    #[error(transparent)]
+    File(#[from] FileError),
+    #[error("MCAP output {}: {what}", path.display())]
+    Io {
+        path: PathBuf,
+        what: &'static str,
+        #[source]
+        source: std::io::Error,
+    },
+    /// The mcap writer failed at `what` ("starting", "writing /twin/train", ...).
+    #[error("MCAP output {}: {what}", path.display())]
+    Mcap {
+        path: PathBuf,
+        what: String,
+        #[source]
+        source: mcap::McapError,
+    },
+    #[error("MCAP output {}: serializing {topic}", path.display())]
+    Json {
+        path: PathBuf,
+        topic: &'static str,
+        #[source]
+        source: serde_json::Error,
+    },
+    #[error("MCAP output {}: already finished", path.display())]
+    Finished { path: PathBuf },
+    /// What the engine handed over does not fit together.
+    #[error("MCAP output {}: {topic}: {problem}", path.display())]
+    Inconsistent {
+        path: PathBuf,
+        topic: &'static str,
+        problem: String,
+    },
+}
+
 /// Writes the twin's output channels to an MCAP file (see the module docs).
 pub struct McapSink {
     // Declared before `temp` so that on drop the writer closes the file
@@ -65,11 +105,22 @@ pub struct McapSink {
 }
 
 impl McapSink {
-    /// Opens `.NAME.partial-<pid>` next to `path` and registers every channel.
-    pub fn create(path: &Path) -> anyhow::Result<McapSink> {
+    /// Opens `.NAME.partial-XXXXXX` next to `path` and registers every channel.
+    pub fn create(path: &Path) -> Result<McapSink, McapError> {
         let temp = PartialFile::beside(path)?;
-        let file = File::create(temp.temp_path())
-            .with_context(|| format!("creating MCAP output {}", temp.temp_path().display()))?;
+        let file = File::create(temp.temp_path()).map_err(|source| McapError::Io {
+            path: path.to_path_buf(),
+            what: "opening",
+            source,
+        })?;
+        let mcap_error = |what: &str| {
+            let what = what.to_owned();
+            move |source| McapError::Mcap {
+                path: path.to_path_buf(),
+                what,
+                source,
+            }
+        };
 
         let version = env!("CARGO_PKG_VERSION");
         // Several replays may run at once under rayon (sweeps): compress on the
@@ -81,7 +132,7 @@ impl McapSink {
             .library(format!("tortwin {version} (mcap-rs)"));
         let mut writer = options
             .create(BufWriter::new(file))
-            .with_context(|| format!("starting MCAP output {}", temp.temp_path().display()))?;
+            .map_err(mcap_error("starting"))?;
 
         writer
             .write_metadata(&mcap::records::Metadata {
@@ -91,17 +142,20 @@ impl McapSink {
                     ("version".to_owned(), version.to_owned()),
                 ]),
             })
-            .with_context(|| format!("writing MCAP output {}", temp.temp_path().display()))?;
+            .map_err(mcap_error("writing the metadata"))?;
 
         let no_metadata = BTreeMap::new();
         let mut channel_ids = [0; Topic::ALL.len()];
         for topic in Topic::ALL {
             let schema_id = writer
                 .add_schema(topic.schema_name(), "jsonschema", topic.schema().as_bytes())
-                .with_context(|| format!("adding the schema of {}", topic.name()))?;
+                .map_err(mcap_error(&format!(
+                    "adding the schema of {}",
+                    topic.name()
+                )))?;
             channel_ids[topic as usize] = writer
                 .add_channel(schema_id, topic.name(), "json", &no_metadata)
-                .with_context(|| format!("adding channel {}", topic.name()))?;
+                .map_err(mcap_error(&format!("adding channel {}", topic.name())))?;
         }
 
         Ok(McapSink {
@@ -120,16 +174,17 @@ impl McapSink {
         topic: Topic,
         log_time_ns: u64,
         message: &T,
-    ) -> anyhow::Result<()> {
-        let writer = self.writer.as_mut().ok_or_else(|| {
-            anyhow!(
-                "MCAP output {}: already finished",
-                self.temp.final_path().display()
-            )
+    ) -> Result<(), McapError> {
+        let path = self.temp.final_path();
+        let writer = self.writer.as_mut().ok_or_else(|| McapError::Finished {
+            path: path.to_path_buf(),
         })?;
         self.json.clear();
-        serde_json::to_writer(&mut self.json, message)
-            .with_context(|| format!("serializing {}", topic.name()))?;
+        serde_json::to_writer(&mut self.json, message).map_err(|source| McapError::Json {
+            path: path.to_path_buf(),
+            topic: topic.name(),
+            source,
+        })?;
         let sequence = &mut self.sequences[topic as usize];
         *sequence = sequence.wrapping_add(1);
         let header = mcap::records::MessageHeader {
@@ -140,24 +195,58 @@ impl McapSink {
         };
         writer
             .write_to_known_channel(&header, &self.json)
-            .with_context(|| {
-                format!(
-                    "writing {} to MCAP output {}",
-                    topic.name(),
-                    self.temp.temp_path().display()
-                )
+            .map_err(|source| McapError::Mcap {
+                path: path.to_path_buf(),
+                what: format!("writing {}", topic.name()),
+                source,
             })
+    }
+
+    /// An error for what the engine handed over on `topic`.
+    fn inconsistent(&self, topic: Topic, problem: String) -> McapError {
+        McapError::Inconsistent {
+            path: self.temp.final_path().to_path_buf(),
+            topic: topic.name(),
+            problem,
+        }
+    }
+
+    /// Writes the summary, flushes and syncs the file, moves it into place.
+    fn finish_file(&mut self) -> Result<(), McapError> {
+        let path = self.temp.final_path().to_path_buf();
+        let mut writer = self
+            .writer
+            .take()
+            .ok_or_else(|| McapError::Finished { path: path.clone() })?;
+        writer.finish().map_err(|source| McapError::Mcap {
+            path: path.clone(),
+            what: "finishing".to_owned(),
+            source,
+        })?;
+        let io_error = |what| {
+            let path = path.clone();
+            move |source| McapError::Io { path, what, source }
+        };
+        let file = writer
+            .into_inner()
+            .into_inner()
+            .map_err(|e| e.into_error())
+            .map_err(io_error("flushing"))?;
+        file.sync_all().map_err(io_error("syncing"))?;
+        drop(file);
+        Ok(self.temp.commit()?)
     }
 }
 
+/// Every method's error is a [`McapError`], or a [`NonFiniteValue`] for a
+/// float JSON cannot hold.
 impl Sink for McapSink {
     fn begin(&mut self, info: &SectionInfo<'_>) -> tortwin_engine::sink::SinkResult {
         let topic = Topic::Section;
         let log_time_ns = u64::try_from(info.origin_ns).map_err(|_| {
-            anyhow!(
-                "{}: origin {} ns is before the Unix epoch",
-                topic.name(),
-                info.origin_ns
+            self.inconsistent(
+                topic,
+                format!("origin {} ns is before the Unix epoch", info.origin_ns),
             )
         })?;
         let section = info.section;
@@ -170,33 +259,33 @@ impl Sink for McapSink {
         check("nominal_wheel_diameter_m", section.nominal_wheel_diameter_m)?;
         finite_all(topic, "grid_d_m", log_time_ns, info.grid_d_m, 1.0)?;
 
-        let rail_name =
-            |rail: usize| {
-                section.rails.get(rail).map(String::as_str).ok_or_else(|| {
-                    anyhow!("{}: rail index {rail} is not in the section", topic.name())
-                })
-            };
+        let rail_name = |rail: usize| {
+            section.rails.get(rail).map(String::as_str).ok_or_else(|| {
+                self.inconsistent(topic, format!("rail index {rail} is not in the section"))
+            })
+        };
         let grid_d_m = |point: usize| {
             info.grid_d_m.get(point).copied().ok_or_else(|| {
-                anyhow!(
-                    "{}: grid index {point} is beyond the grid of {} points",
-                    topic.name(),
-                    info.grid_d_m.len()
+                self.inconsistent(
+                    topic,
+                    format!(
+                        "grid index {point} is beyond the grid of {} points",
+                        info.grid_d_m.len()
+                    ),
                 )
             })
         };
         if info.applicator_points.len() != section.applicators.len()
             || info.site_points.len() != section.sites.len()
         {
-            return Err(anyhow!(
-                "{}: {} applicator and {} site grid points for {} applicators and {} sites",
-                topic.name(),
+            let problem = format!(
+                "{} applicator and {} site grid points for {} applicators and {} sites",
                 info.applicator_points.len(),
                 info.site_points.len(),
                 section.applicators.len(),
                 section.sites.len()
-            )
-            .into());
+            );
+            return Err(self.inconsistent(topic, problem).into());
         }
 
         let mut applicators = Vec::with_capacity(section.applicators.len());
@@ -211,7 +300,7 @@ impl Sink for McapSink {
                     .rails
                     .iter()
                     .map(|&rail| rail_name(rail))
-                    .collect::<anyhow::Result<_>>()?,
+                    .collect::<Result<_, _>>()?,
                 nominal_pulse_g,
                 grid_index,
                 grid_d_m: grid_d_m(grid_index)?,
@@ -312,11 +401,11 @@ impl Sink for McapSink {
             ("wheel_mass_mg", f.wheel_mass_kg.len()),
         ] {
             if len != points {
-                return Err(anyhow!(
-                    "{}, log_time {t} ns, train {}: {name} has {len} values for {points} grid points",
-                    topic.name(),
+                let problem = format!(
+                    "log_time {t} ns, train {}: {name} has {len} values for {points} grid points",
                     f.train_id
-                ).into());
+                );
+                return Err(self.inconsistent(topic, problem).into());
             }
         }
         finite_all(topic, "d_m", t, f.d_m, 1.0)?;
@@ -339,25 +428,7 @@ impl Sink for McapSink {
     }
 
     fn finish(&mut self, _summary: &RunSummary) -> tortwin_engine::sink::SinkResult {
-        let mut writer = self.writer.take().ok_or_else(|| {
-            anyhow!(
-                "MCAP output {}: already finished",
-                self.temp.final_path().display()
-            )
-        })?;
-        let temp_path = self.temp.temp_path().to_path_buf();
-        writer
-            .finish()
-            .with_context(|| format!("finishing MCAP output {}", temp_path.display()))?;
-        let file = writer
-            .into_inner()
-            .into_inner()
-            .map_err(|e| e.into_error())
-            .with_context(|| format!("flushing MCAP output {}", temp_path.display()))?;
-        file.sync_all()
-            .with_context(|| format!("syncing MCAP output {}", temp_path.display()))?;
-        drop(file);
-        Ok(self.temp.commit()?)
+        Ok(self.finish_file()?)
     }
 }
 

@@ -1,0 +1,326 @@
+//! The default layout (see "Blueprint" in the module docs), logged by hand
+//! into a blueprint store: the 0.36 Rust builder cannot set the view
+//! properties it needs.
+
+use std::collections::{BTreeMap, BTreeSet};
+
+use rerun::blueprint::components::{
+    AutoLayout, AutoViews, ColumnShare, ContainerKind, Corner2D, Fps, GridColumns, IncludedContent,
+    PanelState, PlayState, PlaybackSpeed, QueryExpression, RootContainer, RowShare, TimelineName,
+    ViewClass, ViewFit,
+};
+use rerun::components::{Colormap, MagnificationFilter, Name};
+use rerun::datatypes::{TimeRange, VisibleTimeRange};
+use rerun::external::re_log_types::{LogMsg, RecordingId};
+use rerun::external::re_sdk_types::blueprint::archetypes::{
+    ContainerBlueprint, PanelBlueprint, PlotLegend, TensorScalarMapping, TensorViewFit, TimeAxis,
+    TimePanelBlueprint, ViewBlueprint, ViewContents, ViewportBlueprint, VisibleTimeRanges,
+};
+use rerun::external::re_sdk_types::external::uuid::Uuid;
+use rerun::{
+    ApplicationId, Archetype, AsComponents, EntityPath, RecordingStream, RecordingStreamBuilder,
+    RecordingStreamError,
+};
+use tortwin_recording::Quantity;
+
+use super::entities::{entity, quantity_label, TrackEntities};
+use super::{TIMELINE_TIME, TIMELINE_WHEEL_PASS};
+
+/// Playback (should the user rewind and press play) covers the run in this.
+const PLAYBACK_S: f64 = 60.0;
+
+/// The section as the blueprint needs it, copied at the sink's `begin`.
+pub(super) struct Layout {
+    pub(super) rails: Vec<String>,
+    /// `(id, position_m)`, in section order.
+    pub(super) sites: Vec<(String, f64)>,
+}
+
+/// Per site index, per quantity (in [`super::entities::QUANTITIES`] order):
+/// the quantity and the rails it was measured on.
+pub(super) type Measured = BTreeMap<usize, BTreeMap<usize, (Quantity, BTreeSet<usize>)>>;
+
+/// What the layout is made of, known when the run is over.
+pub(super) struct Run<'a> {
+    pub(super) application_id: &'a ApplicationId,
+    pub(super) layout: &'a Layout,
+    pub(super) tracks: Vec<&'a TrackEntities>,
+    pub(super) measured: &'a Measured,
+    /// Applicator entities that received a pulse.
+    pub(super) pulsed: &'a BTreeSet<EntityPath>,
+    /// `K`: rows of the mu history heatmaps (0: none).
+    pub(super) history_rows: usize,
+    pub(super) mu_color_range: [f64; 2],
+    /// First and last log_time on `time`.
+    pub(super) time_span_ns: Option<[u64; 2]>,
+    /// Wheel passes of the whole run.
+    pub(super) wheel_pass: u64,
+}
+
+/// Picks one of a track's entities.
+type TrackEntity = fn(&TrackEntities) -> &EntityPath;
+
+pub(super) fn blueprint(run: &Run<'_>) -> Result<Vec<LogMsg>, RecordingStreamError> {
+    let layout = run.layout;
+    let (rec, storage) = RecordingStreamBuilder::new(run.application_id.clone())
+        .recording_id(RecordingId::random())
+        .blueprint()
+        .memory()?;
+    // The viewer identifies blueprint data by this timeline.
+    rec.set_time_sequence("blueprint", 0);
+    let bp = BlueprintWriter { rec: &rec };
+    let everything = [TIMELINE_TIME, TIMELINE_WHEEL_PASS].map(|timeline| VisibleTimeRange {
+        timeline: timeline.into(),
+        range: TimeRange::EVERYTHING,
+    });
+    // A time series over the whole run, whatever the time cursor: the
+    // default x range of 0.36 is a window of +-30 s (or +-1000 passes)
+    // around the cursor once the data spans more.
+    let whole_run =
+        |bp: &BlueprintWriter<'_>, view: &BlueprintItem| -> Result<(), RecordingStreamError> {
+            bp.property(view, &VisibleTimeRanges::new(everything.clone()))?;
+            bp.property(
+                view,
+                &TimeAxis::update_fields().with_view_range(TimeRange::EVERYTHING),
+            )?;
+            bp.property(
+                view,
+                &PlotLegend::update_fields().with_corner(Corner2D::LeftTop),
+            )
+        };
+
+    // Left: a column per track, a row per quantity along d, and the
+    // mu history below them (its columns are the same grid points).
+    let quantities: [(&str, TrackEntity); 4] = [
+        ("mu", |t| &t.mu),
+        ("adhesion T/N", |t| &t.adhesion),
+        ("rail product (mg)", |t| &t.rail_mass),
+        ("wheel product (mg)", |t| &t.wheel_mass),
+    ];
+    let mut grid = Vec::new();
+    for (quantity, pick) in quantities {
+        for track in &run.tracks {
+            let view = bp.view(
+                "BarChart",
+                &format!("{}: {quantity} along d [m]", track.label),
+                [format!("+ {}", pick(track))],
+            )?;
+            // The title names the track; the legend would only repeat
+            // the entity path.
+            bp.property(&view, &PlotLegend::update_fields().with_visible(false))?;
+            grid.push(view);
+        }
+    }
+    if run.history_rows > 0 {
+        // 0.36 draws no colour bar next to a tensor: the title says it.
+        let [low, high] = run.mu_color_range;
+        for track in &run.tracks {
+            let view = bp.view(
+                "Tensor",
+                &format!("{}: mu history, colour {low:.2} → {high:.2}", track.label),
+                [format!("+ {}", track.mu_history)],
+            )?;
+            // Stretched: a few trains by 600 points is a strip otherwise.
+            bp.property(
+                &view,
+                &TensorViewFit::update_fields().with_scaling(ViewFit::Fill),
+            )?;
+            bp.property(
+                &view,
+                &TensorScalarMapping::update_fields()
+                    .with_colormap(Colormap::Viridis)
+                    .with_mag_filter(MagnificationFilter::Nearest),
+            )?;
+            grid.push(view);
+        }
+    }
+    // The heatmap's row a little taller than a profile's.
+    let row_shares = [1.0, 1.0, 1.0, 1.0, 1.6].map(RowShare::from);
+    let rows = grid.len() / run.tracks.len().max(1);
+    let profiles = bp.container(
+        ContainerKind::Grid,
+        "Along the section (a column per rail/band)",
+        grid,
+        |c| {
+            c.with_grid_columns(GridColumns::from(run.tracks.len().max(1) as u32))
+                .with_row_shares(row_shares.into_iter().take(rows))
+        },
+    )?;
+
+    // Right, top: a tab per site; in it a row per quantity measured
+    // there and a plot per rail, like the profiles.
+    let mut sites = Vec::new();
+    for (&site, quantities) in run.measured {
+        let Some((site_id, position_m)) = layout.sites.get(site) else {
+            continue;
+        };
+        let mut rows = Vec::new();
+        for (quantity, rails) in quantities.values() {
+            let mut views = Vec::new();
+            for &rail in rails {
+                let Some(rail) = layout.rails.get(rail) else {
+                    continue;
+                };
+                let view = bp.view(
+                    "TimeSeries",
+                    &format!("{site_id}, {rail} rail: {}", quantity_label(*quantity)),
+                    [format!(
+                        "+ {}/**",
+                        entity(&["sites", site_id, rail, quantity.as_str()])
+                    )],
+                )?;
+                whole_run(&bp, &view)?;
+                views.push(view);
+            }
+            rows.push(bp.container(
+                ContainerKind::Horizontal,
+                &format!("site {site_id}: {}", quantity_label(*quantity)),
+                views,
+                |c| c,
+            )?);
+        }
+        sites.push(bp.container(
+            ContainerKind::Vertical,
+            &format!("site {site_id} ({position_m:.1} m)"),
+            rows,
+            |c| c,
+        )?);
+    }
+
+    // Right, bottom: the context.
+    let trains = bp.view("TextLog", "Trains", ["+ /trains"])?;
+    let pulses = bp.view(
+        "TimeSeries",
+        "Applicator pulses (g)",
+        run.pulsed.iter().map(|p| format!("+ {p}")),
+    )?;
+    whole_run(&bp, &pulses)?;
+    let section = bp.view("TextDocument", "Section", ["+ /section/description"])?;
+    let map = bp.view("2D", "Section map", ["+ /section/map/**"])?;
+    let summary = bp.view("TextDocument", "Run summary", ["+ /run/summary"])?;
+    let context = bp.container(
+        ContainerKind::Tabs,
+        "Run",
+        vec![trains, pulses, section, map, summary],
+        |c| c,
+    )?;
+
+    let mut right = Vec::new();
+    let mut shares = Vec::new();
+    if !sites.is_empty() {
+        right.push(bp.container(ContainerKind::Tabs, "Sites", sites, |c| c)?);
+        shares.push(0.62);
+    }
+    right.push(context);
+    shares.push(0.38);
+    let right = bp.container(ContainerKind::Vertical, "Sites and run", right, |c| {
+        c.with_row_shares(shares.iter().map(|&s| RowShare::from(s)))
+    })?;
+    let root = bp.container(
+        ContainerKind::Horizontal,
+        "tortwin",
+        vec![profiles, right],
+        |c| c.with_col_shares([0.55, 0.45].map(ColumnShare::from)),
+    )?;
+
+    rec.log(
+        "viewport",
+        &ViewportBlueprint::new()
+            .with_root_container(RootContainer::from(root.id))
+            .with_auto_layout(AutoLayout::from(false))
+            .with_auto_views(AutoViews::from(false)),
+    )?;
+    for panel in ["blueprint_panel", "selection_panel"] {
+        rec.log(
+            panel,
+            &PanelBlueprint::new().with_state(PanelState::Collapsed),
+        )?;
+    }
+    // Follow the data: the viewer opens at the end of the run (0.36 has
+    // no blueprint field for the time cursor itself).
+    let span_s = run
+        .time_span_ns
+        .map_or(0.0, |[first, last]| (last - first) as f64 * 1e-9);
+    rec.log(
+        "time_panel",
+        &TimePanelBlueprint::new()
+            .with_state(PanelState::Collapsed)
+            .with_timeline(TimelineName::from(TIMELINE_TIME))
+            .with_play_state(PlayState::Following)
+            .with_playback_speed(PlaybackSpeed::from((span_s / PLAYBACK_S).max(1.0)))
+            .with_fps(Fps::from((run.wheel_pass as f64 / PLAYBACK_S).max(30.0))),
+    )?;
+    Ok(storage.take())
+}
+
+/// A view or container logged to a blueprint store.
+struct BlueprintItem {
+    id: Uuid,
+    path: String,
+}
+
+/// Logs containers, views and view properties as the viewer reads them.
+struct BlueprintWriter<'r> {
+    rec: &'r RecordingStream,
+}
+
+impl BlueprintWriter<'_> {
+    /// A view of `class` showing what the `+ /path` queries include.
+    fn view(
+        &self,
+        class: &str,
+        name: &str,
+        queries: impl IntoIterator<Item = impl Into<String>>,
+    ) -> Result<BlueprintItem, RecordingStreamError> {
+        let id = Uuid::new_v4();
+        let path = format!("view/{id}");
+        self.rec.log(
+            format!("{path}/ViewContents"),
+            &ViewContents::new(queries.into_iter().map(|q| QueryExpression::from(q.into()))),
+        )?;
+        self.rec.log(
+            path.as_str(),
+            &ViewBlueprint::new(ViewClass::from(class))
+                .with_display_name(Name::from(name))
+                .with_space_origin("/"),
+        )?;
+        Ok(BlueprintItem { id, path })
+    }
+
+    /// A view property: `view/<id>/<Archetype>`, where the viewer looks.
+    fn property<A: Archetype + AsComponents>(
+        &self,
+        view: &BlueprintItem,
+        property: &A,
+    ) -> Result<(), RecordingStreamError> {
+        self.rec.log(
+            format!("{}/{}", view.path, A::name().short_name()),
+            property,
+        )?;
+        Ok(())
+    }
+
+    fn container(
+        &self,
+        kind: ContainerKind,
+        name: &str,
+        children: Vec<BlueprintItem>,
+        extra: impl FnOnce(ContainerBlueprint) -> ContainerBlueprint,
+    ) -> Result<BlueprintItem, RecordingStreamError> {
+        let id = Uuid::new_v4();
+        let path = format!("container/{id}");
+        let contents: Vec<IncludedContent> = children
+            .iter()
+            .map(|child| IncludedContent::from(child.path.as_str()))
+            .collect();
+        self.rec.log(
+            path.as_str(),
+            &extra(
+                ContainerBlueprint::new(kind)
+                    .with_display_name(Name::from(name))
+                    .with_contents(contents),
+            ),
+        )?;
+        Ok(BlueprintItem { id, path })
+    }
+}

@@ -1,0 +1,105 @@
+//! Where things are logged and how they look: entity paths from verbatim
+//! names, a track's entities, labels, and the colours that make a rail
+//! read alike in every view.
+
+use rerun::components::Color;
+use rerun::{EntityPath, EntityPathPart};
+use tortwin_engine::sink::TrackInfo;
+use tortwin_recording::Quantity;
+
+/// A track's (rail/band's) entities, its label and its colour.
+pub(super) struct TrackEntities {
+    /// "high rail (top band)".
+    pub(super) label: String,
+    pub(super) color: Color,
+    pub(super) mu: EntityPath,
+    pub(super) adhesion: EntityPath,
+    pub(super) rail_mass: EntityPath,
+    pub(super) wheel_mass: EntityPath,
+    pub(super) mu_history: EntityPath,
+}
+
+impl TrackEntities {
+    /// `field/<rail>/<band>/...` of `track`, one of the section's `tracks`.
+    pub(super) fn new(track: &TrackInfo, tracks: &[TrackInfo]) -> Self {
+        let path = |leaf: &str| entity(&["field", &track.rail_name, &track.band, leaf]);
+        TrackEntities {
+            label: track_label(track),
+            color: track_color(track, tracks),
+            mu: path("mu"),
+            adhesion: path("adhesion"),
+            rail_mass: path("rail_mass_mg"),
+            wheel_mass: path("wheel_mass_mg"),
+            mu_history: path("mu_history"),
+        }
+    }
+
+    /// The profiles' entities, in the order of
+    /// [`super::batch::PendingProfiles::values`].
+    pub(super) fn profiles(&self) -> [&EntityPath; 4] {
+        [&self.mu, &self.adhesion, &self.rail_mass, &self.wheel_mass]
+    }
+}
+
+/// An entity path from verbatim names (rail names may hold any character).
+pub(super) fn entity(parts: &[&str]) -> EntityPath {
+    EntityPath::new(parts.iter().map(|p| EntityPathPart::new(*p)).collect())
+}
+
+/// "high rail (top band)", "high rail (gauge corner band)".
+pub(super) fn track_label(track: &TrackInfo) -> String {
+    format!(
+        "{} rail ({} band)",
+        track.rail_name,
+        track.band.replace('_', " ")
+    )
+}
+
+/// The order of a site's plots.
+pub(super) const QUANTITIES: [Quantity; 3] = [Quantity::Mu, Quantity::Adhesion, Quantity::RailMu];
+
+pub(super) fn quantity_label(quantity: Quantity) -> &'static str {
+    match quantity {
+        Quantity::Mu => "wheel-rail mu per axle",
+        Quantity::Adhesion => "adhesion T/N per axle",
+        Quantity::RailMu => "rail mu (tribometer)",
+    }
+}
+
+const RAIL_COLORS: [(u8, u8, u8); 4] = [
+    (66, 135, 245),
+    (235, 87, 70),
+    (160, 100, 220),
+    (240, 200, 60),
+];
+/// A second shade per rail, for its bands other than `top`.
+const BAND_COLORS: [(u8, u8, u8); 4] = [
+    (60, 200, 200),
+    (245, 160, 50),
+    (220, 120, 200),
+    (150, 200, 70),
+];
+
+pub(super) fn rail_color(rail: usize) -> Color {
+    let (r, g, b) = RAIL_COLORS[rail % RAIL_COLORS.len()];
+    Color::from_rgb(r, g, b)
+}
+
+/// The rail's colour for its `top` band (or its only one), a second shade
+/// for another band: the same rail reads alike in every plot.
+pub(super) fn track_color(track: &TrackInfo, tracks: &[TrackInfo]) -> Color {
+    let single_band = tracks.iter().filter(|t| t.rail == track.rail).count() == 1;
+    if track.band == "top" || single_band {
+        rail_color(track.rail)
+    } else {
+        let (r, g, b) = BAND_COLORS[track.rail % BAND_COLORS.len()];
+        Color::from_rgb(r, g, b)
+    }
+}
+
+/// `color` blended towards white by `amount` (0 to 1).
+pub(super) fn lighten(color: Color, amount: f32) -> Color {
+    let [r, g, b, _] = color.to_array();
+    let blend = |c: u8| (f32::from(c) + (255.0 - f32::from(c)) * amount).round() as u8;
+    Color::from_rgb(blend(r), blend(g), blend(b))
+}

@@ -1,0 +1,555 @@
+//! The sink: the recording stream and its file, the time of each log, and
+//! what each of the engine's events becomes.
+
+use std::collections::{BTreeMap, BTreeSet, HashSet};
+use std::path::Path;
+use std::time::Duration;
+
+use rerun::components::{MarkerShape, TextLogLevel, ValueRange};
+use rerun::external::re_log_types::BlueprintActivationCommand;
+use rerun::log::ChunkBatcherConfig;
+use rerun::{
+    ApplicationId, AsComponents, EntityPath, RecordingStream, RecordingStreamBuilder, TimeCell,
+};
+use tortwin_engine::sink::{
+    FieldSnapshot, MeasurementOutput, PulseEvent, RunSummary, SectionInfo, Sink, SinkResult,
+    SnapshotKind, TrainEvent,
+};
+use tortwin_recording::Direction;
+
+use super::batch::{log_history, send_profiles, send_series, Series, TrackState, F16};
+use super::blueprint::{blueprint, Layout, Measured, Run};
+use super::entities::{entity, lighten, rail_color, TrackEntities, QUANTITIES};
+use super::error::{sdk_error, RerunError};
+use super::section::log_section;
+use super::summary::summarize;
+use super::{
+    RerunOptions, BATCH_CHUNK_BYTES, G_PER_KG, MAX_BYTES_IN_FLIGHT, MG_PER_KG,
+    MU_COLOR_STEPS_PER_UNIT, SERIES_CHUNK_ROWS, TIMELINE_TIME, TIMELINE_WHEEL_PASS,
+};
+use crate::files::PartialFile;
+
+/// Writes the twin's results to a rerun `.rrd` (see the module docs).
+pub struct RerunSink {
+    /// `None` once [`Sink::finish`] has closed the stream.
+    rec: Option<RecordingStream>,
+    /// The output under its temporary name; renamed at finish, deleted if dropped before.
+    file: PartialFile,
+    /// [`RerunOptions::application_id`], checked; the blueprint's too.
+    application_id: ApplicationId,
+    options: RerunOptions,
+    /// What the blueprint needs from [`Sink::begin`], `None` before it.
+    layout: Option<Layout>,
+    tracks: Vec<TrackState>,
+    grid_len: usize,
+    /// Snapshots a track buffers before its profiles are sent: a chunk of
+    /// about [`BATCH_CHUNK_BYTES`] per quantity.
+    profile_chunk_rows: usize,
+    /// Largest wheel_pass of any track so far: the `wheel_pass` timeline.
+    wheel_pass: u64,
+    /// Series entities whose static style has been logged.
+    styled: HashSet<EntityPath>,
+    /// Per site index, per quantity (in [`QUANTITIES`] order): the
+    /// quantity and the rails it was measured on.
+    measured: Measured,
+    /// Applicator entities that received a pulse.
+    pulsed: BTreeSet<EntityPath>,
+    /// Pulse and measurement values not sent yet, per entity.
+    series: BTreeMap<EntityPath, Series>,
+    /// Smallest and largest mu put into a heatmap.
+    mu_seen: Option<[f64; 2]>,
+    /// First and last log_time of anything logged on `time`.
+    time_span_ns: Option<[u64; 2]>,
+}
+
+impl RerunSink {
+    /// Opens `.NAME.partial-XXXXXX` next to `path` as the recording's file.
+    pub fn create(path: &Path, options: RerunOptions) -> Result<RerunSink, RerunError> {
+        let file = PartialFile::beside(path)?;
+        let file_name = path.file_name().unwrap_or_default();
+
+        let recording_name = options
+            .recording_name
+            .clone()
+            .unwrap_or_else(|| file_name.to_string_lossy().into_owned());
+        let application_id =
+            ApplicationId::try_new(options.application_id.as_str()).map_err(|source| {
+                RerunError::ApplicationId {
+                    path: path.to_path_buf(),
+                    id: options.application_id.clone(),
+                    source,
+                }
+            })?;
+        // `enabled(true)`: the user asked for this file, so the `RERUN=off`
+        // environment switch must not silently drop it.
+        let rec = RecordingStreamBuilder::new(application_id.clone())
+            .recording_name(recording_name)
+            .enabled(true)
+            .batcher_config(ChunkBatcherConfig {
+                flush_tick: Duration::MAX,
+                flush_num_bytes: BATCH_CHUNK_BYTES,
+                flush_num_rows: SERIES_CHUNK_ROWS as u64,
+                max_bytes_in_flight: MAX_BYTES_IN_FLIGHT,
+                ..ChunkBatcherConfig::DEFAULT
+            })
+            .save(file.temp_path())
+            .map_err(sdk_error(path, || "starting the recording".to_owned()))?;
+        rec.set_log_time_enabled(false);
+        rec.set_log_tick_enabled(false);
+
+        Ok(RerunSink {
+            rec: Some(rec),
+            file,
+            application_id,
+            options,
+            layout: None,
+            tracks: Vec::new(),
+            grid_len: 0,
+            profile_chunk_rows: 1,
+            wheel_pass: 0,
+            styled: HashSet::new(),
+            measured: BTreeMap::new(),
+            pulsed: BTreeSet::new(),
+            series: BTreeMap::new(),
+            mu_seen: None,
+            time_span_ns: None,
+        })
+    }
+
+    /// The output's final path, which the errors name.
+    fn path(&self) -> &Path {
+        self.file.final_path()
+    }
+
+    fn rec(&self) -> Result<&RecordingStream, RerunError> {
+        self.rec.as_ref().ok_or_else(|| RerunError::Finished {
+            path: self.path().to_path_buf(),
+        })
+    }
+
+    /// Sets the calling thread's time: `time` always, `wheel_pass` if given
+    /// (else that timeline is cleared). The next logs land there. Returns
+    /// the time as rerun takes it.
+    fn set_time(&mut self, log_time_ns: u64, wheel_pass: Option<u64>) -> Result<i64, RerunError> {
+        let time_ns = self.note_time(log_time_ns)?;
+        let wheel_pass = wheel_pass.map(|w| self.sequence(w)).transpose()?;
+        let rec = self.rec()?;
+        match wheel_pass {
+            Some(wheel_pass) => {
+                rec.set_time(TIMELINE_WHEEL_PASS, TimeCell::from_sequence(wheel_pass));
+            }
+            None => rec.disable_timeline(TIMELINE_WHEEL_PASS),
+        }
+        rec.set_time(
+            TIMELINE_TIME,
+            TimeCell::from_timestamp_nanos_since_epoch(time_ns),
+        );
+        Ok(time_ns)
+    }
+
+    /// A wheel pass count as the `wheel_pass` timeline takes it.
+    fn sequence(&self, wheel_pass: u64) -> Result<i64, RerunError> {
+        i64::try_from(wheel_pass).map_err(|_| RerunError::OutOfRange {
+            path: self.path().to_path_buf(),
+            what: "wheel_pass",
+            value: wheel_pass,
+        })
+    }
+
+    /// Checks a log_time and widens the run's time span by it.
+    fn note_time(&mut self, log_time_ns: u64) -> Result<i64, RerunError> {
+        let time_ns = i64::try_from(log_time_ns).map_err(|_| RerunError::OutOfRange {
+            path: self.path().to_path_buf(),
+            what: "log_time (ns)",
+            value: log_time_ns,
+        })?;
+        self.time_span_ns = Some(match self.time_span_ns {
+            Some([first, last]) => [first.min(log_time_ns), last.max(log_time_ns)],
+            None => [log_time_ns, log_time_ns],
+        });
+        Ok(time_ns)
+    }
+
+    /// Adds a value to the series at `path` on `time`; sends the series once
+    /// it holds [`SERIES_CHUNK_ROWS`] values. `what` names the event in an
+    /// error.
+    fn push_series(
+        &mut self,
+        path: EntityPath,
+        log_time_ns: u64,
+        value: f64,
+        what: impl FnOnce() -> String,
+    ) -> Result<(), RerunError> {
+        let time_ns = self.note_time(log_time_ns)?;
+        let series = self.series.entry(path.clone()).or_default();
+        series.times_ns.push(time_ns);
+        series.values.push(value);
+        if series.values.len() >= SERIES_CHUNK_ROWS {
+            let series = std::mem::take(series);
+            send_series(self.rec()?, path, series).map_err(sdk_error(self.path(), what))?;
+        }
+        Ok(())
+    }
+
+    /// Sends every buffered series.
+    fn flush_series(&mut self) -> Result<(), RerunError> {
+        let rec = self.rec.as_ref().ok_or_else(|| RerunError::Finished {
+            path: self.file.final_path().to_path_buf(),
+        })?;
+        for (path, series) in std::mem::take(&mut self.series) {
+            if !series.values.is_empty() {
+                send_series(rec, path, series)
+                    .map_err(sdk_error(self.file.final_path(), || {
+                        "pulses and measurements".to_owned()
+                    }))?;
+            }
+        }
+        Ok(())
+    }
+
+    /// Logs a time series style once per entity, statically.
+    fn style_once(
+        &mut self,
+        path: &EntityPath,
+        styles: &[&dyn AsComponents],
+    ) -> Result<(), RerunError> {
+        if self.styled.contains(path) {
+            return Ok(());
+        }
+        for style in styles {
+            self.rec()?
+                .log_static(path.clone(), *style)
+                .map_err(sdk_error(self.path(), || format!("style of {path}")))?;
+        }
+        self.styled.insert(path.clone());
+        Ok(())
+    }
+
+    /// The heatmaps' colour range: the option, or the run's mu rounded out.
+    fn mu_color_range(&self) -> [f64; 2] {
+        if let Some(range) = self.options.mu_color_range {
+            return range;
+        }
+        match self.mu_seen {
+            Some([low, high]) => {
+                let steps = MU_COLOR_STEPS_PER_UNIT;
+                let low = (low * steps).floor() / steps;
+                let high = (high * steps).ceil() / steps;
+                [low, high.max(low + 1.0 / steps)]
+            }
+            None => [0.0, 0.6],
+        }
+    }
+
+    /// Sends what is still buffered, the last heatmaps, the summary and the
+    /// blueprint; closes the stream and moves the file into place.
+    fn finish_run(&mut self, summary: &RunSummary) -> Result<(), RerunError> {
+        self.flush_series()?;
+        if let Some(rec) = self.rec.as_ref() {
+            for track in &mut self.tracks {
+                send_profiles(rec, track)
+                    .map_err(sdk_error(self.file.final_path(), || "profiles".to_owned()))?;
+            }
+        }
+        // The last train's heatmap, where its snapshot was, if not yet logged.
+        for index in 0..self.tracks.len() {
+            let track = &self.tracks[index];
+            let Some((log_time_ns, wheel_pass)) = track.last_train else {
+                continue;
+            };
+            if track.history_unlogged == 0 {
+                continue;
+            }
+            self.set_time(log_time_ns, Some(wheel_pass))?;
+            let rec = self.rec.as_ref().ok_or_else(|| RerunError::Finished {
+                path: self.file.final_path().to_path_buf(),
+            })?;
+            log_history(rec, &mut self.tracks[index], self.grid_len)
+                .map_err(sdk_error(self.file.final_path(), || {
+                    "last heatmap".to_owned()
+                }))?;
+        }
+        let [low, high] = self.mu_color_range();
+        let rec = self.rec()?;
+        let history = (self.options.history_rows, self.options.history_every.max(1));
+        rec.log_static(
+            "run/summary",
+            &rerun::TextDocument::from_markdown(summarize(summary, [low, high], history)),
+        )
+        .map_err(sdk_error(self.path(), || "summary".to_owned()))?;
+        if self.options.mu_color_range.is_none() {
+            for track in &self.tracks {
+                rec.log_static(
+                    track.entities.mu_history.clone(),
+                    &rerun::Tensor::update_fields().with_value_range(ValueRange::new(low, high)),
+                )
+                .map_err(sdk_error(self.path(), || "heatmap colour range".to_owned()))?;
+            }
+        }
+        if self.options.blueprint {
+            let Some(layout) = &self.layout else {
+                return Err(RerunError::NotBegun {
+                    path: self.path().to_path_buf(),
+                });
+            };
+            let blueprint = blueprint(&Run {
+                application_id: &self.application_id,
+                layout,
+                tracks: self.tracks.iter().map(|t| &t.entities).collect(),
+                measured: &self.measured,
+                pulsed: &self.pulsed,
+                history_rows: self.options.history_rows,
+                mu_color_range: [low, high],
+                time_span_ns: self.time_span_ns,
+                wheel_pass: self.wheel_pass,
+            })
+            .map_err(sdk_error(self.path(), || "blueprint".to_owned()))?;
+            let Some(blueprint_id) = blueprint.first().map(|msg| msg.store_id().clone()) else {
+                return Err(RerunError::EmptyBlueprint {
+                    path: self.path().to_path_buf(),
+                });
+            };
+            rec.send_blueprint(
+                blueprint,
+                BlueprintActivationCommand {
+                    blueprint_id,
+                    make_active: true,
+                    make_default: true,
+                },
+            );
+        }
+
+        let rec = self.rec.take().ok_or_else(|| RerunError::Finished {
+            path: self.file.final_path().to_path_buf(),
+        })?;
+        rec.flush_blocking().map_err(|source| RerunError::Flush {
+            path: self.path().to_path_buf(),
+            source,
+        })?;
+        // Dropping the only handle joins the SDK's threads; the file sink
+        // writes the rrd footer and closes the file before this returns.
+        drop(rec);
+        Ok(self.file.commit()?)
+    }
+}
+
+/// Every method's error is a [`RerunError`].
+impl Sink for RerunSink {
+    fn begin(&mut self, info: &SectionInfo<'_>) -> SinkResult {
+        self.grid_len = info.grid_d_m.len();
+        self.profile_chunk_rows = (BATCH_CHUNK_BYTES as usize
+            / (self.grid_len * std::mem::size_of::<f32>()).max(1))
+        .clamp(1, SERIES_CHUNK_ROWS);
+        self.layout = Some(Layout {
+            rails: info.section.rails.clone(),
+            sites: info
+                .section
+                .sites
+                .iter()
+                .map(|s| (s.id.clone(), s.position_m))
+                .collect(),
+        });
+        self.tracks = info
+            .tracks
+            .iter()
+            .map(|t| TrackState::new(TrackEntities::new(t, info.tracks)))
+            .collect();
+        log_section(self.rec()?, info, &self.tracks, self.options.mu_color_range)
+            .map_err(sdk_error(self.path(), || "section".to_owned()))?;
+        Ok(())
+    }
+
+    fn train(&mut self, train: &TrainEvent<'_>) -> SinkResult {
+        self.set_time(train.log_time_ns, Some(self.wheel_pass))?;
+        let direction = match train.direction {
+            Direction::Up => "up (d increasing)",
+            Direction::Down => "down (d decreasing)",
+        };
+        let text = format!(
+            "train {} {direction}, {:.1} m/s ({:.0} km/h), {} axles",
+            train.train_id,
+            train.speed_mps,
+            train.speed_mps * 3.6,
+            train.axles
+        );
+        self.rec()?
+            .log(
+                "trains",
+                &rerun::TextLog::new(text).with_level(TextLogLevel::INFO),
+            )
+            .map_err(sdk_error(self.path(), || {
+                format!("train {}", train.train_id)
+            }))?;
+        Ok(())
+    }
+
+    fn pulse(&mut self, pulse: &PulseEvent<'_>) -> SinkResult {
+        let path = entity(&["applicator", pulse.applicator_id, pulse.rail_name]);
+        let name = format!("{} on {} rail (g)", pulse.applicator_id, pulse.rail_name);
+        self.style_once(
+            &path,
+            &[&rerun::SeriesPoints::new()
+                .with_names([name])
+                .with_colors([rail_color(pulse.rail)])
+                .with_markers([MarkerShape::Diamond])
+                .with_marker_sizes([3.0])],
+        )?;
+        self.pulsed.insert(path.clone());
+        self.push_series(path, pulse.log_time_ns, pulse.mass_kg * G_PER_KG, || {
+            format!("pulse of {}", pulse.applicator_id)
+        })?;
+        Ok(())
+    }
+
+    fn measurement(&mut self, m: &MeasurementOutput<'_>) -> SinkResult {
+        let quantity = m.quantity.as_str();
+        let base = ["sites", m.site_id, m.rail_name, quantity];
+        let measured = entity(&[&base[..], &["measured"]].concat());
+        let simulated = entity(&[&base[..], &["simulated"]].concat());
+        let color = rail_color(m.rail);
+        let pale = lighten(color, 0.45);
+        self.style_once(
+            &measured,
+            &[&rerun::SeriesPoints::new()
+                .with_names(["measured"])
+                .with_colors([color])
+                .with_markers([MarkerShape::Circle])
+                .with_marker_sizes([2.5])],
+        )?;
+        // Points and a line: a lone simulated value still shows.
+        self.style_once(
+            &simulated,
+            &[
+                &rerun::SeriesLines::new()
+                    .with_names(["simulated (twin)"])
+                    .with_colors([pale])
+                    .with_widths([1.5]),
+                &rerun::SeriesPoints::new()
+                    .with_names(["simulated (twin)"])
+                    .with_colors([pale])
+                    .with_markers([MarkerShape::Circle])
+                    .with_marker_sizes([1.5]),
+            ],
+        )?;
+        let rank = QUANTITIES
+            .iter()
+            .position(|&q| q == m.quantity)
+            .unwrap_or(QUANTITIES.len());
+        self.measured
+            .entry(m.site)
+            .or_default()
+            .entry(rank)
+            .or_insert_with(|| (m.quantity, BTreeSet::new()))
+            .1
+            .insert(m.rail);
+        let what = || format!("measurement {} at site {}", m.index_in_file, m.site_id);
+        self.push_series(measured, m.log_time_ns, m.measured, what)?;
+        self.push_series(simulated, m.log_time_ns, m.simulated, what)?;
+        Ok(())
+    }
+
+    fn field(&mut self, f: &FieldSnapshot<'_>) -> SinkResult {
+        let grid_len = self.grid_len;
+        let lengths = [
+            ("d_m", f.d_m.len()),
+            ("mu", f.mu.len()),
+            ("adhesion", f.adhesion.len()),
+            ("rail_mass_kg", f.rail_mass_kg.len()),
+            ("wheel_mass_kg", f.wheel_mass_kg.len()),
+        ];
+        if let Some(&(field, len)) = lengths.iter().find(|(_, len)| *len != grid_len) {
+            return Err(RerunError::SnapshotLength {
+                path: self.path().to_path_buf(),
+                train_id: f.train_id.to_owned(),
+                track: format!("{}/{}", f.rail_name, f.band),
+                field,
+                len,
+                grid: grid_len,
+            }
+            .into());
+        }
+        // Checked before the sink's time and wheel passes move.
+        if f.track >= self.tracks.len() {
+            return Err(RerunError::NoTrack {
+                path: self.path().to_path_buf(),
+                track: f.track,
+                tracks: self.tracks.len(),
+            }
+            .into());
+        }
+
+        self.wheel_pass = self.wheel_pass.max(f.wheel_pass);
+        let wheel_pass = self.wheel_pass;
+        let time_ns = self.set_time(f.log_time_ns, Some(wheel_pass))?;
+        let wheel_pass_seq = self.sequence(wheel_pass)?;
+        let history_rows = self.options.history_rows;
+        if f.kind == SnapshotKind::Train && history_rows > 0 {
+            for &mu in f.mu.iter().filter(|mu| mu.is_finite()) {
+                self.mu_seen = Some(match self.mu_seen {
+                    Some([low, high]) => [low.min(mu), high.max(mu)],
+                    None => [mu, mu],
+                });
+            }
+        }
+        let path = self.file.final_path();
+        let Some(rec) = self.rec.as_ref() else {
+            return Err(RerunError::Finished {
+                path: path.to_path_buf(),
+            }
+            .into());
+        };
+        let tracks = self.tracks.len();
+        let Some(track) = self.tracks.get_mut(f.track) else {
+            return Err(RerunError::NoTrack {
+                path: path.to_path_buf(),
+                track: f.track,
+                tracks,
+            }
+            .into());
+        };
+        let label = track.entities.label.clone();
+        let what = || format!("field of train {} on {label}", f.train_id);
+        let pending = &mut track.pending;
+        pending.times_ns.push(time_ns);
+        pending.wheel_passes.push(wheel_pass_seq);
+        let profiles = [
+            (f.mu, 1.0),
+            (f.adhesion, 1.0),
+            (f.rail_mass_kg, MG_PER_KG),
+            (f.wheel_mass_kg, MG_PER_KG),
+        ];
+        for (rows, (values, scale)) in pending.values.iter_mut().zip(profiles) {
+            rows.push(values.iter().map(|&v| (v * scale) as f32).collect());
+        }
+        if pending.times_ns.len() >= self.profile_chunk_rows {
+            send_profiles(rec, track).map_err(sdk_error(path, what))?;
+        }
+
+        if f.kind == SnapshotKind::Train && history_rows > 0 {
+            while track.history.len() >= history_rows {
+                track.history.pop_front();
+            }
+            track
+                .history
+                .push_back(f.mu.iter().map(|&mu| F16::from_f64(mu)).collect());
+            track.history_unlogged += 1;
+            track.last_train = Some((f.log_time_ns, wheel_pass));
+            if track.history_unlogged >= self.options.history_every.max(1) {
+                log_history(rec, track, grid_len).map_err(sdk_error(path, what))?;
+            }
+        }
+        Ok(())
+    }
+
+    fn finish(&mut self, summary: &RunSummary) -> SinkResult {
+        Ok(self.finish_run(summary)?)
+    }
+}
+
+impl Drop for RerunSink {
+    fn drop(&mut self) {
+        // Close the stream first so no writer thread still holds the file;
+        // then the `file` field, dropped after this, deletes it unless finished.
+        drop(self.rec.take());
+    }
+}
