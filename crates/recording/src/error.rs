@@ -27,16 +27,27 @@ impl fmt::Display for MessageLocation {
     }
 }
 
-/// A recording (or a state file) that breaks its format.
+/// Where in a table (CSV) a problem is: the 1-based line and column, as
+/// editors and `file:line:column` links count them.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct CellLocation {
+    pub line: u64,
+    pub column: usize,
+}
+
+/// A recording, a state file or a table that breaks its format.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 #[error(
-    "{}: {}{message}",
+    "{}{}: {}{message}",
     .file.display(),
+    .cell.map_or(String::new(), |c| format!(":{}:{}", c.line, c.column)),
     .location.as_ref().map_or(String::new(), |l| format!("{l}: "))
 )]
 pub struct InputError {
     pub file: PathBuf,
     pub location: Option<MessageLocation>,
+    /// For a table: the line and column.
+    pub cell: Option<CellLocation>,
     pub message: String,
 }
 
@@ -45,6 +56,22 @@ impl InputError {
         Self {
             file: file.into(),
             location: None,
+            cell: None,
+            message: message.into(),
+        }
+    }
+
+    /// A problem at `line` and `column` (1-based) of a table.
+    pub fn cell(
+        file: impl Into<PathBuf>,
+        line: u64,
+        column: usize,
+        message: impl Into<String>,
+    ) -> Self {
+        Self {
+            file: file.into(),
+            location: None,
+            cell: Some(CellLocation { line, column }),
             message: message.into(),
         }
     }
@@ -57,6 +84,7 @@ impl InputError {
         Self {
             file: file.into(),
             location: Some(location),
+            cell: None,
             message: message.into(),
         }
     }

@@ -15,6 +15,9 @@
 //!   `tortwin synth`, importers and tests;
 //! - [`recording`]: a recording read whole into memory, for the studies
 //!   that replay it many times;
+//! - [`tables`]: a recording as the CSV files (and a section TOML) a
+//!   wayside installation exports: imported with errors at file, line and
+//!   column, and exported with the recording's own numbers;
 //! - [`error`]: [`InputError`](error::InputError) names the file and, for
 //!   a message, its topic, log_time and index in the file.
 //!
@@ -27,6 +30,7 @@ pub mod event;
 pub mod reader;
 pub mod recording;
 pub mod schema;
+pub mod tables;
 pub mod topic;
 pub mod wire;
 pub mod writer;
