@@ -55,32 +55,60 @@ def g(form, params, driver, x):
 
 
 def observed(path, driver, rails, measured_only=False):
-    """Every value the driver takes where a term can act."""
-    xs = set()
-    if driver in WEATHER:
-        xs.add({"air_temperature_c": 20.0, "relative_humidity": 0.5, "precipitation_mm_h": 0.0}[driver])
-    times = []
+    """Every value the driver takes where a term can act; with
+    `measured_only`, where it can show: at the measured contacts and
+    tribometer readings (a friction term changes no state)."""
+    weather, passages, measurements = [], {}, []
     with open(path, "rb") as f:
         for _, channel, message in make_reader(f).iter_messages():
-            if channel.topic == "/environment/weather" and driver in WEATHER:
-                xs.add(json.loads(message.data)[driver])
-            elif channel.topic == "/measurement/friction" and measured_only:
-                times.append(message.log_time / 1e9)
+            body = json.loads(message.data)
+            t = message.log_time / 1e9
+            if channel.topic == "/environment/weather":
+                weather.append((t, body))
             elif channel.topic == "/train/passage":
-                p = json.loads(message.data)
-                if not measured_only:
-                    times.append(message.log_time / 1e9)
-                if driver == "speed_mps":
-                    xs.add(p["speed_mps"])
-                for a in p["axles"]:
-                    for r in rails:
-                        if driver == "wheel_load_kN":
-                            xs.add(a["wheel_load_kN"][r])
-                        elif driver == "creepage":
-                            c = a["creepage"][r]
-                            xs.add(math.hypot(c["cx"], c["cy"]))
-    if driver == "time":
-        return sorted(times)
+                passages[body["train_id"]] = (t, body)
+            elif channel.topic == "/measurement/friction":
+                measurements.append((t, body))
+    weather.sort(key=lambda w: w[0])
+    defaults = {"air_temperature_c": 20.0, "relative_humidity": 0.5, "precipitation_mm_h": 0.0}
+
+    def weather_at(t):
+        value = defaults[driver]
+        for tw, body in weather:
+            if tw > t:
+                break
+            value = body[driver]
+        return value
+
+    xs = set()
+    if not measured_only:
+        if driver in WEATHER:
+            xs.add(defaults[driver])
+            xs.update(body[driver] for _, body in weather)
+        for t, p in passages.values():
+            if driver == "time":
+                xs.add(t)
+            elif driver == "speed_mps":
+                xs.add(p["speed_mps"])
+            for a in p["axles"]:
+                for r in rails:
+                    if driver == "wheel_load_kN":
+                        xs.add(a["wheel_load_kN"][r])
+                    elif driver == "creepage":
+                        c = a["creepage"][r]
+                        xs.add(math.hypot(c["cx"], c["cy"]))
+        return sorted(xs)
+    for t, m in measurements:
+        if driver == "time":
+            xs.add(t)
+        elif driver in WEATHER:
+            xs.add(weather_at(t))
+        elif "train_id" in m:
+            _, p = passages[m["train_id"]]
+            a = p["axles"][m["axle_index"]]
+            r = m["rail"]
+            xs.add({"speed_mps": p["speed_mps"], "wheel_load_kN": a["wheel_load_kN"][r],
+                    "creepage": math.hypot(a["creepage"][r]["cx"], a["creepage"][r]["cy"])}[driver])
     return sorted(xs)
 
 
@@ -195,9 +223,9 @@ def judge(term, scope, report, recording, rails, single_applicator=True):
     if e.get("driver") != term["driver"]:
         return False, f"driver {e.get('driver')} vs {term['driver']}"
     driver = term["driver"]
-    # A friction term acts on the state nowhere: only where something is
-    # measured can it show, so that is where g is compared for a time step.
-    measured_only = term["acts_on"].startswith("friction") and driver == "time"
+    # A friction term changes no state: only where something is measured
+    # can it show, so that is where g is compared.
+    measured_only = term["acts_on"].startswith("friction")
     xs = observed(recording, driver, rails, measured_only)
     tp = {k: v for k, v in term.items()}
     fp = dict(e["params"])

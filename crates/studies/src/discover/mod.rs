@@ -594,8 +594,7 @@ pub fn discover(
                 "step {step}: placing the threshold of {}",
                 results[k].0.label
             ));
-            let refined =
-                refine_step(&ev, data, &drivers, &results[k].1, &results[k].2, noise_now)?;
+            let refined = refine_step(&ev, data, &drivers, &results[k].1, &results[k].2)?;
             if let Some((space, u, eval)) = refined {
                 let Some(c) = space.slots.first() else {
                     unreachable!("a refined space has its slot")
@@ -617,7 +616,7 @@ pub fn discover(
         // A named effect that describes the data (nearly) as well as the
         // best generic term is the better statement: it goes first.
         prefer_named(&mut results, n, options);
-        prefer_narrow_offsets(&mut results, n, options);
+        prefer_narrow_offsets(&mut results, n);
 
         // The current model's held-out SSE: every block predicted as it is.
         let cv_current = sse;
@@ -730,7 +729,7 @@ pub fn discover(
                                 form,
                                 g.scope(),
                                 None,
-                                drivers.typical(d),
+                                drivers.reach(d),
                             );
                             (i, Candidate::Generic(alt))
                         })
@@ -912,18 +911,19 @@ type Fitted = (Space, Vec<f64>, std::sync::Arc<fit::Evaluation>);
 /// Places a step's threshold: the fitted factor is tried at thresholds
 /// around the first guess (between consecutive trains for time; between
 /// consecutive observed values for another driver, coarse then fine), and
-/// the threshold goes to the middle of those the data cannot tell from the
-/// best (SSE within 4 σ̂², about a 95 % interval for one parameter): a
-/// friction term acts only where it is measured, so every t0 between two
-/// measured trains gives the same values, and wherever in there the change
-/// was, the middle is off by least. The factor is then fitted again there.
+/// the threshold goes to the middle of the thresholds that give exactly the
+/// best fit: a friction term acts only where it is measured, so every t0
+/// between two measured trains gives the same values, and wherever in there
+/// the change was, the middle is off by least. (A wider interval, of
+/// thresholds within the noise of the best, moved the threshold across
+/// trains and observed values it should not cross.) The factor is then
+/// fitted again there.
 fn refine_step(
     ev: &Evaluator<'_>,
     data: &Dataset,
     drivers: &Drivers,
     space: &Space,
     u: &[f64],
-    noise: Option<f64>,
 ) -> Result<Option<Fitted>> {
     use tortwin_model::generic::Driver;
     let Some(Candidate::Generic(slot)) = space.slots.first() else {
@@ -944,7 +944,7 @@ fn refine_step(
             FormKind::Step,
             slot.scope(),
             Some(x),
-            (0.0, 1.0),
+            space::Reach::STEP,
         );
         Space {
             base: space.base.clone(),
@@ -1049,8 +1049,7 @@ fn refine_step(
         return Ok(None);
     };
     let best_sse = tried[best].1;
-    let tolerance = noise.map_or(1e-12 * best_sse, |s| 4.0 * s * s);
-    let near = |k: usize| tried[k].1 - best_sse <= tolerance;
+    let near = |k: usize| tried[k].1 - best_sse <= 1e-12 * best_sse;
     let (mut first, mut last) = (best, best);
     while first > 0 && near(first - 1) {
         first -= 1;
@@ -1059,10 +1058,20 @@ fn refine_step(
         last += 1;
     }
     let (lo, hi) = (gaps[tried[first].0].0, gaps[tried[last].0].1);
+    let mid = 0.5 * (lo + hi);
     let x = if driver == Driver::Time {
-        (0.5 * (lo + hi)).round()
+        mid.round()
     } else {
-        readable_between(lo, hi)
+        // Inside the gap that holds the middle, never on an observed value:
+        // every value the recording shows then falls on one side of it.
+        let middle = (first..=last)
+            .map(|k| gaps[tried[k].0])
+            .min_by(|a, b| {
+                let off = |g: &(f64, f64)| (0.5 * (g.0 + g.1) - mid).abs();
+                off(a).total_cmp(&off(b))
+            })
+            .unwrap_or((lo, hi));
+        readable_between(middle.0, middle.1)
     };
     let s = with_x0(x);
     let start = Start::Warm(vec![s.slots[0].unit(0, f)]);
@@ -1169,15 +1178,13 @@ fn prefer_named(results: &mut [(CandidateResult, Space, Vec<f64>)], n: usize, op
 }
 
 /// A sensor's offset: the narrowest scope (site, rail, quantity: one
-/// instrument) that describes the residual about as well as the best
-/// offset goes first. Tribometer readings at a site are few: a site-wide
-/// offset fits them by chance about as well as not, and the evidence is the
-/// sensor's; a broader scope wins only when it is decisively better.
-fn prefer_narrow_offsets(
-    results: &mut [(CandidateResult, Space, Vec<f64>)],
-    n: usize,
-    options: &Options,
-) {
+/// instrument) goes first when it describes the residual as well as the
+/// best offset, to within [`NARROW_MARGIN`] of BIC: where the few
+/// tribometer readings at a site cannot tell a sensor's offset from a
+/// site's, the statement stays with the instrument that carries the
+/// evidence. The BIC decides otherwise, both ways: readings that share the
+/// offset make the broader scope better, readings that do not, worse.
+fn prefer_narrow_offsets(results: &mut [(CandidateResult, Space, Vec<f64>)], n: usize) {
     let passing = |r: &CandidateResult| r.passes_bic && r.passes_share;
     let Some(best) = results.iter().position(|r| passing(&r.0)) else {
         return;
@@ -1207,9 +1214,7 @@ fn prefer_narrow_offsets(
         .enumerate()
         .filter(|(_, r)| passing(&r.0))
         .filter_map(|(k, r)| offset_scope(&r.1).map(|s| (k, s, r.0.sse)))
-        .filter(|(_, s, sse)| {
-            within(s) && n as f64 * (sse / best_sse).ln() < options.bic_threshold.abs()
-        })
+        .filter(|(_, s, sse)| within(s) && n as f64 * (sse / best_sse).ln() < NARROW_MARGIN)
         .max_by(|a, b| a.1.keys().cmp(&b.1.keys()).then(b.2.total_cmp(&a.2)));
     if let Some((k, _, _)) = narrowest {
         results[best..=k].rotate_right(1);
@@ -1242,6 +1247,10 @@ fn judge_share(
 
 /// See [`judge_share`]: 2 % of σ², an effect of about 0.14 σ RMS.
 const MIN_EFFECT: f64 = 0.02;
+
+/// See [`prefer_narrow_offsets`]: a difference of BIC that is "not worth
+/// more than a bare mention".
+const NARROW_MARGIN: f64 = 2.0;
 
 /// The exp terms whose other forms are fitted too, per step.
 const FORMS_FOR: usize = 2;

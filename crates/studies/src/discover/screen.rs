@@ -31,7 +31,7 @@ use serde::Serialize;
 
 use super::data::Dataset;
 use super::fit::{Candidate, Evaluator, Start};
-use super::space::{Drivers, GenericSlot, Scope};
+use super::space::{Drivers, GenericSlot, Reach, Scope};
 use tortwin_model::config::ModelConfig;
 use tortwin_model::generic::{ActsOn, Driver, FormKind};
 use tortwin_recording::Quantity;
@@ -413,7 +413,7 @@ pub fn propose(
                         FormKind::Step,
                         scope,
                         Some(x0),
-                        (0.0, 1.0),
+                        Reach::STEP,
                     ),
                     EPS_STEP,
                 ),
@@ -422,7 +422,14 @@ pub fn propose(
                     let x_ref = driver.x_ref().unwrap_or(0.0);
                     let span = (lo - x_ref).abs().max((hi - x_ref).abs()).max(1e-12);
                     (
-                        GenericSlot::factor(acts_on, driver, FormKind::Exp, scope, None, (lo, hi)),
+                        GenericSlot::factor(
+                            acts_on,
+                            driver,
+                            FormKind::Exp,
+                            scope,
+                            None,
+                            drivers.reach(driver),
+                        ),
                         EPS_REACH / span,
                     )
                 }
@@ -536,7 +543,7 @@ pub fn propose(
                 FormKind::Step,
                 s.scope.clone(),
                 s.x0,
-                drivers.typical(s.driver),
+                drivers.reach(s.driver),
             );
             let c = Candidate::Generic(slot);
             let u = c.unit(0, s.estimate);
@@ -581,7 +588,7 @@ pub fn propose(
             FormKind::Exp,
             s.scope.clone(),
             None,
-            drivers.typical(s.driver),
+            drivers.reach(s.driver),
         );
         let c = Candidate::Generic(slot);
         let u = c.unit(0, s.estimate);
@@ -717,7 +724,7 @@ fn label_of(acts_on: ActsOn, driver: Driver, scope: &Scope, x0: Option<f64>) -> 
     } else {
         FormKind::Exp
     };
-    GenericSlot::factor(acts_on, driver, form, scope.clone(), x0, (0.0, 1.0)).label()
+    GenericSlot::factor(acts_on, driver, form, scope.clone(), x0, Reach::STEP).label()
 }
 
 /// `x` to `digits` significant digits (a threshold people can read).
@@ -744,7 +751,7 @@ pub fn other_forms(
     let Some(driver) = slot.driver else {
         return Vec::new();
     };
-    let typical = drivers.typical(driver);
+    let reach = drivers.reach(driver);
     let x_ref = driver.x_ref().unwrap_or(0.0);
     let mut out = Vec::new();
     for form in [FormKind::Exp, FormKind::Linear, FormKind::Power] {
@@ -757,7 +764,7 @@ pub fn other_forms(
             form,
             slot.scope(),
             None,
-            typical,
+            reach,
         ));
         let start = match (beta, form) {
             (Some(b), FormKind::Power) => Start::Warm(vec![c.unit(0, b * x_ref)]),
@@ -786,7 +793,7 @@ pub fn other_forms(
             FormKind::Step,
             slot.scope(),
             Some(round_sig(x0, 3)),
-            typical,
+            reach,
         ));
         // From g = 1: the bracket around it reaches f = 0.55 to 1.45, and
         // widens to the whole range if the optimum is beyond.

@@ -29,6 +29,28 @@ const REACH: f64 = 5.0;
 /// The same for a linear factor: g may reach 1 ± this at the typical
 /// extremes (it is clamped at 0 below).
 const LINEAR_REACH: f64 = 3.0;
+/// And at the extremes of everything the recording shows, `|ln g|` stays
+/// below this: a driver that is nearly always at one value (precipitation
+/// is mostly 0) has almost no typical span, and a factor fitted to it must
+/// still be a number at the rare extreme (the engine refuses one that is
+/// not).
+const FULL_REACH: f64 = 20.0;
+
+/// The values a driver takes, for the range of a fitted parameter: its
+/// 5th to 95th percentile, and everything the recording shows.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Reach {
+    pub typical: (f64, f64),
+    pub full: (f64, f64),
+}
+
+impl Reach {
+    /// For a step, whose factor `f` does not depend on the driver's values.
+    pub const STEP: Reach = Reach {
+        typical: (0.0, 1.0),
+        full: (0.0, 1.0),
+    };
+}
 /// The largest measurement offset searched.
 const OFFSET_MAX: f64 = 0.3;
 /// A step's factor is searched in [0, STEP_F_MAX].
@@ -72,40 +94,46 @@ impl Scope {
 
 impl GenericSlot {
     /// A slot on `acts_on` driven by `driver` in `form` (a step at `x0`),
-    /// its parameter searched on the range that `typical` (the driver's
-    /// 5th and 95th percentiles, [`Drivers::typical`]) allows.
+    /// its parameter searched on the range that `reach` (the driver's
+    /// typical and full range, [`Drivers::reach`]) allows.
     pub fn factor(
         acts_on: ActsOn,
         driver: Driver,
         form: FormKind,
         scope: Scope,
         x0: Option<f64>,
-        typical: (f64, f64),
+        reach: Reach,
     ) -> Self {
         let x_ref = driver.x_ref().unwrap_or(0.0);
+        let linear_span = |(lo, hi): (f64, f64)| {
+            (lo - x_ref)
+                .abs()
+                .max((hi - x_ref).abs())
+                .max(hi - lo)
+                .max(1e-9)
+        };
+        let log_span = |(lo, hi): (f64, f64)| {
+            let (lo, hi) = (lo.max(1e-12), hi.max(1e-12));
+            (lo / x_ref)
+                .ln()
+                .abs()
+                .max((hi / x_ref).ln().abs())
+                .max((hi / lo).ln())
+                .max(1e-9)
+        };
         let (lo, hi) = match form {
-            FormKind::Exp | FormKind::Linear => {
-                let span = (typical.0 - x_ref)
-                    .abs()
-                    .max((typical.1 - x_ref).abs())
-                    .max(typical.1 - typical.0)
-                    .max(1e-9);
-                let b = if form == FormKind::Exp {
-                    REACH / span
-                } else {
-                    LINEAR_REACH / span
-                };
+            FormKind::Exp => {
+                let b =
+                    (REACH / linear_span(reach.typical)).min(FULL_REACH / linear_span(reach.full));
+                (-b, b)
+            }
+            FormKind::Linear => {
+                let b = LINEAR_REACH / linear_span(reach.typical);
                 (-b, b)
             }
             FormKind::Power => {
-                let (lo, hi) = (typical.0.max(1e-12), typical.1.max(1e-12));
-                let span = (lo / x_ref)
-                    .ln()
-                    .abs()
-                    .max((hi / x_ref).ln().abs())
-                    .max((hi / lo).ln())
-                    .max(1e-9);
-                (-REACH / span, REACH / span)
+                let b = (REACH / log_span(reach.typical)).min(FULL_REACH / log_span(reach.full));
+                (-b, b)
             }
             FormKind::Step => (0.0, STEP_F_MAX),
         };
@@ -406,9 +434,13 @@ impl Drivers {
         &self.distinct[d as usize]
     }
 
-    /// The 5th and 95th percentiles of the values a term driven by `d` sees.
-    pub fn typical(&self, d: Driver) -> (f64, f64) {
-        self.typical[d as usize]
+    /// The 5th and 95th percentiles of the values a term driven by `d` sees,
+    /// and all of them.
+    pub fn reach(&self, d: Driver) -> Reach {
+        Reach {
+            typical: self.typical[d as usize],
+            full: self.range[d as usize],
+        }
     }
 
     /// Whether the recording shows the driver changing at all.
