@@ -594,19 +594,20 @@ fn read_events(path: &Path, topic: Topic, items: &mut Vec<Item>) -> Result<(), I
             }),
             _ => {
                 let (q, q_col) = table.cell(&row, "quantity");
-                let quantity =
-                    match q {
-                        "mu" => Quantity::Mu,
-                        "adhesion" => Quantity::Adhesion,
-                        "rail_mu" => Quantity::RailMu,
-                        other => return Err(table.fail(
+                let quantity = match q {
+                    "mu" => Quantity::Mu,
+                    "adhesion" => Quantity::Adhesion,
+                    "rail_mu" => Quantity::RailMu,
+                    other => {
+                        return Err(table.fail(
                             &row,
                             q_col,
                             format!(
                                 "`quantity` = `{other}`: expected `mu`, `adhesion` or `rail_mu`"
                             ),
-                        )),
-                    };
+                        ))
+                    }
+                };
                 let (train, _) = table.cell(&row, "train_id");
                 let (axle, axle_col) = table.cell(&row, "axle_index");
                 let axle_index = match axle {
