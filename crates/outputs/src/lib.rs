@@ -1,8 +1,9 @@
 //! What the engine's results are written to: the MCAP output for Foxglove
-//! ([`mcap_out`]), the rerun recording ([`rerun_out`]), both
-//! [`tortwin_engine::sink::Sink`]s, and files that appear only when complete
-//! ([`files`]).
+//! ([`mcap_out`]), the rerun recording ([`rerun_out`]), Parquet and CSV
+//! tables ([`tables`]), all [`tortwin_engine::sink::Sink`]s, and files that
+//! appear only when complete ([`files`]).
 
 pub mod files;
 pub mod mcap_out;
 pub mod rerun_out;
+pub mod tables;
