@@ -33,8 +33,10 @@ use tortwin_model::contact::{
     self, HertzContact, HertzShape, KalkerCoefficients, PolachInput, Steel,
 };
 use tortwin_model::effects::TimeEffects;
+use tortwin_model::error::{ConfigError, UsageError};
 use tortwin_model::generic::{ActsOn, Driver};
 use tortwin_model::product;
+use tortwin_recording::error::InputError;
 use tortwin_recording::{
     Axle, AxleRef, BogiePosition, Creepage, Direction, Event, EventKind, Measured, Measurement,
     Passage, Quantity, Section,
@@ -84,9 +86,19 @@ pub enum EngineError {
 
 impl EngineError {
     /// Whether the recording or configuration is at fault (exit status 2),
-    /// not the machine or an output.
+    /// not the machine or an output. A sink's error is opaque to the engine:
+    /// it is bad input only where its causes hold one of the input errors
+    /// (an output folder that cannot be made is a `UsageError` under the
+    /// sink's file error).
     pub fn is_input(&self) -> bool {
-        !matches!(self, EngineError::Sink(_))
+        match self {
+            EngineError::Sink(e) => std::iter::successors(
+                Some(e.as_ref() as &(dyn std::error::Error + 'static)),
+                |e| e.source(),
+            )
+            .any(|e| e.is::<InputError>() || e.is::<ConfigError>() || e.is::<UsageError>()),
+            EngineError::MeasurementTooLate { .. } | EngineError::UndefinedFactor { .. } => true,
+        }
     }
 }
 
