@@ -9,9 +9,8 @@
 //!   through [`Engine`], so the paper's figures check the replay engine and
 //!   the strategy machinery.
 
-use anyhow::Result;
-
 use crate::strategy::{self, Plan, Strategy, Traffic};
+use crate::Result;
 use tortwin_engine::sink::{FieldSnapshot, Sink, SnapshotKind};
 use tortwin_engine::{Engine, EngineOptions};
 use tortwin_model::config::ModelConfig;

@@ -12,8 +12,7 @@
 use std::collections::HashMap;
 use std::path::Path;
 
-use anyhow::{bail, Context, Result};
-
+use crate::{Error, Result};
 use tortwin_engine::sink::{MeasurementOutput, Sink};
 use tortwin_engine::weather::WeatherState;
 use tortwin_engine::{Engine, EngineOptions};
@@ -200,15 +199,18 @@ impl Dataset {
         for event in &self.events {
             engine
                 .push(event.clone(), &mut sink)
-                .with_context(|| format!("replaying {}", self.path.display()))?;
+                .map_err(|source| Error::Replay {
+                    what: self.path.display().to_string(),
+                    source,
+                })?;
         }
         engine.finish(&mut sink, self.unknown_topic_messages)?;
         if let Some(k) = sink.simulated.iter().position(|v| !v.is_finite()) {
-            bail!(
-                "the engine gave no finite simulated value for measurement {} of {}",
-                self.rows[k].index_in_file,
-                self.path.display()
-            );
+            return Err(Error::NotSimulated {
+                file: self.path.clone(),
+                log_time_ns: self.rows[k].log_time_ns,
+                index_in_file: Some(self.rows[k].index_in_file),
+            });
         }
         Ok(sink.simulated)
     }

@@ -30,7 +30,6 @@ use std::collections::HashMap;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
 
-use anyhow::Result;
 use argmin::core::{
     CostFunction, Executor, IterState, Problem, Solver, State, TerminationReason,
     TerminationStatus, KV,
@@ -42,6 +41,8 @@ use serde::Serialize;
 
 use super::data::Dataset;
 use super::space::GenericSlot;
+use crate::error::optimiser;
+use crate::{Error, Result};
 use tortwin_model::config::{Effects, ModelConfig};
 use tortwin_model::effects::Named;
 
@@ -456,7 +457,7 @@ struct Objective<'e, 'a> {
     ev: &'e Evaluator<'a>,
     space: &'e Space,
     excluded: Option<(Blocking, usize)>,
-    error: Mutex<Option<anyhow::Error>>,
+    error: Mutex<Option<Error>>,
     /// Every point evaluated: (u clamped, eval).
     seen: Mutex<Vec<(Vec<f64>, Arc<Evaluation>)>>,
     /// Engine runs this objective caused (cache misses).
@@ -697,9 +698,7 @@ fn fit_with(
 
 fn finish(obj: &Objective<'_, '_>) -> Result<Fit> {
     obj.take_error()?;
-    let (u, eval) = obj
-        .best()
-        .ok_or_else(|| anyhow::anyhow!("a fit evaluated no point"))?;
+    let (u, eval) = obj.best().ok_or(Error::NoFitPoint)?;
     Ok(Fit {
         u,
         eval,
@@ -711,7 +710,8 @@ fn brent(obj: &Objective<'_, '_>, lo: f64, hi: f64) -> Result<f64> {
     let solver = UntilFlat::new(BrentOpt::new(lo, hi).set_tolerance(1e-8, BRENT_TOL), obj);
     let result = Executor::new(Scalar(obj), solver)
         .configure(|state| state.max_iters(BRENT_MAX_ITERS))
-        .run()?;
+        .run()
+        .map_err(optimiser)?;
     obj.take_error()?;
     Ok(result
         .state()
@@ -728,10 +728,13 @@ fn nelder_mead(obj: &Objective<'_, '_>, u0: &[f64], step: f64, max_iters: u64) -
         v[i] += if u0[i] + step <= 1.0 { step } else { -step };
         simplex.push(v);
     }
-    let solver = NelderMead::new(simplex).with_sd_tolerance(obj.scale * NM_SD_REL)?;
+    let solver = NelderMead::new(simplex)
+        .with_sd_tolerance(obj.scale * NM_SD_REL)
+        .map_err(optimiser)?;
     Executor::new(Vector(obj), UntilFlat::new(solver, obj))
         .configure(|state| state.max_iters(max_iters))
-        .run()?;
+        .run()
+        .map_err(optimiser)?;
     obj.take_error()
 }
 

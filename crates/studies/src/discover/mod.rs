@@ -46,10 +46,10 @@ pub mod space;
 use std::collections::{BTreeMap, HashMap};
 use std::time::Instant;
 
-use anyhow::Result;
 use rayon::prelude::*;
 use serde::Serialize;
 
+use crate::Result;
 use data::Dataset;
 use diagnose::CovariateScore;
 use fit::{Blocking, Candidate, CrossValidation, Evaluator, Space, Start};

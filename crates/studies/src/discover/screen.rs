@@ -25,13 +25,13 @@
 
 use std::collections::BTreeMap;
 
-use anyhow::Result;
 use rayon::prelude::*;
 use serde::Serialize;
 
 use super::data::Dataset;
 use super::fit::{Candidate, Evaluator, Start};
 use super::space::{Drivers, GenericSlot, Scope};
+use crate::Result;
 use tortwin_model::config::ModelConfig;
 use tortwin_model::generic::{ActsOn, Driver, FormKind};
 use tortwin_recording::Quantity;

@@ -5,13 +5,13 @@
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
-use anyhow::{Context, Result};
 use serde::Deserialize;
 
 use crate::progress::{Progress, Silent};
 use crate::strategy::search::{Method, Space, SpaceConfig, Values};
 use crate::strategy::{self, Study, Target, Traffic};
 use crate::synth::{self, Preset, SynthParams};
+use crate::{Error, Result};
 use tortwin_model::error::UsageError;
 
 #[derive(Debug, Clone)]
@@ -141,11 +141,10 @@ impl Default for SearchConfig {
 }
 
 impl StrategyFile {
-    pub fn read(path: &Path) -> Result<Self> {
+    pub fn read(path: &Path) -> Result<Self, UsageError> {
         let text = std::fs::read_to_string(path)
             .map_err(|e| UsageError(format!("--space {}: {e}", path.display())))?;
-        Self::parse(&text)
-            .map_err(|e| UsageError(format!("--space {}: {e}", path.display())).into())
+        Self::parse(&text).map_err(|e| UsageError(format!("--space {}: {e}", path.display())))
     }
 
     pub fn parse(text: &str) -> Result<Self, String> {
@@ -181,11 +180,15 @@ pub fn run_with(args: &StrategyArgs, progress: &dyn Progress) -> Result<(Traffic
         p.seed = args.synth_seed;
         p.trains_per_day = args.synth_trains_per_day;
         p.validate()?;
-        std::fs::create_dir_all(&args.out)
-            .with_context(|| format!("creating {}", args.out.display()))?;
+        std::fs::create_dir_all(&args.out).map_err(|source| Error::Io {
+            what: "creating",
+            path: args.out.clone(),
+            source,
+        })?;
         let path = args.out.join("traffic.mcap");
         progress.stage(&format!("writing the traffic {}", path.display()));
-        synth::generate(&p, &cfg, &path).with_context(|| format!("writing {}", path.display()))?;
+        synth::generate(&p, &cfg, &path)
+            .map_err(|e| e.context(format!("writing {}", path.display())))?;
         Traffic::read(&path)?
     } else {
         let path = args
@@ -215,7 +218,7 @@ pub fn run_with(args: &StrategyArgs, progress: &dyn Progress) -> Result<(Traffic
         )
     };
     let study = super::with_threads(args.threads, work)
-        .with_context(|| format!("strategy study on {}", traffic.source))?;
+        .map_err(|e| e.context(format!("strategy study on {}", traffic.source)))?;
     progress.stage("writing the report");
     strategy::report::write(&args.out, &traffic, &cfg, &target, &space, &study)?;
     Ok((traffic, study))

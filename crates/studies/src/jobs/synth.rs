@@ -4,11 +4,11 @@
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
-use anyhow::{Context, Result};
 #[cfg(feature = "cli")]
 use clap::ArgAction;
 
 use crate::synth::{self, Preset, SynthParams, SynthReport};
+use crate::{Error, Result};
 use tortwin_model::config::ModelConfig;
 use tortwin_model::error::UsageError;
 
@@ -129,8 +129,11 @@ pub fn synth(args: &SynthArgs) -> Result<(SynthReport, PathBuf)> {
         .into());
     }
     let report = synth::generate(&params, &truth, &args.out)
-        .with_context(|| format!("writing {}", args.out.display()))?;
-    let mut text = serde_json::to_string_pretty(&report).context("serializing the key")?;
+        .map_err(|e| e.context(format!("writing {}", args.out.display())))?;
+    let mut text = serde_json::to_string_pretty(&report).map_err(|source| Error::Json {
+        what: "the key",
+        source,
+    })?;
     text.push('\n');
     tortwin_outputs::files::write_atomically(&key_path, text.as_bytes())?;
     Ok((report, key_path))

@@ -8,7 +8,6 @@
 //! comparisons, not an `exp`. The sink keeps, per rail, travel direction
 //! and point, how many wheel passes saw mu inside and below the band.
 
-use anyhow::Result;
 use serde::{Deserialize, Serialize};
 
 use super::Traffic;
@@ -198,7 +197,7 @@ impl Stats {
         cfg: &ModelConfig,
         target: &Target,
         detail: bool,
-    ) -> Result<Self> {
+    ) -> Result<Self, UsageError> {
         target.check(section)?;
         let points = grid.d_m.len();
         let rails = section.rails.len();

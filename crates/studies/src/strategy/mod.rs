@@ -21,16 +21,18 @@ pub mod search;
 use std::path::Path;
 use std::sync::Arc;
 
-use anyhow::{Context, Result};
 use serde::Serialize;
 
 use tortwin_engine::sink::{Fanout, Sink};
-use tortwin_engine::{Engine, EngineOptions, Grid};
+use tortwin_engine::{Engine, EngineError, EngineOptions, Grid};
 use tortwin_model::config::ModelConfig;
 use tortwin_model::error::UsageError;
+use tortwin_recording::error::InputError;
 use tortwin_recording::{Applicator, Direction, Event, EventKind, Pulse, Recording, Section};
 
 pub use metrics::{Band, Figures, Target};
+
+use crate::{Error, Result};
 
 const DAY_S: f64 = 86_400.0;
 
@@ -57,7 +59,7 @@ pub struct Traffic {
 
 impl Traffic {
     /// Reads a recording (every input error names where it is).
-    pub fn read(path: &Path) -> Result<Self> {
+    pub fn read(path: &Path) -> Result<Self, InputError> {
         let r = Recording::read(path)?;
         // The span counts the measurements too, which `new` then drops.
         let span_s = (r.last_log_time_ns() - r.section_log_time_ns) as f64 * 1e-9;
@@ -94,6 +96,14 @@ impl Traffic {
             trains,
             axles,
             span_s,
+        }
+    }
+
+    /// The engine's `source` as an error of replaying this traffic.
+    fn replay_error(&self, source: EngineError) -> Error {
+        Error::Replay {
+            what: format!("the traffic of {}", self.source),
+            source,
         }
     }
 
@@ -341,7 +351,7 @@ pub fn evaluate(
     drive(&mut engine, traffic, plan, &mut fanout)?;
     engine
         .finish(&mut fanout, 0)
-        .with_context(|| format!("replaying the traffic of {}", traffic.source))?;
+        .map_err(|source| traffic.replay_error(source))?;
     drop(fanout);
     Ok(stats.figures(traffic))
 }
@@ -356,11 +366,11 @@ pub fn drive(
     plan: &Plan,
     sink: &mut dyn Sink,
 ) -> Result<()> {
-    let context = || format!("replaying the traffic of {}", traffic.source);
+    let context = |source| traffic.replay_error(source);
     let strategy = match plan {
         Plan::Today => {
             for e in &traffic.events {
-                engine.push(e.clone(), sink).with_context(context)?;
+                engine.push(e.clone(), sink).map_err(context)?;
             }
             return Ok(());
         }
@@ -387,12 +397,12 @@ pub fn drive(
                 || (p.log_time_ns == e.log_time_ns && matches!(e.kind, EventKind::Weather(_)))
         };
         while let Some(p) = pulses.next_if(before) {
-            engine.push(p, sink).with_context(context)?;
+            engine.push(p, sink).map_err(context)?;
         }
-        engine.push(e.clone(), sink).with_context(context)?;
+        engine.push(e.clone(), sink).map_err(context)?;
     }
     for p in pulses {
-        engine.push(p, sink).with_context(context)?;
+        engine.push(p, sink).map_err(context)?;
     }
     Ok(())
 }

@@ -11,12 +11,12 @@
 use std::fmt::Write as _;
 use std::path::Path;
 
-use anyhow::{Context, Result};
 use serde::Serialize;
 
 use super::metrics::{Figures, RailFigures, Target};
 use super::search::{Evaluated, Space};
 use super::{evaluate, Plan, Strategy, Study, TodayApplicator, Traffic};
+use crate::{Error, Result};
 use tortwin_engine::sink::Sink;
 use tortwin_model::config::ModelConfig;
 use tortwin_outputs::files::write_atomically;
@@ -134,7 +134,11 @@ pub fn write(
     space: &Space,
     study: &Study,
 ) -> Result<()> {
-    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    std::fs::create_dir_all(dir).map_err(|source| Error::Io {
+        what: "creating",
+        path: dir.to_path_buf(),
+        source,
+    })?;
     let section = &traffic.section;
 
     // Today's and the recommendation's profiles; the recommendation's field
@@ -242,7 +246,10 @@ pub fn write(
         evaluated: study.evaluated.iter().map(|e| choice(e, section)).collect(),
         model: cfg.clone(),
     };
-    let mut json = serde_json::to_string_pretty(&result).context("serializing the result")?;
+    let mut json = serde_json::to_string_pretty(&result).map_err(|source| Error::Json {
+        what: "the result",
+        source,
+    })?;
     json.push('\n');
     let md = markdown(
         traffic,
@@ -256,8 +263,11 @@ pub fn write(
     write_atomically(&dir.join("report.md"), md.as_bytes())?;
     if study.recommended.is_none() && rec_path.exists() {
         // A recording of an earlier run must not pass for this one's.
-        std::fs::remove_file(&rec_path)
-            .with_context(|| format!("removing {}", rec_path.display()))?;
+        std::fs::remove_file(&rec_path).map_err(|source| Error::Io {
+            what: "removing",
+            path: rec_path.clone(),
+            source,
+        })?;
     }
     Ok(())
 }

@@ -20,7 +20,6 @@
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex};
 
-use anyhow::Result;
 use argmin::core::{CostFunction, Executor};
 use argmin::solver::neldermead::NelderMead;
 use rayon::prelude::*;
@@ -28,6 +27,8 @@ use serde::{Deserialize, Serialize};
 
 use super::metrics::{Figures, Target};
 use super::{evaluate, Plan, Strategy, Traffic};
+use crate::error::optimiser;
+use crate::{Error, Result};
 use tortwin_model::config::ModelConfig;
 use tortwin_model::error::UsageError;
 
@@ -338,7 +339,7 @@ pub struct Searcher<'a> {
     pub target: &'a Target,
     pub space: &'a Space,
     cache: Mutex<HashMap<Key, Arc<Evaluated>>>,
-    error: Mutex<Option<anyhow::Error>>,
+    error: Mutex<Option<Error>>,
     on_evaluation: &'a (dyn Fn(usize) + Sync),
 }
 
@@ -586,10 +587,13 @@ impl<'a> Searcher<'a> {
             upper,
             objective,
         };
-        let solver = NelderMead::new(simplex).with_sd_tolerance(1e-6)?;
+        let solver = NelderMead::new(simplex)
+            .with_sd_tolerance(1e-6)
+            .map_err(optimiser)?;
         Executor::new(problem, solver)
             .configure(|state| state.max_iters(NM_MAX_ITERS))
-            .run()?;
+            .run()
+            .map_err(optimiser)?;
         self.take_error()
     }
 

@@ -3,8 +3,7 @@
 
 use std::path::Path;
 
-use anyhow::Result;
-
+use crate::Result;
 use tortwin_model::config::ModelConfig;
 use tortwin_model::error::UsageError;
 
