@@ -185,7 +185,9 @@ mod tests {
     /// in a sink's error; the machine's failures are not bad input.
     #[test]
     fn bad_input_is_found_wherever_it_is_wrapped() {
-        assert!(Error::from(usage()).context("discover on a.mcap").is_input());
+        assert!(Error::from(usage())
+            .context("discover on a.mcap")
+            .is_input());
         assert!(Error::from(folder()).is_input());
         assert!(Error::from(McapError::File(folder())).is_input());
         assert!(Error::from(RerunError::File(folder())).is_input());

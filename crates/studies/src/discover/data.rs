@@ -21,7 +21,7 @@ use tortwin_recording::{
     BogiePosition, Direction, Event, EventKind, Passage, Quantity, Recording, Section,
 };
 
-pub const DAY_NS: u64 = 86_400_000_000_000;
+pub(crate) const DAY_NS: u64 = 86_400_000_000_000;
 const HOUR_NS: u64 = 3_600_000_000_000;
 
 /// One measurement of the recording.
@@ -217,21 +217,21 @@ impl Dataset {
 
     /// The weather in effect at `log_time_ns` (the defaults before the first
     /// message).
-    pub fn weather_at(&self, log_time_ns: u64) -> tortwin_recording::Weather {
+    pub(crate) fn weather_at(&self, log_time_ns: u64) -> tortwin_recording::Weather {
         self.weather.state(log_time_ns).current
     }
 
     /// The section's name of a rail.
-    pub fn rail_name(&self, rail: usize) -> &str {
+    pub(crate) fn rail_name(&self, rail: usize) -> &str {
         self.section.rails.get(rail).map_or("?", String::as_str)
     }
 
-    pub fn site_name(&self, site: usize) -> &str {
+    pub(crate) fn site_name(&self, site: usize) -> &str {
         self.section.sites.get(site).map_or("?", |s| s.id.as_str())
     }
 
     /// A covariate by name.
-    pub fn covariate(&self, name: &str) -> Option<&Covariate> {
+    pub(crate) fn covariate(&self, name: &str) -> Option<&Covariate> {
         self.covariates.iter().find(|c| c.name == name)
     }
 }

@@ -32,7 +32,7 @@ const MAX_DOTS: usize = 2500;
 
 /// Writes every file of the report into `dir` (created if needed); returns
 /// the paths written.
-pub fn write(dir: &Path, data: &Dataset, d: &Discovery) -> Result<Vec<PathBuf>> {
+pub(crate) fn write(dir: &Path, data: &Dataset, d: &Discovery) -> Result<Vec<PathBuf>> {
     std::fs::create_dir_all(dir).map_err(|source| Error::Io {
         what: "cannot create the report directory",
         path: dir.to_path_buf(),
@@ -93,7 +93,7 @@ pub fn write(dir: &Path, data: &Dataset, d: &Discovery) -> Result<Vec<PathBuf>> 
 }
 
 /// The final configuration, whole, with a header saying where it comes from.
-pub fn model_toml(d: &Discovery) -> String {
+pub(crate) fn model_toml(d: &Discovery) -> String {
     let mut text = String::new();
     let _ = writeln!(
         text,

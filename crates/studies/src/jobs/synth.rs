@@ -116,8 +116,8 @@ pub struct SynthArgs {
     pub quiet: bool,
 }
 
-/// Writes the recording and its key (beside it, see [`key_path`]); returns
-/// the key and where it was written.
+/// Writes the recording and its key (`--key`, or beside it: NAME.key.json
+/// for NAME.mcap); returns the key and where it was written.
 pub fn synth(args: &SynthArgs) -> Result<(SynthReport, PathBuf)> {
     let (params, truth) = prepare(args)?;
     let key_path = key_path(args);
@@ -141,7 +141,7 @@ pub fn synth(args: &SynthArgs) -> Result<(SynthReport, PathBuf)> {
 
 /// The generator's parameters and the truth configuration the arguments ask
 /// for; every check that can fail is done here, before anything is written.
-pub fn prepare(args: &SynthArgs) -> Result<(SynthParams, ModelConfig)> {
+fn prepare(args: &SynthArgs) -> Result<(SynthParams, ModelConfig)> {
     let start = chrono::DateTime::parse_from_rfc3339(&args.start).map_err(|e| {
         UsageError(format!(
             "--start {}: not an RFC 3339 time such as 2024-04-08T00:00:00Z ({e})",
@@ -192,7 +192,7 @@ pub fn prepare(args: &SynthArgs) -> Result<(SynthParams, ModelConfig)> {
 }
 
 /// `--key`, or the recording's path with `.mcap` replaced by `.key.json`.
-pub fn key_path(args: &SynthArgs) -> PathBuf {
+fn key_path(args: &SynthArgs) -> PathBuf {
     if let Some(key) = &args.key {
         return key.clone();
     }

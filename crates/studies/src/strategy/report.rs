@@ -26,16 +26,16 @@ use tortwin_recording::Section;
 
 /// A strategy as people and scripts read it.
 #[derive(Debug, Clone, Serialize)]
-pub struct StrategyView {
-    pub description: String,
-    pub pulse_g: f64,
-    pub every_axles: u32,
-    pub positions_m: Vec<f64>,
-    pub rails: Vec<String>,
+pub(crate) struct StrategyView {
+    pub(crate) description: String,
+    pub(crate) pulse_g: f64,
+    pub(crate) every_axles: u32,
+    pub(crate) positions_m: Vec<f64>,
+    pub(crate) rails: Vec<String>,
 }
 
 impl StrategyView {
-    pub fn new(s: &Strategy, section: &Section) -> Self {
+    pub(crate) fn new(s: &Strategy, section: &Section) -> Self {
         Self {
             description: s.describe(section),
             pulse_g: s.pulse_kg * 1e3,
@@ -126,7 +126,7 @@ fn choice(e: &Evaluated, section: &Section) -> Choice {
 }
 
 /// Writes the study's result into `dir` (created if missing).
-pub fn write(
+pub(crate) fn write(
     dir: &Path,
     traffic: &Traffic,
     cfg: &ModelConfig,
@@ -277,7 +277,11 @@ fn pct(v: f64) -> String {
 }
 
 /// Why the recommendation is the one, in sentences.
-pub fn recommendation_reasons(traffic: &Traffic, target: &Target, study: &Study) -> Vec<String> {
+pub(crate) fn recommendation_reasons(
+    traffic: &Traffic,
+    target: &Target,
+    study: &Study,
+) -> Vec<String> {
     let section = &traffic.section;
     let Some(r) = &study.recommended else {
         return vec![format!(

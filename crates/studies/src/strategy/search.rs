@@ -334,10 +334,10 @@ pub struct Evaluated {
 
 /// Evaluations by lattice point, shared by parallel workers.
 pub struct Searcher<'a> {
-    pub traffic: &'a Traffic,
-    pub cfg: &'a ModelConfig,
-    pub target: &'a Target,
-    pub space: &'a Space,
+    traffic: &'a Traffic,
+    cfg: &'a ModelConfig,
+    target: &'a Target,
+    space: &'a Space,
     cache: Mutex<HashMap<Key, Arc<Evaluated>>>,
     error: Mutex<Option<Error>>,
     on_evaluation: &'a (dyn Fn(usize) + Sync),
@@ -378,7 +378,7 @@ impl<'a> Searcher<'a> {
     }
 
     /// Evaluates `k` (once).
-    pub fn eval(&self, k: Key) -> Result<Arc<Evaluated>> {
+    pub(crate) fn eval(&self, k: Key) -> Result<Arc<Evaluated>> {
         if let Some(e) = self.lock_cache().get(&k) {
             return Ok(e.clone());
         }
@@ -406,7 +406,7 @@ impl<'a> Searcher<'a> {
     }
 
     /// Evaluates every key, in parallel.
-    pub fn eval_all(&self, keys: &[Key]) -> Result<Vec<Arc<Evaluated>>> {
+    pub(crate) fn eval_all(&self, keys: &[Key]) -> Result<Vec<Arc<Evaluated>>> {
         keys.par_iter().map(|&k| self.eval(k)).collect()
     }
 
@@ -707,7 +707,7 @@ pub fn recommend<'e>(evaluated: &'e [Arc<Evaluated>], target: &Target) -> Option
 }
 
 /// The strategy with the best admissible coverage (ties: less product).
-pub fn best_coverage(evaluated: &[Arc<Evaluated>]) -> Option<&Evaluated> {
+pub(crate) fn best_coverage(evaluated: &[Arc<Evaluated>]) -> Option<&Evaluated> {
     evaluated
         .iter()
         .filter(|e| e.figures.admissible)
@@ -728,7 +728,7 @@ pub fn best_coverage(evaluated: &[Arc<Evaluated>]) -> Option<&Evaluated> {
 /// The admissible strategies no other admissible one beats on both product
 /// per day (less) and coverage (more), by ascending product: the choices
 /// an engineer trades between (over-applying ones are not choices).
-pub fn pareto_front(evaluated: &[Arc<Evaluated>]) -> Vec<&Evaluated> {
+pub(crate) fn pareto_front(evaluated: &[Arc<Evaluated>]) -> Vec<&Evaluated> {
     let mut v: Vec<&Evaluated> = evaluated
         .iter()
         .filter(|e| e.figures.admissible)

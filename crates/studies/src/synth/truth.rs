@@ -27,7 +27,11 @@ use tortwin_recording::{Direction, Event, EventKind, Quantity};
 /// Writes the synthetic recording `params` describes to `out` (under a
 /// temporary name, renamed when complete), with measurements from the
 /// engine run with `truth`, and returns its key.
-pub fn generate(params: &SynthParams, truth: &ModelConfig, out: &Path) -> Result<SynthReport> {
+pub(crate) fn generate(
+    params: &SynthParams,
+    truth: &ModelConfig,
+    out: &Path,
+) -> Result<SynthReport> {
     params.validate()?;
     let section = params.section();
     let origin_ns = params.start_ns as i64;
