@@ -123,7 +123,10 @@ impl GenericSet {
     /// `power` of a temperature below 0 °C or of a creepage of 0 with a
     /// negative exponent: effects.md's formula has no value there, and a NaN
     /// or infinite factor would quietly empty or flood the rail.
-    pub(crate) fn undefined(&self, value: impl Fn(Driver) -> Option<f64>) -> Option<UndefinedFactor> {
+    pub(crate) fn undefined(
+        &self,
+        value: impl Fn(Driver) -> Option<f64>,
+    ) -> Option<UndefinedFactor> {
         self.by_acts_on.iter().flatten().find_map(|t| {
             let x = value(t.driver)?;
             let g = t.form.g(x, t.x_ref);

@@ -90,7 +90,7 @@ impl PartialFile {
     }
 
     /// Where the file goes when complete.
-    pub fn final_path(&self) -> &Path {
+    pub(crate) fn final_path(&self) -> &Path {
         &self.final_path
     }
 
