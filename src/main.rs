@@ -10,9 +10,6 @@ use anyhow::Result;
 use clap::{Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
-use tortwin_engine::EngineError;
-use tortwin_model::error::{ConfigError, UsageError};
-use tortwin_recording::error::InputError;
 use tortwin_studies::jobs::{discover, paper, replay, strategy, summary, synth};
 use tortwin_studies::Progress;
 
@@ -63,15 +60,12 @@ fn main() -> ExitCode {
     }
 }
 
-/// True when an error chain holds bad user input (exit status 2).
+/// True when the error is bad user input (exit status 2): the library
+/// classifies its own errors; writing the summary to stdout is never the
+/// input's fault.
 fn is_input_error(err: &anyhow::Error) -> bool {
-    err.chain().any(|e| {
-        e.downcast_ref::<InputError>().is_some()
-            || e.downcast_ref::<ConfigError>().is_some()
-            || e.downcast_ref::<UsageError>().is_some()
-            || e.downcast_ref::<EngineError>()
-                .is_some_and(EngineError::is_input)
-    })
+    err.downcast_ref::<tortwin_studies::Error>()
+        .is_some_and(tortwin_studies::Error::is_input)
 }
 
 fn run(command: Command) -> Result<()> {

@@ -15,9 +15,9 @@ use tortwin_recording::{Quantity, Section, Weather};
 /// and, at a contact, the wheel's drivers.
 #[derive(Debug, Clone, Copy)]
 pub(crate) struct When<'a> {
-    pub time_s: f64,
-    pub weather: &'a Weather,
-    pub wheel: Option<&'a WheelDrivers>,
+    pub(crate) time_s: f64,
+    pub(crate) weather: &'a Weather,
+    pub(crate) wheel: Option<&'a WheelDrivers>,
 }
 
 /// A name in a scope that the section does not have: matches nothing (the
@@ -51,10 +51,10 @@ pub struct UndefinedFactor {
 /// What a wheel brings to a contact: the wheel drivers.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub(crate) struct WheelDrivers {
-    pub speed_mps: f64,
-    pub wheel_load_kn: f64,
+    pub(crate) speed_mps: f64,
+    pub(crate) wheel_load_kn: f64,
     /// `sqrt(cx² + cy²)`.
-    pub creepage: f64,
+    pub(crate) creepage: f64,
 }
 
 /// Which terms a product takes.
@@ -75,7 +75,7 @@ pub(crate) struct GenericSet {
 }
 
 impl GenericSet {
-    pub fn compile(terms: &[GenericTerm], section: &Section, origin_ns: i64) -> Self {
+    pub(crate) fn compile(terms: &[GenericTerm], section: &Section, origin_ns: i64) -> Self {
         let mut set = Self::default();
         fn index<'a>(
             name: &Option<String>,
@@ -123,7 +123,10 @@ impl GenericSet {
     /// `power` of a temperature below 0 °C or of a creepage of 0 with a
     /// negative exponent: effects.md's formula has no value there, and a NaN
     /// or infinite factor would quietly empty or flood the rail.
-    pub fn undefined(&self, value: impl Fn(Driver) -> Option<f64>) -> Option<UndefinedFactor> {
+    pub(crate) fn undefined(
+        &self,
+        value: impl Fn(Driver) -> Option<f64>,
+    ) -> Option<UndefinedFactor> {
         self.by_acts_on.iter().flatten().find_map(|t| {
             let x = value(t.driver)?;
             let g = t.form.g(x, t.x_ref);
@@ -137,13 +140,13 @@ impl GenericSet {
     }
 
     /// Whether any term acts on `acts_on`.
-    pub fn any(&self, acts_on: ActsOn) -> bool {
+    pub(crate) fn any(&self, acts_on: ActsOn) -> bool {
         !self.by_acts_on[acts_on.index()].is_empty()
     }
 
     /// Whether a term on `acts_on` for `rail` changes along a wheel's path
     /// (driven by time or weather).
-    pub fn varies(&self, acts_on: ActsOn, rail: usize) -> bool {
+    pub(crate) fn varies(&self, acts_on: ActsOn, rail: usize) -> bool {
         self.by_acts_on[acts_on.index()]
             .iter()
             .any(|t| t.rail.is_none_or(|r| r == rail) && !t.driver.is_wheel())
@@ -154,7 +157,7 @@ impl GenericSet {
     /// weather and, at a contact, the wheel's drivers. A wheel term has no
     /// value without a wheel: it does not act (g = 1).
     #[inline]
-    pub fn factor(
+    pub(crate) fn factor(
         &self,
         acts_on: ActsOn,
         which: Which,
@@ -202,7 +205,7 @@ impl GenericSet {
     /// muD and muC of eq. (4) with the friction terms for `rail` at this
     /// contact or reading.
     #[inline]
-    pub fn friction_levels(
+    pub(crate) fn friction_levels(
         &self,
         mu_d: f64,
         mu_c: f64,
@@ -225,14 +228,14 @@ impl GenericSet {
 
     /// Whether any friction term exists (the field and the site contacts
     /// then carry their own muD, muC).
-    pub fn any_friction(&self) -> bool {
+    pub(crate) fn any_friction(&self) -> bool {
         self.any(ActsOn::FrictionDry) || self.any(ActsOn::FrictionBoundary)
     }
 
     /// The simulated value of a measurement with the `measurement` terms'
     /// offsets added, in the order of the terms.
     #[inline]
-    pub fn measured(&self, value: f64, site: usize, rail: usize, quantity: Quantity) -> f64 {
+    pub(crate) fn measured(&self, value: f64, site: usize, rail: usize, quantity: Quantity) -> f64 {
         let mut v = value;
         for t in &self.by_acts_on[ActsOn::Measurement.index()] {
             if t.site.is_none_or(|s| s == site)

@@ -15,10 +15,12 @@
 //! Everything that simulates (replay, paper scenarios, synthetic truth runs,
 //! fits, strategies) drives this one engine with [`Engine::push`].
 
+#![warn(unreachable_pub)]
+
 pub mod generic;
 mod roll;
 pub mod sink;
-pub mod state;
+mod state;
 pub mod weather;
 
 use std::collections::VecDeque;
@@ -33,15 +35,17 @@ use tortwin_model::contact::{
     self, HertzContact, HertzShape, KalkerCoefficients, PolachInput, Steel,
 };
 use tortwin_model::effects::TimeEffects;
+use tortwin_model::error::{ConfigError, UsageError};
 use tortwin_model::generic::{ActsOn, Driver};
 use tortwin_model::product;
+use tortwin_recording::error::InputError;
 use tortwin_recording::{
     Axle, AxleRef, BogiePosition, Creepage, Direction, Event, EventKind, Measured, Measurement,
     Passage, Quantity, Section,
 };
 
 use generic::{GenericSet, WheelDrivers};
-pub use state::EngineState;
+pub use state::{EngineState, SavedTrack, StateError};
 use weather::{WeatherState, WeatherTimeline};
 
 /// How many past trains keep their contacts at the measurement sites, for
@@ -84,9 +88,19 @@ pub enum EngineError {
 
 impl EngineError {
     /// Whether the recording or configuration is at fault (exit status 2),
-    /// not the machine or an output.
+    /// not the machine or an output. A sink's error is opaque to the engine:
+    /// it is bad input only where its causes hold one of the input errors
+    /// (an output folder that cannot be made is a `UsageError` under the
+    /// sink's file error).
     pub fn is_input(&self) -> bool {
-        !matches!(self, EngineError::Sink(_))
+        match self {
+            EngineError::Sink(e) => std::iter::successors(
+                Some(e.as_ref() as &(dyn std::error::Error + 'static)),
+                |e| e.source(),
+            )
+            .any(|e| e.is::<InputError>() || e.is::<ConfigError>() || e.is::<UsageError>()),
+            EngineError::MeasurementTooLate { .. } | EngineError::UndefinedFactor { .. } => true,
+        }
     }
 }
 
@@ -125,7 +139,7 @@ impl Grid {
         Self { spacing_m, d_m }
     }
 
-    pub fn i_last(&self) -> usize {
+    pub(crate) fn i_last(&self) -> usize {
         self.d_m.len() - 1
     }
 
@@ -161,15 +175,15 @@ impl TrackState {
 /// One wheel on one rail: what depends on the wheel and not on the point.
 #[derive(Debug, Clone, Copy)]
 pub(crate) struct WheelOnRail {
-    pub track: usize,
-    pub q_n: f64,
-    pub hertz: HertzContact,
-    pub kalker: KalkerCoefficients,
-    pub creepage: Creepage,
+    pub(crate) track: usize,
+    pub(crate) q_n: f64,
+    pub(crate) hertz: HertzContact,
+    pub(crate) kalker: KalkerCoefficients,
+    pub(crate) creepage: Creepage,
     /// fp · fc, eq. (2) and (3).
-    pub fp_fc: f64,
+    pub(crate) fp_fc: f64,
     /// What generic terms driven by the wheel see.
-    pub drivers: WheelDrivers,
+    pub(crate) drivers: WheelDrivers,
 }
 
 /// A train being rolled, or kept for late measurements.
@@ -202,12 +216,12 @@ struct Buffered {
 /// A pulse or tribometer reading at one point of one track, inside a window.
 #[derive(Debug, Clone, Copy)]
 pub(crate) struct PointEvent {
-    pub point: usize,
-    pub time_s: f64,
+    pub(crate) point: usize,
+    pub(crate) time_s: f64,
     /// Index into the window's buffered events.
-    pub buffered: usize,
-    pub kind: PointEventKind,
-    pub done: bool,
+    pub(crate) buffered: usize,
+    pub(crate) kind: PointEventKind,
+    pub(crate) done: bool,
 }
 
 #[derive(Debug, Clone, Copy)]
@@ -223,20 +237,20 @@ pub(crate) enum PointEventKind {
 /// Running totals for the run summary.
 #[derive(Debug, Clone, Copy, Default)]
 pub(crate) struct Totals {
-    pub trains: u64,
-    pub wheels: u64,
-    pub contacts: u64,
-    pub pulses: u64,
-    pub measurements: u64,
-    pub weather_messages: u64,
-    pub applied_kg: f64,
-    pub carried_out_kg: f64,
-    pub consumed_kg: f64,
-    pub capped_kg: f64,
-    pub effects_lost_kg: f64,
+    pub(crate) trains: u64,
+    pub(crate) wheels: u64,
+    pub(crate) contacts: u64,
+    pub(crate) pulses: u64,
+    pub(crate) measurements: u64,
+    pub(crate) weather_messages: u64,
+    pub(crate) applied_kg: f64,
+    pub(crate) carried_out_kg: f64,
+    pub(crate) consumed_kg: f64,
+    pub(crate) capped_kg: f64,
+    pub(crate) effects_lost_kg: f64,
     /// Sum of squared residuals and counts per quantity (mu, adhesion, rail_mu).
-    pub sq_residual: [f64; 3],
-    pub residual_n: [u64; 3],
+    pub(crate) sq_residual: [f64; 3],
+    pub(crate) residual_n: [u64; 3],
 }
 
 /// The replay engine of one section.
@@ -440,30 +454,13 @@ impl Engine {
         &self.grid
     }
 
-    pub fn config(&self) -> &ModelConfig {
-        &self.cfg
-    }
-
     pub fn tracks(&self) -> &[TrackState] {
         &self.tracks
     }
 
-    pub fn track_info(&self) -> &[TrackInfo] {
-        &self.track_info
-    }
-
-    pub fn origin_ns(&self) -> i64 {
-        self.origin_ns
-    }
-
-    /// End of the last train's occupation, time_s (−inf before any train).
-    pub fn occupied_until_s(&self) -> f64 {
-        self.occupied_until_s
-    }
-
     /// `time_s = (log_time_ns - origin_ns) * 1e-9`, the difference in 64-bit
     /// integers (model.md).
-    pub fn time_s(&self, log_time_ns: u64) -> f64 {
+    pub(crate) fn time_s(&self, log_time_ns: u64) -> f64 {
         (log_time_ns as i64).wrapping_sub(self.origin_ns) as f64 * 1e-9
     }
 

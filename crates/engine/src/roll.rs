@@ -19,9 +19,9 @@ use tortwin_model::product::{self, ContactConditions, ProductParams};
 #[derive(Debug, Clone, Default)]
 pub(crate) struct Observed {
     /// Total mass at step 2, per point.
-    pub mass_kg: Vec<f64>,
+    pub(crate) mass_kg: Vec<f64>,
     /// The wheel's mass after the contact (after step 6), per point.
-    pub wheel_mass_kg: Vec<f64>,
+    pub(crate) wheel_mass_kg: Vec<f64>,
 }
 
 impl Observed {

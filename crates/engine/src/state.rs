@@ -12,9 +12,9 @@ use tortwin_model::config::{Effects, ModelConfig};
 use tortwin_recording::Section;
 
 /// Names the document kind, so that a wrong file is refused early.
-pub const STATE_FORMAT: &str = "tortwin-state";
+pub(crate) const STATE_FORMAT: &str = "tortwin-state";
 /// Bumped whenever the layout changes; other versions are refused.
-pub const STATE_VERSION: u32 = 1;
+pub(crate) const STATE_VERSION: u32 = 1;
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]

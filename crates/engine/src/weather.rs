@@ -59,26 +59,26 @@ impl WeatherState {
 /// messages inside it, in replay order. Lookups are linear: a train lasts
 /// minutes and weather comes every few minutes, so the list is short.
 #[derive(Debug, Clone, Default)]
-pub struct WeatherTimeline {
+pub(crate) struct WeatherTimeline {
     base: WeatherState,
     /// States after each message inside the window, in replay order.
     changes: Vec<WeatherState>,
 }
 
 impl WeatherTimeline {
-    pub fn reset(&mut self, base: WeatherState) {
+    pub(crate) fn reset(&mut self, base: WeatherState) {
         self.base = base;
         self.changes.clear();
     }
 
-    pub fn push(&mut self, t_s: f64, weather: Weather) {
+    pub(crate) fn push(&mut self, t_s: f64, weather: Weather) {
         let last = *self.changes.last().unwrap_or(&self.base);
         self.changes.push(last.after_message(t_s, weather));
     }
 
     /// The state in effect at `t_s`: the last message with time <= t.
     #[inline]
-    pub fn at(&self, t_s: f64) -> &WeatherState {
+    pub(crate) fn at(&self, t_s: f64) -> &WeatherState {
         let mut state = &self.base;
         for change in &self.changes {
             match change.since_s {
@@ -90,12 +90,12 @@ impl WeatherTimeline {
     }
 
     /// Whether no message falls inside the window (one weather throughout).
-    pub fn is_constant(&self) -> bool {
+    pub(crate) fn is_constant(&self) -> bool {
         self.changes.is_empty()
     }
 
     /// The state after every message of the window.
-    pub fn last(&self) -> WeatherState {
+    pub(crate) fn last(&self) -> WeatherState {
         *self.changes.last().unwrap_or(&self.base)
     }
 }

@@ -30,9 +30,10 @@
 //! Axes (contact.md, "Hertz"): x is the rolling direction, y lateral. `a` is
 //! always the semi-axis along x and `b` the one along y.
 //!
-//! The engine builds one [`WheelRailContact`] per wheel and rail (the Hertz
-//! and Kalker part depend only on load and geometry) and asks it for
-//! [`WheelRailContact::adhesion`] at each contact.
+//! The engine solves the ellipse's shape once per wheel diameter
+//! ([`HertzShape`]: it does not depend on the load), scales it to each
+//! wheel's load ([`HertzContact`]) with Kalker's coefficients ([`kalker`]),
+//! and asks [`polach`] for the adhesion at each contact.
 
 use std::f64::consts::PI;
 
@@ -62,7 +63,7 @@ impl Steel {
 
     /// Contact modulus `E* = E / (2 (1 - nu^2))` [Pa] of two bodies of this
     /// steel (contact.md, "Hertz"): `1/E* = (1 - nu^2)/E + (1 - nu^2)/E`.
-    pub fn e_star_pa(&self) -> f64 {
+    pub(crate) fn e_star_pa(&self) -> f64 {
         self.e_pa / (2.0 * (1.0 - self.nu * self.nu))
     }
 }
@@ -392,7 +393,7 @@ pub struct PolachParams {
 impl PolachParams {
     /// Polach's dry set, the default (contact.md, "fixed here"):
     /// A = 0.40, B = 0.60 s/m, kA = 1.00, kS = 0.40.
-    pub const DRY: PolachParams = PolachParams {
+    pub(crate) const DRY: PolachParams = PolachParams {
         p_a: 0.40,
         p_b_s_per_m: 0.60,
         k_a: 1.00,
@@ -559,87 +560,28 @@ pub fn polach(input: &PolachInput, params: &PolachParams) -> PolachForces {
     }
 }
 
-/// The geometry-only part of one wheel's contact on one rail: the Hertz
-/// ellipse and Kalker's coefficients, which depend on load, wheel diameter
-/// and rail head radius but not on creepage or friction. The engine builds
-/// it once per wheel and rail and then asks for [`Self::adhesion`] at every
-/// contact.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct WheelRailContact {
-    /// The Hertz contact ellipse (its `pm_pa` is model.md's `pm`).
-    pub hertz: HertzContact,
-    /// Kalker's coefficients for this ellipse and the steel's nu.
-    pub kalker: KalkerCoefficients,
-    /// Shear modulus G of the steel [Pa], for Polach.
-    pub g_pa: f64,
-}
-
-impl WheelRailContact {
-    /// The contact of a wheel of `wheel_diameter_m` with a flat transverse
-    /// tread profile under load `q_n` [N] on a rail head of transverse radius
-    /// `r_ry_m` (contact.md, "Hertz": `R_wx = wheel_diameter_m / 2`, R_wy
-    /// infinite by default).
-    ///
-    /// Precondition: as for [`hertz`].
-    pub fn new(q_n: f64, wheel_diameter_m: f64, r_ry_m: f64, steel: &Steel) -> Self {
-        Self::with_wheel_profile(q_n, wheel_diameter_m, f64::INFINITY, r_ry_m, steel)
-    }
-
-    /// As [`Self::new`], for a wheel whose transverse profile radius R_wy is
-    /// `r_wy_m` (configurable as `contact.wheel_profile_radius_m`;
-    /// `f64::INFINITY` is flat).
-    pub fn with_wheel_profile(
-        q_n: f64,
-        wheel_diameter_m: f64,
-        r_wy_m: f64,
-        r_ry_m: f64,
-        steel: &Steel,
-    ) -> Self {
-        let hertz = hertz(q_n, wheel_diameter_m / 2.0, r_wy_m, r_ry_m, steel);
-        WheelRailContact {
-            hertz,
-            kalker: kalker(steel.nu, hertz.a_m, hertz.b_m),
-            g_pa: steel.g_pa(),
-        }
-    }
-
-    /// Coefficient of adhesion T/N [-] of this contact by Polach's model
-    /// ([`polach`]) for creepages `cx`, `cy` [-] and spin `spin_per_m` [1/m]
-    /// exactly as recorded, at `speed_mps` with maximum friction `mu0`
-    /// (model.md's `mu`, eq. 4).
-    ///
-    /// `q_n` is the load the contact was built with; it is passed again so
-    /// the hot loop need not keep it alongside.
-    #[allow(clippy::too_many_arguments)] // mirrors Polach's inputs one to one
-    pub fn adhesion(
-        &self,
-        q_n: f64,
-        cx: f64,
-        cy: f64,
-        spin_per_m: f64,
-        speed_mps: f64,
-        mu0: f64,
-        params: &PolachParams,
-    ) -> f64 {
-        let input = PolachInput {
-            q_n,
-            a_m: self.hertz.a_m,
-            b_m: self.hertz.b_m,
-            g_pa: self.g_pa,
-            kalker: self.kalker,
-            sx: cx,
-            sy: cy,
-            psi_per_m: spin_per_m,
-            speed_mps,
-            mu0,
-        };
-        polach(&input, params).t_over_q
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Polach's input for the worked contact of contact.md (a 0.92 m wheel,
+    /// 100 kN on a rail head of R_ry = 0.30 m, the default steel) at 20 m/s.
+    fn worked(cx: f64, cy: f64, spin_per_m: f64, mu0: f64) -> PolachInput {
+        let steel = Steel::DEFAULT;
+        let h = hertz(100e3, 0.46, f64::INFINITY, 0.30, &steel);
+        PolachInput {
+            q_n: 100e3,
+            a_m: h.a_m,
+            b_m: h.b_m,
+            g_pa: steel.g_pa(),
+            kalker: kalker(steel.nu, h.a_m, h.b_m),
+            sx: cx,
+            sy: cy,
+            psi_per_m: spin_per_m,
+            speed_mps: 20.0,
+            mu0,
+        }
+    }
 
     /// `got` rounds to `printed`, which the spec prints with `decimals`
     /// decimals (contact.md: "rounded to 6 digits").
@@ -660,9 +602,6 @@ mod tests {
         assert_rounds_to("b [mm]", h.b_m * 1e3, 5.38717, 5);
         assert_rounds_to("p0 [MPa]", h.p0_pa * 1e-6, 1237.56, 2);
         assert_rounds_to("pm [MPa]", h.pm_pa * 1e-6, 825.04, 2);
-        // model.md's example quotes the same pm for a 0.92 m wheel.
-        let c = WheelRailContact::new(100e3, 0.92, 0.30, &Steel::DEFAULT);
-        assert_eq!(c.hertz, h);
     }
 
     /// contact.md, "Kalker", worked example: nu = 0.3 on the worked ellipse.
@@ -678,7 +617,6 @@ mod tests {
     /// contact.md, "Polach", golden values: T/Q at six longitudinal creepages.
     #[test]
     fn polach_worked_example() {
-        let contact = WheelRailContact::new(100e3, 0.92, 0.30, &Steel::DEFAULT);
         let cases = [
             (0.001, 0.097936),
             (0.002, 0.179978),
@@ -688,7 +626,7 @@ mod tests {
             (0.05, 0.374360),
         ];
         for (cx, t_over_q) in cases {
-            let got = contact.adhesion(100e3, cx, 0.0, 0.0, 20.0, 0.55, &PolachParams::DRY);
+            let got = polach(&worked(cx, 0.0, 0.0, 0.55), &PolachParams::DRY).t_over_q;
             assert_rounds_to(&format!("T/Q at cx = {cx}"), got, t_over_q, 6);
         }
     }
@@ -733,20 +671,7 @@ mod tests {
     /// Nothing slides, nothing is transmitted (contact.md, Polach step 1).
     #[test]
     fn no_creepage_no_force() {
-        let contact = WheelRailContact::new(100e3, 0.92, 0.30, &Steel::DEFAULT);
-        let input = PolachInput {
-            q_n: 100e3,
-            a_m: contact.hertz.a_m,
-            b_m: contact.hertz.b_m,
-            g_pa: contact.g_pa,
-            kalker: contact.kalker,
-            sx: 0.0,
-            sy: 0.0,
-            psi_per_m: 0.0,
-            speed_mps: 20.0,
-            mu0: 0.55,
-        };
-        let f = polach(&input, &PolachParams::DRY);
+        let f = polach(&worked(0.0, 0.0, 0.0, 0.55), &PolachParams::DRY);
         assert_eq!(
             (f.fx_n, f.fy_n, f.t_over_q, f.eps, f.eps_m),
             (0.0, 0.0, 0.0, 0.0, 0.0)
@@ -764,13 +689,12 @@ mod tests {
         let k = kalker(0.3, slender.a_m, slender.b_m);
         assert_eq!(k, kalker(0.3, 1.0, 0.1 * 0.999));
 
-        let contact = WheelRailContact::new(100e3, 0.92, 0.30, &steel);
         for (cx, cy, spin) in [(1e3, -1e3, 1e6), (0.0, 0.0, 1e300), (-1e-300, 0.0, 0.0)] {
-            let t = contact.adhesion(100e3, cx, cy, spin, 20.0, 0.4, &PolachParams::DRY);
+            let t = polach(&worked(cx, cy, spin, 0.4), &PolachParams::DRY).t_over_q;
             assert!(t.is_finite() && t >= 0.0, "{cx} {cy} {spin}: {t}");
         }
         assert_eq!(
-            contact.adhesion(100e3, 0.01, 0.0, 0.0, 20.0, 0.0, &PolachParams::DRY),
+            polach(&worked(0.01, 0.0, 0.0, 0.0), &PolachParams::DRY).t_over_q,
             0.0
         );
     }

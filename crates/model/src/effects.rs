@@ -4,28 +4,29 @@
 //!
 //! | effect | step of "one contact" | function |
 //! |---|---|---|
-//! | `rail_ageing` | 1, pulse, reading | [`ageing_factor`] |
-//! | `rain_washoff` | 1, pulse, reading | [`washoff_factor`] |
+//! | `rail_ageing` | 1, pulse, reading | `ageing_factor` (in [`TimeEffects`]) |
+//! | `rain_washoff` | 1, pulse, reading | `washoff_factor` (in [`TimeEffects`]) |
 //! | `temperature_consumption` | 4 | [`temperature_factor`] |
 //! | `speed_transfer` | 3 | [`speed_transfer_factor`] |
 //! | `wheel_edge_reservoir` | 6 | [`wheel_edge_reservoir`] |
 //! | `bogie_bands` | — | a layout: the engine keeps two tracks for the rail named `high` |
 //!
-//! [`EFFECTS`] describes each effect once as data (name, parameters with
-//! units, valid ranges, the range and transform a fitter searches, the step
-//! it acts at): configuration validation, discover and the reports read it.
+//! `EFFECTS` (a row by [`Named::spec`]) describes each effect once as data
+//! (name, parameters with units, valid ranges, the range and transform a
+//! fitter searches, the step it acts at): configuration validation,
+//! discover and the reports read it.
 
 /// `rail_ageing`: rail product dries out and is lost between touches,
 /// `m_r *= exp(-dt / tau)` with `dt` the time since the point was last touched.
 #[inline]
-pub fn ageing_factor(dt_s: f64, tau_s: f64) -> f64 {
+pub(crate) fn ageing_factor(dt_s: f64, tau_s: f64) -> f64 {
     (-dt_s / tau_s).exp()
 }
 
 /// `rain_washoff`: `m_r *= exp(-k R)` with `R` the precipitation (mm) since
 /// the point was last touched.
 #[inline]
-pub fn washoff_factor(rain_mm: f64, k_per_mm: f64) -> f64 {
+pub(crate) fn washoff_factor(rain_mm: f64, k_per_mm: f64) -> f64 {
     (-k_per_mm * rain_mm).exp()
 }
 
@@ -117,17 +118,6 @@ pub enum Transform {
     Linear,
 }
 
-impl Transform {
-    /// The report's words for it.
-    pub fn describe(self) -> &'static str {
-        match self {
-            Transform::Log => "log",
-            Transform::LogLike { .. } => "log-like from 0",
-            Transform::Linear => "linear",
-        }
-    }
-}
-
 /// One parameter of a named effect.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Param {
@@ -145,7 +135,7 @@ pub struct Param {
 
 impl Param {
     /// True when a configuration may give `x`.
-    pub fn is_valid(&self, x: f64) -> bool {
+    pub(crate) fn is_valid(&self, x: f64) -> bool {
         let (lo, hi) = self.valid;
         if hi.is_infinite() {
             x.is_finite() && if self.valid_open_low { x > lo } else { x >= lo }
@@ -155,7 +145,7 @@ impl Param {
     }
 
     /// The rule [`Param::is_valid`] checks, in words.
-    pub fn rule(&self) -> String {
+    pub(crate) fn rule(&self) -> String {
         let (lo, hi) = self.valid;
         match (hi.is_infinite(), self.valid_open_low) {
             (true, true) => format!("finite and > {lo}"),
@@ -220,7 +210,7 @@ fn p(params: &[f64], i: usize) -> f64 {
 }
 
 /// Every named effect, in the order of effects.md.
-pub static EFFECTS: [EffectSpec; 6] = [
+pub(crate) static EFFECTS: [EffectSpec; 6] = [
     EffectSpec {
         effect: Named::RailAgeing,
         name: "rail_ageing",
@@ -332,27 +322,13 @@ pub static EFFECTS: [EffectSpec; 6] = [
 ];
 
 impl Named {
-    /// Every named effect, in the order of effects.md.
-    pub const ALL: [Named; 6] = [
-        Named::RailAgeing,
-        Named::RainWashoff,
-        Named::TemperatureConsumption,
-        Named::SpeedTransfer,
-        Named::WheelEdgeReservoir,
-        Named::BogieBands,
-    ];
-
-    /// Its row of [`EFFECTS`].
+    /// Its row of `EFFECTS`, the table of the effects.
     pub fn spec(self) -> &'static EffectSpec {
         &EFFECTS[self as usize]
     }
 
     pub fn name(self) -> &'static str {
         self.spec().name
-    }
-
-    pub fn from_name(name: &str) -> Option<Named> {
-        Named::ALL.into_iter().find(|n| n.name() == name)
     }
 }
 
@@ -410,7 +386,7 @@ mod tests {
     fn the_table_is_in_order_and_its_maps_invert() {
         for (k, spec) in EFFECTS.iter().enumerate() {
             assert_eq!(spec.effect as usize, k, "{}", spec.name);
-            assert_eq!(Named::from_name(spec.name), Some(spec.effect));
+            assert_eq!(spec.effect.name(), spec.name);
             for param in spec.params {
                 for u in [0.0, 0.25, 0.5, 1.0] {
                     let x = param.at(u);

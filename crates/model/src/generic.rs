@@ -29,7 +29,7 @@ pub enum ActsOn {
 }
 
 impl ActsOn {
-    pub const ALL: [ActsOn; 6] = [
+    pub(crate) const ALL: [ActsOn; 6] = [
         ActsOn::PulseMass,
         ActsOn::Transfer,
         ActsOn::Consumption,
@@ -50,12 +50,12 @@ impl ActsOn {
         }
     }
 
-    pub fn from_name(name: &str) -> Option<Self> {
+    pub(crate) fn from_name(name: &str) -> Option<Self> {
         Self::ALL.into_iter().find(|a| a.name() == name)
     }
 
     /// The scope keys a term on this quantity may carry.
-    pub fn scope_keys(self) -> &'static [&'static str] {
+    pub(crate) fn scope_keys(self) -> &'static [&'static str] {
         match self {
             ActsOn::PulseMass => &["applicator", "rail"],
             ActsOn::Measurement => &["site", "rail", "quantity"],
@@ -125,7 +125,7 @@ impl Driver {
         }
     }
 
-    pub fn from_name(name: &str) -> Option<Self> {
+    pub(crate) fn from_name(name: &str) -> Option<Self> {
         Self::ALL.into_iter().find(|d| d.name() == name)
     }
 
@@ -189,7 +189,7 @@ pub enum FormKind {
 }
 
 impl FormKind {
-    pub const ALL: [FormKind; 4] = [
+    pub(crate) const ALL: [FormKind; 4] = [
         FormKind::Exp,
         FormKind::Power,
         FormKind::Linear,
@@ -205,19 +205,8 @@ impl FormKind {
         }
     }
 
-    pub fn from_name(name: &str) -> Option<Self> {
+    pub(crate) fn from_name(name: &str) -> Option<Self> {
         Self::ALL.into_iter().find(|f| f.name() == name)
-    }
-
-    /// The parameter names in a configuration (for `time`, `t0_utc`
-    /// replaces `x0`).
-    pub fn param_names(self) -> &'static [&'static str] {
-        match self {
-            FormKind::Exp => &["beta"],
-            FormKind::Power => &["n"],
-            FormKind::Linear => &["gamma"],
-            FormKind::Step => &["x0", "f"],
-        }
     }
 }
 

@@ -11,6 +11,8 @@
 //!   parameters, the effects switched on), overlaid from TOML.
 //! - [`error`]: configuration and usage errors.
 
+#![warn(unreachable_pub)]
+
 pub mod config;
 pub mod contact;
 pub mod effects;

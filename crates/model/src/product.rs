@@ -11,11 +11,11 @@
 use serde::{Deserialize, Serialize};
 
 /// The reference mean contact pressure of eq. (2): 1178 MPa.
-pub const PM_REF_PA: f64 = 1178e6;
+pub(crate) const PM_REF_PA: f64 = 1178e6;
 /// The reference creepage of eq. (3): 1 %.
-pub const CREEPAGE_REF: f64 = 0.01;
+pub(crate) const CREEPAGE_REF: f64 = 0.01;
 /// The largest transfer fraction: equal shares (model.md).
-pub const TRANSFER_FRACTION_MAX: f64 = 0.5;
+pub(crate) const TRANSFER_FRACTION_MAX: f64 = 0.5;
 
 /// The product model's parameters: Table 2 of the paper plus the cap.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -108,7 +108,12 @@ pub fn revolution_factor(params: &ProductParams, n: u32) -> f64 {
 /// `factor` (1 without one), clamped to at most 0.5 (equal shares; model.md).
 /// `revolution` is [`revolution_factor`] for this N.
 #[inline]
-pub fn transfer_fraction(params: &ProductParams, m1_kg: f64, revolution: f64, factor: f64) -> f64 {
+pub(crate) fn transfer_fraction(
+    params: &ProductParams,
+    m1_kg: f64,
+    revolution: f64,
+    factor: f64,
+) -> f64 {
     // `1 / cm` is a constant the compiler hoists out of the stepping loop.
     let t = params.kt * (1.0 - (-m1_kg * (1.0 / params.cm_kg)).exp()) * revolution;
     (t * factor).min(TRANSFER_FRACTION_MAX)
@@ -117,7 +122,11 @@ pub fn transfer_fraction(params: &ProductParams, m1_kg: f64, revolution: f64, fa
 /// Eq. (5): the surface with more product (the donor, `m1`) gives
 /// `t (m1 - m2)` to the other; equal masses exchange nothing. Returns the
 /// new `(wheel, rail)` masses. `fraction_of` gives `t` for the donor's mass.
-pub fn transfer(wheel_kg: f64, rail_kg: f64, fraction_of: impl Fn(f64) -> f64) -> (f64, f64) {
+pub(crate) fn transfer(
+    wheel_kg: f64,
+    rail_kg: f64,
+    fraction_of: impl Fn(f64) -> f64,
+) -> (f64, f64) {
     if wheel_kg > rail_kg {
         let moved = fraction_of(wheel_kg) * (wheel_kg - rail_kg);
         (wheel_kg - moved, rail_kg + moved)

@@ -56,6 +56,14 @@ pub enum FileError {
     AlreadyCommitted { path: PathBuf },
 }
 
+impl FileError {
+    /// Whether the user asked for the impossible: an output folder that
+    /// cannot be made (exit status 2); the others are the machine's.
+    pub fn is_input(&self) -> bool {
+        matches!(self, FileError::Folder { .. })
+    }
+}
+
 /// A file being written under a temporary name beside its final path, for
 /// writers that open a path themselves (the MCAP and rerun writers).
 #[derive(Debug)]
@@ -82,7 +90,7 @@ impl PartialFile {
     }
 
     /// Where the file goes when complete.
-    pub fn final_path(&self) -> &Path {
+    pub(crate) fn final_path(&self) -> &Path {
         &self.final_path
     }
 

@@ -3,6 +3,8 @@
 //! tables ([`tables`]), all [`tortwin_engine::sink::Sink`]s, and files that
 //! appear only when complete ([`files`]).
 
+#![warn(unreachable_pub)]
+
 pub mod files;
 pub mod mcap_out;
 pub mod rerun_out;

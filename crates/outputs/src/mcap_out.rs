@@ -92,6 +92,17 @@ pub enum McapError {
     },
 }
 
+impl McapError {
+    /// Whether the user asked for the impossible (see
+    /// [`FileError::is_input`]).
+    pub fn is_input(&self) -> bool {
+        match self {
+            McapError::File(e) => e.is_input(),
+            _ => false,
+        }
+    }
+}
+
 /// Writes the twin's output channels to an MCAP file (see the module docs).
 pub struct McapSink {
     // Declared before `temp` so that on drop the writer closes the file

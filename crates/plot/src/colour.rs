@@ -17,8 +17,8 @@ impl Colour {
     pub const ORANGE: Colour = Colour(255, 127, 14);
     pub const GREEN: Colour = Colour(44, 160, 44);
     pub const RED: Colour = Colour(214, 39, 40);
-    pub const PURPLE: Colour = Colour(148, 103, 189);
-    pub const BROWN: Colour = Colour(140, 86, 75);
+    pub(crate) const PURPLE: Colour = Colour(148, 103, 189);
+    pub(crate) const BROWN: Colour = Colour(140, 86, 75);
 
     /// The `i`-th colour of a repeating palette (blue, orange, green, red, ...).
     pub fn palette(i: usize) -> Colour {

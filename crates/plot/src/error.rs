@@ -108,6 +108,16 @@ pub enum PlotError {
 }
 
 impl PlotError {
+    /// Whether the user asked for the impossible: a file in an output
+    /// folder that cannot be made (`tortwin_outputs::files::FileError::is_input`).
+    pub fn is_input(&self) -> bool {
+        match self {
+            PlotError::File(e) => e.is_input(),
+            PlotError::Unwritten { source, .. } => source.is_input(),
+            _ => false,
+        }
+    }
+
     /// `self` as the reason `path` was not written.
     pub(crate) fn for_file(self, path: &std::path::Path) -> PlotError {
         PlotError::Unwritten {

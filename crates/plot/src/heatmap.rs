@@ -142,7 +142,7 @@ impl Heatmap {
     /// The figure as SVG text. An error says what is wrong with the grid
     /// (its shape, the range, the highlighted cell, or a picture too small
     /// for it).
-    pub fn render_svg(&self) -> Result<String, PlotError> {
+    pub(crate) fn render_svg(&self) -> Result<String, PlotError> {
         let (lo, hi) = self.colour_range()?;
         let grid = self.layout(lo, hi)?;
         let mut svg = String::new();

@@ -98,7 +98,7 @@ impl ReferenceLine {
 /// Where a panel's legend goes, inside the plotting area.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum Legend {
-    /// The place of [`Legend::AUTO_ORDER`] that covers the least of the
+    /// The place of `Legend::AUTO_ORDER` that covers the least of the
     /// series, the reference lines and their labels.
     #[default]
     Auto,
@@ -116,7 +116,7 @@ pub enum Legend {
 
 impl Legend {
     /// The places [`Legend::Auto`] tries, in order of preference.
-    pub const AUTO_ORDER: [Legend; 8] = [
+    pub(crate) const AUTO_ORDER: [Legend; 8] = [
         Legend::UpperRight,
         Legend::LowerRight,
         Legend::UpperLeft,
@@ -163,11 +163,6 @@ impl Panel {
 
     pub fn y_range(mut self, min: f64, max: f64) -> Self {
         self.y_range = Some((min, max));
-        self
-    }
-
-    pub fn legend(mut self, legend: Legend) -> Self {
-        self.legend = legend;
         self
     }
 

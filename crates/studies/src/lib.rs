@@ -11,13 +11,19 @@
 //! - [`synth`]: synthetic recordings whose measurements come from the engine
 //!   run with a truth model (hidden effects), plus noise.
 //! - [`paper`]: the paper's scenarios (wayside and on-board application).
-//! - [`progress`]: how a long job reports progress to whoever shows it.
+//! - [`Progress`]: how a long job reports progress to whoever shows it.
+//! - [`Error`]: why a study or job stopped, and whether the input is at
+//!   fault ([`Error::is_input`]).
+
+#![warn(unreachable_pub)]
 
 pub mod discover;
+mod error;
 pub mod jobs;
 pub mod paper;
-pub mod progress;
+mod progress;
 pub mod strategy;
 pub mod synth;
 
+pub use error::{Error, Result};
 pub use progress::{Progress, Silent};

@@ -9,9 +9,8 @@
 //!   through [`Engine`], so the paper's figures check the replay engine and
 //!   the strategy machinery.
 
-use anyhow::Result;
-
 use crate::strategy::{self, Plan, Strategy, Traffic};
+use crate::Result;
 use tortwin_engine::sink::{FieldSnapshot, Sink, SnapshotKind};
 use tortwin_engine::{Engine, EngineOptions};
 use tortwin_model::config::ModelConfig;
@@ -88,7 +87,7 @@ const PASS_INTERVAL_NS: u64 = 100_000_000_000;
 const ORIGIN_NS: u64 = 1_600_000_000_000_000_000;
 
 impl WaysideScenario {
-    pub fn section(&self) -> Section {
+    pub(crate) fn section(&self) -> Section {
         Section {
             section_id: "paper-section-4".into(),
             length_m: self.length_m,

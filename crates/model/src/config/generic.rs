@@ -73,7 +73,7 @@ struct RawTerm {
 pub type TermError = (String, String);
 
 /// How a [`TermError`] reads where serde reports it (the state file).
-pub struct TermErrorText(TermError);
+pub(crate) struct TermErrorText(TermError);
 
 impl std::fmt::Display for TermErrorText {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
@@ -110,7 +110,7 @@ pub fn format_utc(unix_s: f64) -> String {
 
 impl GenericTerm {
     /// Parses one `[[effects.generic]]` table; the error names the key.
-    pub fn from_toml(value: toml::Value) -> Result<Self, TermError> {
+    pub(crate) fn from_toml(value: toml::Value) -> Result<Self, TermError> {
         let raw = RawTerm::deserialize(value).map_err(|e| {
             let message = e.message().to_string();
             // "unknown field `x`, expected one of ..." / "missing field `x`"
@@ -171,7 +171,7 @@ impl GenericTerm {
     }
 
     /// Ranges of the parameters: every one finite, a step's `f` >= 0.
-    pub fn check(&self) -> Result<(), TermError> {
+    pub(crate) fn check(&self) -> Result<(), TermError> {
         for (name, v) in self.params() {
             if !v.is_finite() {
                 return Err(err(name, format!("is {v}; a finite number is required")));

@@ -22,7 +22,7 @@ use crate::product::ProductParams;
 pub use generic::{format_utc, GenericTerm, TermEffect};
 
 /// The text of `config/default.toml`, compiled in.
-pub const DEFAULT_TOML: &str = include_str!("../../config/default.toml");
+pub(crate) const DEFAULT_TOML: &str = include_str!("../../config/default.toml");
 
 /// Steel and wheel profile (contact.md, "Hertz").
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]

@@ -75,6 +75,17 @@ pub enum RerunError {
     },
 }
 
+impl RerunError {
+    /// Whether the user asked for the impossible (see
+    /// [`FileError::is_input`]).
+    pub fn is_input(&self) -> bool {
+        match self {
+            RerunError::File(e) => e.is_input(),
+            _ => false,
+        }
+    }
+}
+
 /// Makes an SDK failure at `what` into a [`RerunError::Sdk`] for `path`;
 /// `what` is only formatted on failure (the sink logs at every event).
 pub(super) fn sdk_error<'a>(

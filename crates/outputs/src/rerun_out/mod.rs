@@ -22,7 +22,7 @@
 //!   row: the sink buffers it and sends it as columns
 //!   ([`RecordingStream::send_columns`]), a chunk per entity of
 //!   [`SERIES_CHUNK_ROWS`] values or, for the profiles, about
-//!   [`BATCH_CHUNK_BYTES`], and the rest at [`Sink::finish`]. A row logged
+//!   `BATCH_CHUNK_BYTES`, and the rest at [`Sink::finish`]. A row logged
 //!   through the SDK's batcher costs several times its data while it waits
 //!   (its own arrays and arrow types), and the batcher fell behind the
 //!   engine: the backlog, and the process, grew with the length of the run;
@@ -33,15 +33,15 @@
 //!   what a bar chart shows; the exact values are in the MCAP output): as
 //!   f64 they were the bulk of a long run's file once the heatmaps were not;
 //! - what still goes through the batcher (trains, heatmaps, static data) is
-//!   cut into chunks by size ([`BATCH_CHUNK_BYTES`], about the viewer's own
+//!   cut into chunks by size (`BATCH_CHUNK_BYTES`, about the viewer's own
 //!   chunk size, or [`SERIES_CHUNK_ROWS`] rows), not every 200 ms of wall
-//!   clock, and the SDK's queues hold at most [`MAX_BYTES_IN_FLIGHT`]: few
+//!   clock, and the SDK's queues hold at most `MAX_BYTES_IN_FLIGHT`: few
 //!   large chunks (the file's footer keeps an entry per chunk until the
 //!   end) and a file that does not depend on how fast the machine ran.
 //!
 //! The sink's own collections are bounded by the section: a style flag per
 //! series, the sites' quantities and rails, the applicators, up to
-//! [`SERIES_CHUNK_ROWS`] values per series, about [`BATCH_CHUNK_BYTES`] of
+//! [`SERIES_CHUNK_ROWS`] values per series, about `BATCH_CHUNK_BYTES` of
 //! profiles per quantity and track, and `K` rows of f16 per heatmap.
 //!
 //! # Entity layout
@@ -159,9 +159,9 @@ pub use error::RerunError;
 pub use sink::RerunSink;
 
 /// Name of the sequence timeline: wheel passes so far.
-pub const TIMELINE_WHEEL_PASS: &str = "wheel_pass";
+pub(crate) const TIMELINE_WHEEL_PASS: &str = "wheel_pass";
 /// Name of the timestamp timeline: the events' log_time.
-pub const TIMELINE_TIME: &str = "time";
+pub(crate) const TIMELINE_TIME: &str = "time";
 
 const MG_PER_KG: f64 = 1e6;
 const G_PER_KG: f64 = 1e3;
@@ -176,10 +176,10 @@ pub const SERIES_CHUNK_ROWS: usize = 4096;
 /// (the viewer's own chunk size, `ChunkStoreConfig::DEFAULT`), not every
 /// 200 ms: fewer, larger chunks, and a file that does not depend on how fast
 /// the machine ran.
-pub const BATCH_CHUNK_BYTES: u64 = 384 * 1024;
+pub(crate) const BATCH_CHUNK_BYTES: u64 = 384 * 1024;
 /// The most the SDK's queues hold before `log` waits for the writer (rerun's
 /// default is 100 MiB).
-pub const MAX_BYTES_IN_FLIGHT: u64 = 8 * 1024 * 1024;
+pub(crate) const MAX_BYTES_IN_FLIGHT: u64 = 8 * 1024 * 1024;
 
 /// What the rerun recording holds beyond the fixed layout.
 #[derive(Debug, Clone)]

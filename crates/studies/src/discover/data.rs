@@ -12,8 +12,7 @@
 use std::collections::HashMap;
 use std::path::Path;
 
-use anyhow::{bail, Context, Result};
-
+use crate::{Error, Result};
 use tortwin_engine::sink::{MeasurementOutput, Sink};
 use tortwin_engine::weather::WeatherState;
 use tortwin_engine::{Engine, EngineOptions};
@@ -22,7 +21,7 @@ use tortwin_recording::{
     BogiePosition, Direction, Event, EventKind, Passage, Quantity, Recording, Section,
 };
 
-pub const DAY_NS: u64 = 86_400_000_000_000;
+pub(crate) const DAY_NS: u64 = 86_400_000_000_000;
 const HOUR_NS: u64 = 3_600_000_000_000;
 
 /// One measurement of the recording.
@@ -200,36 +199,39 @@ impl Dataset {
         for event in &self.events {
             engine
                 .push(event.clone(), &mut sink)
-                .with_context(|| format!("replaying {}", self.path.display()))?;
+                .map_err(|source| Error::Replay {
+                    what: self.path.display().to_string(),
+                    source,
+                })?;
         }
         engine.finish(&mut sink, self.unknown_topic_messages)?;
         if let Some(k) = sink.simulated.iter().position(|v| !v.is_finite()) {
-            bail!(
-                "the engine gave no finite simulated value for measurement {} of {}",
-                self.rows[k].index_in_file,
-                self.path.display()
-            );
+            return Err(Error::NotSimulated {
+                file: self.path.clone(),
+                log_time_ns: self.rows[k].log_time_ns,
+                index_in_file: Some(self.rows[k].index_in_file),
+            });
         }
         Ok(sink.simulated)
     }
 
     /// The weather in effect at `log_time_ns` (the defaults before the first
     /// message).
-    pub fn weather_at(&self, log_time_ns: u64) -> tortwin_recording::Weather {
+    pub(crate) fn weather_at(&self, log_time_ns: u64) -> tortwin_recording::Weather {
         self.weather.state(log_time_ns).current
     }
 
     /// The section's name of a rail.
-    pub fn rail_name(&self, rail: usize) -> &str {
+    pub(crate) fn rail_name(&self, rail: usize) -> &str {
         self.section.rails.get(rail).map_or("?", String::as_str)
     }
 
-    pub fn site_name(&self, site: usize) -> &str {
+    pub(crate) fn site_name(&self, site: usize) -> &str {
         self.section.sites.get(site).map_or("?", |s| s.id.as_str())
     }
 
     /// A covariate by name.
-    pub fn covariate(&self, name: &str) -> Option<&Covariate> {
+    pub(crate) fn covariate(&self, name: &str) -> Option<&Covariate> {
         self.covariates.iter().find(|c| c.name == name)
     }
 }

@@ -10,7 +10,7 @@ use tortwin_model::config::{format_utc, GenericTerm, TermEffect};
 use tortwin_model::generic::{ActsOn, Driver, Form};
 
 /// One sentence an engineer can act on.
-pub fn term(t: &GenericTerm, data: &Dataset, drivers: &Drivers) -> String {
+pub(super) fn term(t: &GenericTerm, data: &Dataset, drivers: &Drivers) -> String {
     let on_rail = t
         .rail
         .as_ref()
@@ -135,7 +135,7 @@ pub struct Location {
 /// The site and rail with the largest excess over the noise, and within it
 /// the contiguous time window whose residuals add up furthest from zero
 /// (a maximum-sum run, either sign).
-pub fn locate(data: &Dataset, residual: &[f64], noise: f64) -> Option<Location> {
+pub(super) fn locate(data: &Dataset, residual: &[f64], noise: f64) -> Option<Location> {
     let sites = data.section.sites.len();
     let rails = data.section.rails.len();
     let mut excess = vec![0.0; sites * rails];

@@ -20,7 +20,7 @@ use tortwin_recording::BogiePosition;
 
 /// Continuous covariates with at most this many distinct values are binned
 /// by value; others by deciles.
-pub const MAX_BINS: usize = 10;
+pub(super) const MAX_BINS: usize = 10;
 
 /// One covariate's share of the residual variance.
 #[derive(Debug, Clone, Serialize)]
@@ -46,13 +46,13 @@ pub struct BinMean {
 
 /// The bins of a covariate: a bin index per row, and per bin its label and
 /// representative x.
-pub struct Bins {
-    pub index: Vec<usize>,
-    pub labels: Vec<String>,
-    pub x: Vec<f64>,
+pub(super) struct Bins {
+    pub(super) index: Vec<usize>,
+    pub(super) labels: Vec<String>,
+    pub(super) x: Vec<f64>,
 }
 
-pub fn bins(c: &Covariate) -> Bins {
+pub(super) fn bins(c: &Covariate) -> Bins {
     match &c.values {
         Values::Categorical { labels, codes } => {
             let used: Vec<u32> = {
@@ -165,7 +165,7 @@ fn short(v: f64) -> String {
 /// eta² of `residual` over the bins of `c`.
 ///
 /// Rows whose residual is not finite (gross outliers) are left out.
-pub fn score(c: &Covariate, residual: &[f64]) -> CovariateScore {
+pub(super) fn score(c: &Covariate, residual: &[f64]) -> CovariateScore {
     let b = bins(c);
     let k = b.labels.len();
     let n = residual.iter().filter(|r| r.is_finite()).count();
@@ -212,7 +212,7 @@ pub fn score(c: &Covariate, residual: &[f64]) -> CovariateScore {
 }
 
 /// Every covariate's score, the strongest first.
-pub fn rank(data: &Dataset, residual: &[f64]) -> Vec<CovariateScore> {
+pub(super) fn rank(data: &Dataset, residual: &[f64]) -> Vec<CovariateScore> {
     let mut scores: Vec<CovariateScore> =
         data.covariates.iter().map(|c| score(c, residual)).collect();
     scores.sort_by(|a, b| b.eta2_adjusted.total_cmp(&a.eta2_adjusted));
@@ -226,7 +226,7 @@ pub fn rank(data: &Dataset, residual: &[f64]) -> Vec<CovariateScore> {
 /// measurements' noise: `sigma = sqrt(mean(diff²) / 2)`. Whatever the model
 /// gets wrong changes little from one such axle to the next and mostly
 /// cancels. `None` without such pairs.
-pub fn noise_estimate(data: &Dataset, residual: &[f64]) -> Option<f64> {
+pub(super) fn noise_estimate(data: &Dataset, residual: &[f64]) -> Option<f64> {
     let mut groups = neighbours(data);
     let mut sum = 0.0;
     let mut count = 0usize;
@@ -241,13 +241,15 @@ pub fn noise_estimate(data: &Dataset, residual: &[f64]) -> Option<f64> {
 }
 
 /// A group of [`neighbours`]: train, site, rail, quantity, bogie position.
-pub type NeighbourKey = (usize, usize, usize, u8, u8);
+pub(super) type NeighbourKey = (usize, usize, usize, u8, u8);
 
 /// The axle measurements that see almost the same rail: one group per
 /// train, site, rail, quantity and bogie position, each a list of (axle,
 /// row) in axle order. The noise estimate and the outlier screen compare
 /// within these.
-pub fn neighbours(data: &Dataset) -> std::collections::BTreeMap<NeighbourKey, Vec<(usize, usize)>> {
+pub(super) fn neighbours(
+    data: &Dataset,
+) -> std::collections::BTreeMap<NeighbourKey, Vec<(usize, usize)>> {
     let mut groups: std::collections::BTreeMap<_, Vec<(usize, usize)>> =
         std::collections::BTreeMap::new();
     for (k, row) in data.rows.iter().enumerate() {

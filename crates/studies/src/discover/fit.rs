@@ -30,7 +30,6 @@ use std::collections::HashMap;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
 
-use anyhow::Result;
 use argmin::core::{
     CostFunction, Executor, IterState, Problem, Solver, State, TerminationReason,
     TerminationStatus, KV,
@@ -42,6 +41,8 @@ use serde::Serialize;
 
 use super::data::Dataset;
 use super::space::GenericSlot;
+use crate::error::optimiser;
+use crate::{Error, Result};
 use tortwin_model::config::{Effects, ModelConfig};
 use tortwin_model::effects::Named;
 
@@ -49,14 +50,14 @@ use tortwin_model::effects::Named;
 /// `tortwin_model::effects::EFFECTS`, gives parameters, ranges and
 /// transforms), and any generic term of its space ([`GenericSlot`]).
 #[derive(Debug, Clone, PartialEq, Eq, Hash)]
-pub enum Candidate {
+pub(super) enum Candidate {
     Named(Named),
     Generic(GenericSlot),
 }
 
 impl Candidate {
     /// Every named effect, in the order of effects.md.
-    pub const ALL: [Candidate; 6] = [
+    pub(super) const ALL: [Candidate; 6] = [
         Candidate::Named(Named::RailAgeing),
         Candidate::Named(Named::RainWashoff),
         Candidate::Named(Named::TemperatureConsumption),
@@ -66,7 +67,7 @@ impl Candidate {
     ];
 
     /// The effect's name in effects.md (`generic` for a generic term).
-    pub fn name(&self) -> &'static str {
+    pub(super) fn name(&self) -> &'static str {
         match self {
             Candidate::Named(n) => n.name(),
             Candidate::Generic(_) => "generic",
@@ -74,49 +75,33 @@ impl Candidate {
     }
 
     /// The name, or a generic term's label.
-    pub fn label(&self) -> String {
+    pub(super) fn label(&self) -> String {
         match self {
             Candidate::Generic(g) => g.label(),
             c => c.name().to_string(),
         }
     }
 
-    pub fn is_generic(&self) -> bool {
+    pub(super) fn is_generic(&self) -> bool {
         matches!(self, Candidate::Generic(_))
     }
 
-    pub fn param_names(&self) -> Vec<&'static str> {
+    pub(super) fn param_names(&self) -> Vec<&'static str> {
         match self {
             Candidate::Named(n) => n.spec().params.iter().map(|p| p.name).collect(),
             Candidate::Generic(g) => vec![g.param_name()],
         }
     }
 
-    pub fn dims(&self) -> usize {
+    pub(super) fn dims(&self) -> usize {
         match self {
             Candidate::Named(n) => n.spec().params.len(),
             Candidate::Generic(_) => 1,
         }
     }
 
-    /// The searched range of each parameter, for the report.
-    pub fn bounds(&self) -> Vec<(f64, f64, &'static str)> {
-        match self {
-            Candidate::Named(n) => n
-                .spec()
-                .params
-                .iter()
-                .map(|p| (p.search.0, p.search.1, p.transform.describe()))
-                .collect(),
-            Candidate::Generic(g) => {
-                let (lo, hi) = g.bounds();
-                vec![(lo, hi, "linear")]
-            }
-        }
-    }
-
     /// Parameter `i` at the search coordinate `u` in [0, 1].
-    pub fn param(&self, i: usize, u: f64) -> f64 {
+    pub(super) fn param(&self, i: usize, u: f64) -> f64 {
         let u = u.clamp(0.0, 1.0);
         match self {
             Candidate::Named(n) => n.spec().params.get(i).map_or(f64::NAN, |p| p.at(u)),
@@ -128,7 +113,7 @@ impl Candidate {
     }
 
     /// The inverse of [`Candidate::param`] (clamped into [0, 1]).
-    pub fn unit(&self, i: usize, p: f64) -> f64 {
+    pub(super) fn unit(&self, i: usize, p: f64) -> f64 {
         match self {
             Candidate::Named(n) => n.spec().params.get(i).map_or(0.0, |param| param.unit_of(p)),
             Candidate::Generic(g) => {
@@ -144,7 +129,7 @@ impl Candidate {
     }
 
     /// Switches the effect on in `effects` with `params`.
-    pub fn set(&self, effects: &mut Effects, params: &[f64]) {
+    pub(super) fn set(&self, effects: &mut Effects, params: &[f64]) {
         match self {
             Candidate::Named(n) => (n.spec().set)(effects, params),
             Candidate::Generic(g) => g.set(effects, params.first().copied().unwrap_or(f64::NAN)),
@@ -152,7 +137,7 @@ impl Candidate {
     }
 
     /// Switches the effect off in `effects`.
-    pub fn unset(&self, effects: &mut Effects) {
+    pub(super) fn unset(&self, effects: &mut Effects) {
         match self {
             Candidate::Named(n) => (n.spec().unset)(effects),
             Candidate::Generic(g) => effects.generic.retain(|t| !g.is(t)),
@@ -160,7 +145,7 @@ impl Candidate {
     }
 
     /// The effect's parameters in `effects`, `None` when it is off.
-    pub fn get(&self, effects: &Effects) -> Option<Vec<f64>> {
+    pub(super) fn get(&self, effects: &Effects) -> Option<Vec<f64>> {
         match self {
             Candidate::Named(n) => (n.spec().get)(effects),
             Candidate::Generic(g) => g.get(effects).map(|p| vec![p]),
@@ -168,7 +153,7 @@ impl Candidate {
     }
 
     /// Parameters as name -> value, for the report.
-    pub fn named(&self, params: &[f64]) -> std::collections::BTreeMap<String, f64> {
+    pub(super) fn named(&self, params: &[f64]) -> std::collections::BTreeMap<String, f64> {
         self.param_names()
             .iter()
             .zip(params)
@@ -181,18 +166,18 @@ impl Candidate {
 /// base configuration: one candidate, or every accepted effect at a joint
 /// refit. The search vector is the concatenation of their coordinates.
 #[derive(Debug, Clone)]
-pub struct Space {
-    pub base: ModelConfig,
-    pub slots: Vec<Candidate>,
+pub(super) struct Space {
+    pub(super) base: ModelConfig,
+    pub(super) slots: Vec<Candidate>,
 }
 
 impl Space {
-    pub fn dims(&self) -> usize {
+    pub(super) fn dims(&self) -> usize {
         self.slots.iter().map(|c| c.dims()).sum()
     }
 
     /// Per slot, its parameters at `u` (clamped into the box).
-    pub fn params(&self, u: &[f64]) -> Vec<Vec<f64>> {
+    pub(super) fn params(&self, u: &[f64]) -> Vec<Vec<f64>> {
         let mut k = 0;
         self.slots
             .iter()
@@ -206,7 +191,7 @@ impl Space {
             .collect()
     }
 
-    pub fn config(&self, u: &[f64]) -> ModelConfig {
+    pub(super) fn config(&self, u: &[f64]) -> ModelConfig {
         let mut cfg = self.base.clone();
         for (c, p) in self.slots.iter().zip(self.params(u)) {
             c.set(&mut cfg.effects, &p);
@@ -216,7 +201,7 @@ impl Space {
 
     /// The search coordinates of the slots' parameters in `cfg` (0.5 for an
     /// effect that is off).
-    pub fn units_of(&self, cfg: &ModelConfig) -> Vec<f64> {
+    pub(super) fn units_of(&self, cfg: &ModelConfig) -> Vec<f64> {
         self.slots
             .iter()
             .flat_map(|c| {
@@ -245,22 +230,22 @@ pub enum Blocking {
 /// One evaluation: SSE in total, per day (indexed like [`Dataset::days`])
 /// and per measured site (like [`Evaluator::sites`]).
 #[derive(Debug, Clone)]
-pub struct Evaluation {
-    pub sse: f64,
-    pub sse_by_day: Vec<f64>,
-    pub sse_by_site: Vec<f64>,
+pub(super) struct Evaluation {
+    pub(super) sse: f64,
+    pub(super) sse_by_day: Vec<f64>,
+    pub(super) sse_by_site: Vec<f64>,
 }
 
 impl Evaluation {
     /// SSE over every day but `excluded` (an index into the days).
-    pub fn sse_without(&self, excluded: Option<(Blocking, usize)>) -> f64 {
+    pub(super) fn sse_without(&self, excluded: Option<(Blocking, usize)>) -> f64 {
         match excluded {
             None => self.sse,
             Some((blocking, j)) => self.sse - self.by(blocking)[j],
         }
     }
 
-    pub fn by(&self, blocking: Blocking) -> &[f64] {
+    pub(super) fn by(&self, blocking: Blocking) -> &[f64] {
         match blocking {
             Blocking::Day => &self.sse_by_day,
             Blocking::Site => &self.sse_by_site,
@@ -269,16 +254,16 @@ impl Evaluation {
 }
 
 /// Runs the engine for a configuration, with a cache and a run counter.
-pub struct Evaluator<'a> {
-    pub data: &'a Dataset,
+pub(super) struct Evaluator<'a> {
+    pub(super) data: &'a Dataset,
     /// Row -> index into `data.days`.
     day_slot: Vec<usize>,
     /// The sites with measurements, ascending (indices into the section's).
-    pub sites: Vec<usize>,
+    pub(super) sites: Vec<usize>,
     /// Row -> index into `sites`.
     site_slot: Vec<usize>,
     /// Rows that count in the SSE (false: treated as a gross outlier).
-    pub active: Vec<bool>,
+    pub(super) active: Vec<bool>,
     cache: Mutex<HashMap<Vec<u64>, Arc<Evaluation>>>,
     runs: AtomicUsize,
     /// Called after every engine run with the number of runs so far.
@@ -287,7 +272,7 @@ pub struct Evaluator<'a> {
 
 impl<'a> Evaluator<'a> {
     /// `active`: the rows that count (every row when empty).
-    pub fn new(
+    pub(super) fn new(
         data: &'a Dataset,
         active: Vec<bool>,
         on_run: impl Fn(usize) + Send + Sync + 'a,
@@ -323,7 +308,7 @@ impl<'a> Evaluator<'a> {
     }
 
     /// The blocks of `blocking`, as labels.
-    pub fn blocks(&self, blocking: Blocking) -> Vec<String> {
+    pub(super) fn blocks(&self, blocking: Blocking) -> Vec<String> {
         match blocking {
             Blocking::Day => self.data.days.iter().map(|d| format!("day {d}")).collect(),
             Blocking::Site => self
@@ -335,17 +320,17 @@ impl<'a> Evaluator<'a> {
     }
 
     /// Engine runs so far (cache misses).
-    pub fn runs(&self) -> usize {
+    pub(super) fn runs(&self) -> usize {
         self.runs.load(Ordering::Relaxed)
     }
 
     /// The rows that count.
-    pub fn n_active(&self) -> usize {
+    pub(super) fn n_active(&self) -> usize {
         self.active.iter().filter(|a| **a).count()
     }
 
     /// The simulated value of every row with `cfg`: one engine run, counted.
-    pub fn simulate(&self, cfg: &ModelConfig) -> Result<Vec<f64>> {
+    pub(super) fn simulate(&self, cfg: &ModelConfig) -> Result<Vec<f64>> {
         let simulated = self.data.simulate(cfg)?;
         let n = self.runs.fetch_add(1, Ordering::Relaxed) + 1;
         (self.on_run)(n);
@@ -354,7 +339,7 @@ impl<'a> Evaluator<'a> {
 
     /// Residuals (measured − simulated) of `cfg` by one engine run, and
     /// their SSE over the active rows (cached for [`Evaluator::evaluate`]).
-    pub fn residuals(&self, cfg: &ModelConfig) -> Result<(Vec<f64>, Arc<Evaluation>)> {
+    pub(super) fn residuals(&self, cfg: &ModelConfig) -> Result<(Vec<f64>, Arc<Evaluation>)> {
         let simulated = self.simulate(cfg)?;
         let residual: Vec<f64> = self
             .data
@@ -385,12 +370,12 @@ impl<'a> Evaluator<'a> {
     }
 
     /// SSE of `cfg` in total and per day; cached by the exact parameters.
-    pub fn evaluate(&self, cfg: &ModelConfig) -> Result<Arc<Evaluation>> {
+    pub(super) fn evaluate(&self, cfg: &ModelConfig) -> Result<Arc<Evaluation>> {
         Ok(self.evaluate_counted(cfg)?.0)
     }
 
     /// [`Evaluator::evaluate`], and whether it ran the engine (a cache miss).
-    pub fn evaluate_counted(&self, cfg: &ModelConfig) -> Result<(Arc<Evaluation>, bool)> {
+    pub(super) fn evaluate_counted(&self, cfg: &ModelConfig) -> Result<(Arc<Evaluation>, bool)> {
         if let Some(hit) = self.lock().get(&cache_key(cfg)) {
             return Ok((hit.clone(), false));
         }
@@ -432,17 +417,17 @@ fn cache_key(cfg: &ModelConfig) -> Vec<u64> {
 
 /// The result of a fit.
 #[derive(Debug, Clone)]
-pub struct Fit {
+pub(super) struct Fit {
     /// The optimum's search coordinates.
-    pub u: Vec<f64>,
-    pub eval: Arc<Evaluation>,
+    pub(super) u: Vec<f64>,
+    pub(super) eval: Arc<Evaluation>,
     /// Engine runs the fit cost (cache misses).
-    pub runs: usize,
+    pub(super) runs: usize,
 }
 
 /// How a fit starts.
 #[derive(Debug, Clone)]
-pub enum Start {
+pub(super) enum Start {
     /// A coarse grid over the whole box first.
     Fresh,
     /// From these coordinates (an earlier optimum).
@@ -456,7 +441,7 @@ struct Objective<'e, 'a> {
     ev: &'e Evaluator<'a>,
     space: &'e Space,
     excluded: Option<(Blocking, usize)>,
-    error: Mutex<Option<anyhow::Error>>,
+    error: Mutex<Option<Error>>,
     /// Every point evaluated: (u clamped, eval).
     seen: Mutex<Vec<(Vec<f64>, Arc<Evaluation>)>>,
     /// Engine runs this objective caused (cache misses).
@@ -581,7 +566,7 @@ const FOLD: Limits = Limits {
 };
 
 /// Fits `space` on every block but `excluded`.
-pub fn fit(
+pub(super) fn fit(
     ev: &Evaluator<'_>,
     space: &Space,
     start: Start,
@@ -697,9 +682,7 @@ fn fit_with(
 
 fn finish(obj: &Objective<'_, '_>) -> Result<Fit> {
     obj.take_error()?;
-    let (u, eval) = obj
-        .best()
-        .ok_or_else(|| anyhow::anyhow!("a fit evaluated no point"))?;
+    let (u, eval) = obj.best().ok_or(Error::NoFitPoint)?;
     Ok(Fit {
         u,
         eval,
@@ -711,7 +694,8 @@ fn brent(obj: &Objective<'_, '_>, lo: f64, hi: f64) -> Result<f64> {
     let solver = UntilFlat::new(BrentOpt::new(lo, hi).set_tolerance(1e-8, BRENT_TOL), obj);
     let result = Executor::new(Scalar(obj), solver)
         .configure(|state| state.max_iters(BRENT_MAX_ITERS))
-        .run()?;
+        .run()
+        .map_err(optimiser)?;
     obj.take_error()?;
     Ok(result
         .state()
@@ -728,10 +712,13 @@ fn nelder_mead(obj: &Objective<'_, '_>, u0: &[f64], step: f64, max_iters: u64) -
         v[i] += if u0[i] + step <= 1.0 { step } else { -step };
         simplex.push(v);
     }
-    let solver = NelderMead::new(simplex).with_sd_tolerance(obj.scale * NM_SD_REL)?;
+    let solver = NelderMead::new(simplex)
+        .with_sd_tolerance(obj.scale * NM_SD_REL)
+        .map_err(optimiser)?;
     Executor::new(Vector(obj), UntilFlat::new(solver, obj))
         .configure(|state| state.max_iters(max_iters))
-        .run()?;
+        .run()
+        .map_err(optimiser)?;
     obj.take_error()
 }
 
@@ -845,7 +832,7 @@ pub struct Fold {
 /// and take the held-out block's SSE at the refitted parameters. The folds
 /// run in parallel; every run of one fold serves the others through the
 /// cache.
-pub fn cross_validate(
+pub(super) fn cross_validate(
     ev: &Evaluator<'_>,
     space: &Space,
     u_star: &[f64],
@@ -886,7 +873,11 @@ mod tests {
                     let p = c.param(i, u);
                     assert!((c.unit(i, p) - u).abs() < 1e-9, "{c:?} {u} {p}");
                 }
-                let (lo, hi, _) = c.bounds()[i];
+                // The searched range of the parameter.
+                let (lo, hi) = match &c {
+                    Candidate::Named(n) => n.spec().params[i].search,
+                    Candidate::Generic(g) => g.bounds(),
+                };
                 assert!((c.param(i, 0.0) - lo).abs() < 1e-9 * hi.abs().max(1.0));
                 assert!((c.param(i, 1.0) - hi).abs() < 1e-9 * hi.abs().max(1.0));
             }

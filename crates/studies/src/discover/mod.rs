@@ -8,12 +8,12 @@
 //!    events (distance downstream of the applicator, time since the site
 //!    was last touched, rain in that time, air temperature, train speed,
 //!    leading/trailing axle, rail, wheel load, time of day, day, ...);
-//!    [`diagnose::rank`] ranks them by the share of the residual variance
-//!    they explain (eta²). [`diagnose::noise_estimate`] estimates the
+//!    `diagnose::rank` ranks them by the share of the residual variance
+//!    they explain (eta²). `diagnose::noise_estimate` estimates the
 //!    measurement noise from axle-to-axle differences, independently of
 //!    the fit.
 //! 3. **Candidates.** Every effect of ../shared/spec/effects.md not yet in
-//!    the model is fitted by re-running the engine ([`fit`]), the candidates
+//!    the model is fitted by re-running the engine (`fit.rs`), the candidates
 //!    in parallel (rayon), and judged by two criteria: the Bayesian
 //!    information criterion must drop by more than
 //!    [`Options::bic_threshold`] (`ΔBIC = n ln(SSE1/SSE0) + Δk ln n`); it
@@ -36,23 +36,22 @@
 //! first (step 0).
 
 pub mod data;
-pub mod describe;
-pub mod diagnose;
-pub mod fit;
-pub mod report;
-pub mod screen;
-pub mod space;
+mod describe;
+mod diagnose;
+mod fit;
+pub(crate) mod report;
+mod screen;
+mod space;
 
 use std::collections::{BTreeMap, HashMap};
 use std::time::Instant;
 
-use anyhow::Result;
 use rayon::prelude::*;
 use serde::Serialize;
 
+use crate::Result;
 use data::Dataset;
-use diagnose::CovariateScore;
-use fit::{Blocking, Candidate, CrossValidation, Evaluator, Space, Start};
+use fit::{Candidate, Evaluator, Space, Start};
 use space::Drivers;
 use tortwin_model::config::{ModelConfig, TermEffect};
 use tortwin_model::effects::Named;
@@ -87,6 +86,11 @@ impl Default for Options {
 }
 
 pub use crate::progress::{Progress, Silent};
+// What a `Discovery` holds, from the files that compute it.
+pub use describe::Location;
+pub use diagnose::{BinMean, CovariateScore};
+pub use fit::{Blocking, CrossValidation, Fold};
+pub use screen::{Outliers, Screened, Screening};
 
 /// An effect switched on, with its parameters by name (interfaces.md,
 /// report.json): a named effect, or a generic term with its acts_on,
@@ -112,7 +116,7 @@ pub struct EffectParams {
 
 impl EffectParams {
     /// Whether two entries are the same effect (whatever their parameters).
-    pub fn same_effect(&self, other: &EffectParams) -> bool {
+    pub(crate) fn same_effect(&self, other: &EffectParams) -> bool {
         self.name == other.name
             && self.acts_on == other.acts_on
             && self.driver == other.driver
@@ -283,7 +287,7 @@ pub struct Discovery {
 
 /// The effects on in `cfg`, with their parameters: the named ones in the
 /// order of effects.md, then the generic terms in their order.
-pub fn effects_of(cfg: &ModelConfig) -> Vec<EffectParams> {
+pub(crate) fn effects_of(cfg: &ModelConfig) -> Vec<EffectParams> {
     let mut list: Vec<EffectParams> = Candidate::ALL
         .iter()
         .filter_map(|c| {
@@ -1320,7 +1324,7 @@ fn verdict(
 }
 
 /// A parameter value for people: 4 significant digits.
-pub fn fmt_param(v: f64) -> String {
+pub(crate) fn fmt_param(v: f64) -> String {
     if v == 0.0 {
         "0".into()
     } else if v.abs() >= 1e4 || v.abs() < 1e-3 {

@@ -15,14 +15,15 @@
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
-use anyhow::{anyhow, Context, Result};
-use rerun::{EntityPath, EntityPathPart, RecordingStreamBuilder, TimeCell};
+use rerun::{EntityPath, EntityPathPart, RecordingStreamBuilder, RecordingStreamError, TimeCell};
 
 use super::data::{Dataset, Values};
 use super::diagnose::{self, CovariateScore};
 use super::fit::CrossValidation;
 use super::{fmt_param, Discovery, EffectParams};
-use tortwin_outputs::files::write_atomically;
+use crate::{Error, Result};
+use tortwin_outputs::files::{write_atomically, PartialFile};
+use tortwin_outputs::rerun_out::RerunError;
 use tortwin_plot::{Colour, LinePlot, Panel, ReferenceLine, Series};
 use tortwin_recording::Quantity;
 
@@ -31,9 +32,12 @@ const MAX_DOTS: usize = 2500;
 
 /// Writes every file of the report into `dir` (created if needed); returns
 /// the paths written.
-pub fn write(dir: &Path, data: &Dataset, d: &Discovery) -> Result<Vec<PathBuf>> {
-    std::fs::create_dir_all(dir)
-        .with_context(|| format!("cannot create the report directory {}", dir.display()))?;
+pub(crate) fn write(dir: &Path, data: &Dataset, d: &Discovery) -> Result<Vec<PathBuf>> {
+    std::fs::create_dir_all(dir).map_err(|source| Error::Io {
+        what: "cannot create the report directory",
+        path: dir.to_path_buf(),
+        source,
+    })?;
     let mut written = Vec::new();
     let mut put = |name: &str, bytes: &[u8]| -> Result<()> {
         let path = dir.join(name);
@@ -42,7 +46,10 @@ pub fn write(dir: &Path, data: &Dataset, d: &Discovery) -> Result<Vec<PathBuf>> 
         Ok(())
     };
 
-    let mut json = serde_json::to_string_pretty(d).context("serializing report.json")?;
+    let mut json = serde_json::to_string_pretty(d).map_err(|source| Error::Json {
+        what: "report.json",
+        source,
+    })?;
     json.push('\n');
     put("report.json", json.as_bytes())?;
     put("model.toml", model_toml(d).as_bytes())?;
@@ -86,7 +93,7 @@ pub fn write(dir: &Path, data: &Dataset, d: &Discovery) -> Result<Vec<PathBuf>> 
 }
 
 /// The final configuration, whole, with a header saying where it comes from.
-pub fn model_toml(d: &Discovery) -> String {
+pub(crate) fn model_toml(d: &Discovery) -> String {
     let mut text = String::new();
     let _ = writeln!(
         text,
@@ -593,64 +600,69 @@ fn entity(parts: &[&str]) -> EntityPath {
 }
 
 /// The residuals before and after as a rerun recording: one time series per
-/// site, rail, quantity and model, on the `time` timeline.
+/// site, rail, quantity and model, on the `time` timeline. Written under a
+/// temporary name beside `path`, renamed when complete (as every output).
 fn write_rrd(path: &Path, data: &Dataset, d: &Discovery, md: &str) -> Result<()> {
-    let file_name = path
-        .file_name()
-        .ok_or_else(|| anyhow!("{}: not a file name", path.display()))?;
-    let dir = path
-        .parent()
-        .filter(|p| !p.as_os_str().is_empty())
-        .unwrap_or(Path::new("."));
-    let temp = dir.join(format!(
-        ".{}.partial-{}",
-        file_name.to_string_lossy(),
-        std::process::id()
-    ));
-    let result = (|| -> Result<()> {
-        let application_id = rerun::ApplicationId::try_new("tortwin")
-            .map_err(|e| anyhow!("rerun output {}: {e}", path.display()))?;
-        let rec = RecordingStreamBuilder::new(application_id)
-            .recording_name("discover residuals")
-            .enabled(true)
-            .save(&temp)
-            .with_context(|| format!("creating rerun output {}", temp.display()))?;
-        rec.set_log_time_enabled(false);
-        rec.set_log_tick_enabled(false);
-        rec.log_static("report", &rerun::TextDocument::from_markdown(md))?;
-        let mut styled = std::collections::HashSet::new();
-        for (i, row) in data.rows.iter().enumerate() {
-            let site = data.site_name(row.site);
-            let rail = data.rail_name(row.rail);
-            let quantity = row.quantity.as_str();
-            let time_ns = i64::try_from(row.log_time_ns)
-                .with_context(|| format!("log_time {} ns out of range", row.log_time_ns))?;
-            rec.set_time("time", TimeCell::from_timestamp_nanos_since_epoch(time_ns));
-            for (which, residual, colour) in [
-                ("before", &d.residual_before, [255, 127, 14]),
-                ("after", &d.residual_after, [31, 119, 180]),
-            ] {
-                let path = entity(&["residuals", site, rail, quantity, which]);
-                if styled.insert(path.clone()) {
-                    rec.log_static(
-                        path.clone(),
-                        &rerun::SeriesPoints::new()
-                            .with_names([format!("{site} {rail} {quantity} residual {which}")])
-                            .with_colors([rerun::Color::from_rgb(colour[0], colour[1], colour[2])])
-                            .with_marker_sizes([2.0]),
-                    )?;
-                }
-                rec.log(path, &rerun::Scalars::single(residual[i]))?;
+    let sdk = |what: &str, source: RecordingStreamError| RerunError::Sdk {
+        path: path.to_path_buf(),
+        what: what.to_owned(),
+        source: Box::new(source),
+    };
+    let mut file = PartialFile::beside(path)?;
+    let application_id =
+        rerun::ApplicationId::try_new("tortwin").map_err(|source| RerunError::ApplicationId {
+            path: path.to_path_buf(),
+            id: "tortwin".to_owned(),
+            source,
+        })?;
+    // Declared after `file`: dropped first on an error, the stream closes
+    // the temporary file before `file` deletes it.
+    let rec = RecordingStreamBuilder::new(application_id)
+        .recording_name("discover residuals")
+        .enabled(true)
+        .save(file.temp_path())
+        .map_err(|e| sdk("starting the recording", e))?;
+    rec.set_log_time_enabled(false);
+    rec.set_log_tick_enabled(false);
+    rec.log_static("report", &rerun::TextDocument::from_markdown(md))
+        .map_err(|e| sdk("the report", e))?;
+    let mut styled = std::collections::HashSet::new();
+    for (i, row) in data.rows.iter().enumerate() {
+        let site = data.site_name(row.site);
+        let rail = data.rail_name(row.rail);
+        let quantity = row.quantity.as_str();
+        let time_ns = i64::try_from(row.log_time_ns).map_err(|_| RerunError::OutOfRange {
+            path: path.to_path_buf(),
+            what: "log_time",
+            value: row.log_time_ns,
+        })?;
+        rec.set_time("time", TimeCell::from_timestamp_nanos_since_epoch(time_ns));
+        for (which, residual, colour) in [
+            ("before", &d.residual_before, [255, 127, 14]),
+            ("after", &d.residual_after, [31, 119, 180]),
+        ] {
+            let entity = entity(&["residuals", site, rail, quantity, which]);
+            if styled.insert(entity.clone()) {
+                rec.log_static(
+                    entity.clone(),
+                    &rerun::SeriesPoints::new()
+                        .with_names([format!("{site} {rail} {quantity} residual {which}")])
+                        .with_colors([rerun::Color::from_rgb(colour[0], colour[1], colour[2])])
+                        .with_marker_sizes([2.0]),
+                )
+                .map_err(|e| sdk(&format!("the style of {entity}"), e))?;
             }
+            rec.log(entity, &rerun::Scalars::single(residual[i]))
+                .map_err(|e| sdk(&format!("{site} {rail} {quantity} residual {which}"), e))?;
         }
-        rec.flush_blocking()
-            .with_context(|| format!("flushing rerun output {}", temp.display()))?;
-        drop(rec);
-        std::fs::rename(&temp, path)
-            .with_context(|| format!("renaming {} to {}", temp.display(), path.display()))
-    })();
-    if result.is_err() {
-        let _ = std::fs::remove_file(&temp);
     }
-    result
+    rec.flush_blocking().map_err(|source| RerunError::Flush {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    // Dropping the only handle joins the SDK's threads: the file is closed
+    // before it is renamed.
+    drop(rec);
+    file.commit()?;
+    Ok(())
 }

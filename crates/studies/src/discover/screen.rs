@@ -25,13 +25,13 @@
 
 use std::collections::BTreeMap;
 
-use anyhow::Result;
 use rayon::prelude::*;
 use serde::Serialize;
 
 use super::data::Dataset;
 use super::fit::{Candidate, Evaluator, Start};
 use super::space::{Drivers, GenericSlot, Reach, Scope};
+use crate::Result;
 use tortwin_model::config::ModelConfig;
 use tortwin_model::generic::{ActsOn, Driver, FormKind};
 use tortwin_recording::Quantity;
@@ -81,7 +81,7 @@ pub struct Outliers {
 /// almost the same rail, so whatever the model gets wrong cancels and a
 /// deviation of many sigma is the sensor's, not the track's. Measurements
 /// without such neighbours (tribometer readings) are kept.
-pub fn outliers(data: &Dataset, residual: &[f64]) -> Outliers {
+pub(super) fn outliers(data: &Dataset, residual: &[f64]) -> Outliers {
     let mut groups = super::diagnose::neighbours(data);
     // Two passes: a neighbourhood with two outliers of one sign moves its
     // median, so the second pass leaves the first pass's outliers out of
@@ -162,7 +162,7 @@ fn median(sorted: &[f64]) -> f64 {
 /// The best single split of `residual` along `x` over the rows in `mask`
 /// (active rows with a finite x): the threshold between the two sides and
 /// the SSE it explains, `n1 n2 / n (m1 − m2)²`.
-pub fn best_split(x: &[f64], residual: &[f64], mask: &[bool]) -> Option<(f64, f64)> {
+pub(super) fn best_split(x: &[f64], residual: &[f64], mask: &[bool]) -> Option<(f64, f64)> {
     let mut pts: Vec<(f64, f64)> = x
         .iter()
         .zip(residual)
@@ -212,7 +212,7 @@ struct Response {
 
 /// The responses to the non-time directions, kept from the first step.
 #[derive(Default)]
-pub struct ResponseCache {
+pub(super) struct ResponseCache {
     kept: Vec<Response>,
 }
 
@@ -271,7 +271,7 @@ pub struct Screening {
 
 /// The generic candidates worth fitting at this step, with where each fit
 /// starts, and what the screening saw.
-pub fn propose(
+pub(super) fn propose(
     ev: &Evaluator<'_>,
     drivers: &Drivers,
     current: &ModelConfig,
@@ -740,7 +740,7 @@ fn round_sig(x: f64, digits: i32) -> f64 {
 /// power (from the exp's first-order slope where the fitted term is an exp,
 /// `gamma ≈ beta`, `n ≈ beta x_ref`; searched afresh otherwise), and a step
 /// where the residual splits along the driver (over the slot's rail).
-pub fn other_forms(
+pub(super) fn other_forms(
     data: &Dataset,
     drivers: &Drivers,
     active: &[bool],

@@ -39,14 +39,14 @@ const FULL_REACH: f64 = 20.0;
 /// The values a driver takes, for the range of a fitted parameter: its
 /// 5th to 95th percentile, and everything the recording shows.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Reach {
-    pub typical: (f64, f64),
-    pub full: (f64, f64),
+pub(super) struct Reach {
+    pub(super) typical: (f64, f64),
+    pub(super) full: (f64, f64),
 }
 
 impl Reach {
     /// For a step, whose factor `f` does not depend on the driver's values.
-    pub const STEP: Reach = Reach {
+    pub(super) const STEP: Reach = Reach {
         typical: (0.0, 1.0),
         full: (0.0, 1.0),
     };
@@ -58,15 +58,15 @@ const STEP_F_MAX: f64 = 3.0;
 
 /// One generic term with its parameter left free.
 #[derive(Debug, Clone, PartialEq, Eq, Hash, Serialize)]
-pub struct GenericSlot {
-    pub acts_on: ActsOn,
+pub(super) struct GenericSlot {
+    pub(super) acts_on: ActsOn,
     /// `None` for `measurement`.
-    pub driver: Option<Driver>,
-    pub form: Option<FormKind>,
-    pub applicator: Option<String>,
-    pub rail: Option<String>,
-    pub site: Option<String>,
-    pub quantity: Option<Quantity>,
+    pub(super) driver: Option<Driver>,
+    pub(super) form: Option<FormKind>,
+    pub(super) applicator: Option<String>,
+    pub(super) rail: Option<String>,
+    pub(super) site: Option<String>,
+    pub(super) quantity: Option<Quantity>,
     /// A step's threshold (unix seconds for time), as bits.
     x0_bits: Option<u64>,
     lo_bits: u64,
@@ -75,16 +75,16 @@ pub struct GenericSlot {
 
 /// Where a slot acts, by name.
 #[derive(Debug, Clone, Default, PartialEq, Eq, Hash, Serialize)]
-pub struct Scope {
-    pub applicator: Option<String>,
-    pub rail: Option<String>,
-    pub site: Option<String>,
-    pub quantity: Option<Quantity>,
+pub(super) struct Scope {
+    pub(super) applicator: Option<String>,
+    pub(super) rail: Option<String>,
+    pub(super) site: Option<String>,
+    pub(super) quantity: Option<Quantity>,
 }
 
 impl Scope {
     /// Scope keys named (more keys: a narrower statement).
-    pub fn keys(&self) -> usize {
+    pub(super) fn keys(&self) -> usize {
         usize::from(self.applicator.is_some())
             + usize::from(self.rail.is_some())
             + usize::from(self.site.is_some())
@@ -96,7 +96,7 @@ impl GenericSlot {
     /// A slot on `acts_on` driven by `driver` in `form` (a step at `x0`),
     /// its parameter searched on the range that `reach` (the driver's
     /// typical and full range, [`Drivers::reach`]) allows.
-    pub fn factor(
+    pub(super) fn factor(
         acts_on: ActsOn,
         driver: Driver,
         form: FormKind,
@@ -152,7 +152,7 @@ impl GenericSlot {
     }
 
     /// An offset on what a site measures.
-    pub fn offset(scope: Scope) -> Self {
+    pub(super) fn offset(scope: Scope) -> Self {
         Self {
             acts_on: ActsOn::Measurement,
             driver: None,
@@ -167,7 +167,7 @@ impl GenericSlot {
         }
     }
 
-    pub fn scope(&self) -> Scope {
+    pub(super) fn scope(&self) -> Scope {
         Scope {
             applicator: self.applicator.clone(),
             rail: self.rail.clone(),
@@ -176,17 +176,17 @@ impl GenericSlot {
         }
     }
 
-    pub fn x0(&self) -> Option<f64> {
+    pub(super) fn x0(&self) -> Option<f64> {
         self.x0_bits.map(f64::from_bits)
     }
 
     /// The fitted parameter's range.
-    pub fn bounds(&self) -> (f64, f64) {
+    pub(super) fn bounds(&self) -> (f64, f64) {
         (f64::from_bits(self.lo_bits), f64::from_bits(self.hi_bits))
     }
 
     /// The parameter's name in a `[[effects.generic]]` table.
-    pub fn param_name(&self) -> &'static str {
+    pub(super) fn param_name(&self) -> &'static str {
         match self.form {
             None => "offset",
             Some(FormKind::Exp) => "beta",
@@ -197,7 +197,7 @@ impl GenericSlot {
     }
 
     /// The parameter value at which the term changes nothing.
-    pub fn neutral(&self) -> f64 {
+    pub(super) fn neutral(&self) -> f64 {
         match self.form {
             Some(FormKind::Step) => 1.0,
             _ => 0.0,
@@ -205,7 +205,7 @@ impl GenericSlot {
     }
 
     /// The term with parameter `p`.
-    pub fn term(&self, p: f64) -> GenericTerm {
+    pub(super) fn term(&self, p: f64) -> GenericTerm {
         let effect = match (self.driver, self.form) {
             (Some(driver), Some(kind)) => TermEffect::Factor {
                 driver,
@@ -233,14 +233,14 @@ impl GenericSlot {
 
     /// Whether `other` acts on the same quantity, driven by the same
     /// covariate, in the same scope (whatever its form).
-    pub fn same_direction(&self, other: &GenericSlot) -> bool {
+    pub(super) fn same_direction(&self, other: &GenericSlot) -> bool {
         self.acts_on == other.acts_on
             && self.driver == other.driver
             && self.scope() == other.scope()
     }
 
     /// Whether `term` is this slot (whatever its parameter).
-    pub fn is(&self, term: &GenericTerm) -> bool {
+    pub(super) fn is(&self, term: &GenericTerm) -> bool {
         let shape = match term.effect {
             TermEffect::Offset { .. } => (None, None, None),
             TermEffect::Factor { driver, form } => (
@@ -261,7 +261,7 @@ impl GenericSlot {
     }
 
     /// The parameter of this slot's term in `effects`, if it is on.
-    pub fn get(&self, effects: &Effects) -> Option<f64> {
+    pub(super) fn get(&self, effects: &Effects) -> Option<f64> {
         effects
             .generic
             .iter()
@@ -279,7 +279,7 @@ impl GenericSlot {
 
     /// Switches the term on in `effects` with parameter `p` (replacing
     /// its earlier value).
-    pub fn set(&self, effects: &mut Effects, p: f64) {
+    pub(super) fn set(&self, effects: &mut Effects, p: f64) {
         let term = self.term(p);
         match effects.generic.iter_mut().find(|t| self.is(t)) {
             Some(t) => *t = term,
@@ -288,7 +288,7 @@ impl GenericSlot {
     }
 
     /// A short label: `consumption × creepage (power; rail low)`.
-    pub fn label(&self) -> String {
+    pub(super) fn label(&self) -> String {
         let scope = self.scope();
         let mut parts = Vec::new();
         if let Some(a) = &scope.applicator {
@@ -331,22 +331,22 @@ impl GenericSlot {
 
 /// Every driver's value at each measurement (NaN where it has none), and its
 /// range over everything the recording shows (contacts and weather).
-pub struct Drivers {
+pub(super) struct Drivers {
     /// [driver][row]
-    pub at_row: Vec<Vec<f64>>,
+    pub(super) at_row: Vec<Vec<f64>>,
     /// [driver]: (min, max) over the recording.
-    pub range: Vec<(f64, f64)>,
+    pub(super) range: Vec<(f64, f64)>,
     /// [driver]: the 5th and 95th percentiles of the values a term sees
     /// (every weather message, every wheel on every rail, every event
     /// time): where a fitted factor must be able to reach.
-    pub typical: Vec<(f64, f64)>,
+    pub(super) typical: Vec<(f64, f64)>,
     /// [driver]: every distinct value a term sees, ascending: where a
     /// step's threshold can make a difference.
-    pub distinct: Vec<Vec<f64>>,
+    pub(super) distinct: Vec<Vec<f64>>,
 }
 
 impl Drivers {
-    pub fn of(data: &Dataset) -> Self {
+    pub(super) fn of(data: &Dataset) -> Self {
         let n = data.rows.len();
         let mut at_row = vec![vec![f64::NAN; n]; Driver::ALL.len()];
         let mut seen: Vec<Vec<f64>> = vec![Vec::new(); Driver::ALL.len()];
@@ -421,22 +421,22 @@ impl Drivers {
         }
     }
 
-    pub fn values(&self, d: Driver) -> &[f64] {
+    pub(super) fn values(&self, d: Driver) -> &[f64] {
         &self.at_row[d as usize]
     }
 
-    pub fn range(&self, d: Driver) -> (f64, f64) {
+    pub(super) fn range(&self, d: Driver) -> (f64, f64) {
         self.range[d as usize]
     }
 
     /// Every distinct value a term driven by `d` sees, ascending.
-    pub fn distinct(&self, d: Driver) -> &[f64] {
+    pub(super) fn distinct(&self, d: Driver) -> &[f64] {
         &self.distinct[d as usize]
     }
 
     /// The 5th and 95th percentiles of the values a term driven by `d` sees,
     /// and all of them.
-    pub fn reach(&self, d: Driver) -> Reach {
+    pub(super) fn reach(&self, d: Driver) -> Reach {
         Reach {
             typical: self.typical[d as usize],
             full: self.range[d as usize],
@@ -444,14 +444,14 @@ impl Drivers {
     }
 
     /// Whether the recording shows the driver changing at all.
-    pub fn varies(&self, d: Driver) -> bool {
+    pub(super) fn varies(&self, d: Driver) -> bool {
         let (lo, hi) = self.range(d);
         lo.is_finite() && hi > lo * (1.0 + 1e-9) + 1e-12
     }
 
     /// Whether `form` can describe `d` over its observed range (a power
     /// needs x > 0 throughout).
-    pub fn allows(&self, d: Driver, form: FormKind) -> bool {
+    pub(super) fn allows(&self, d: Driver, form: FormKind) -> bool {
         d.allows(form) && (form != FormKind::Power || self.range(d).0 > 0.0)
     }
 }

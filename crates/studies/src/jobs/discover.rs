@@ -4,9 +4,8 @@
 use std::fmt::Write as _;
 use std::path::PathBuf;
 
-use anyhow::{Context, Result};
-
 use crate::discover::{self, data::Dataset, Discovery, Options, Progress, Silent};
+use crate::Result;
 use tortwin_model::error::UsageError;
 
 #[derive(Debug, Clone)]
@@ -88,7 +87,7 @@ pub fn run_with(args: &DiscoverArgs, progress: &dyn Progress) -> Result<Discover
 
     let work = || discover::discover(&data, &start, &options, progress);
     let discovery = super::with_threads(args.threads, work)
-        .with_context(|| format!("discover on {}", args.recording.display()))?;
+        .map_err(|e| e.context(format!("discover on {}", args.recording.display())))?;
     progress.stage("writing the report");
     discover::report::write(&args.report, &data, &discovery)?;
     Ok(discovery)

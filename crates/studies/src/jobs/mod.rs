@@ -12,8 +12,10 @@ pub mod strategy;
 pub mod summary;
 pub mod synth;
 
-use anyhow::{Context, Result};
 use tortwin_model::config::ModelConfig;
+use tortwin_model::error::ConfigError;
+
+use crate::{Error, Result};
 
 /// The recording the main job replays when none is given: the one bundled
 /// with the repository, `recordings/demo_day.mcap`.
@@ -25,7 +27,7 @@ pub fn default_recording() -> std::path::PathBuf {
 }
 
 /// Loads the model configuration: the defaults, overlaid by `path`.
-pub fn load_config(path: Option<&std::path::Path>) -> Result<ModelConfig> {
+pub(crate) fn load_config(path: Option<&std::path::Path>) -> Result<ModelConfig, ConfigError> {
     Ok(match path {
         Some(p) => ModelConfig::from_file(p)?,
         None => ModelConfig::default(),
@@ -34,7 +36,7 @@ pub fn load_config(path: Option<&std::path::Path>) -> Result<ModelConfig> {
 
 /// Runs `work` on a pool of `threads` workers, or on rayon's global pool
 /// (one per core) when `None`.
-pub fn with_threads<T: Send>(
+pub(crate) fn with_threads<T: Send>(
     threads: Option<usize>,
     work: impl FnOnce() -> Result<T> + Send,
 ) -> Result<T> {
@@ -42,7 +44,7 @@ pub fn with_threads<T: Send>(
         Some(threads) => rayon::ThreadPoolBuilder::new()
             .num_threads(threads.max(1))
             .build()
-            .context("cannot start the worker threads")?
+            .map_err(Error::Threads)?
             .install(work),
         None => work(),
     }

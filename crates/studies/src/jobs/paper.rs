@@ -11,9 +11,8 @@
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
-use anyhow::{Context, Result};
-
 use crate::paper::{twin_disc, PassField, WaysideScenario};
+use crate::{Error, Result};
 use tortwin_model::config::ModelConfig;
 use tortwin_plot::{write_csv, write_csv_columns, Colour, LinePlot, Panel, ReferenceLine, Series};
 
@@ -66,7 +65,11 @@ const MU_RANGE: (f64, f64) = (0.1, 0.65);
 pub fn paper(args: &PaperArgs) -> Result<PaperReport> {
     let cfg = super::load_config(args.config.as_deref())?;
     let out = &args.out;
-    std::fs::create_dir_all(out).with_context(|| format!("cannot create {}", out.display()))?;
+    std::fs::create_dir_all(out).map_err(|source| Error::Io {
+        what: "cannot create",
+        path: out.clone(),
+        source,
+    })?;
     let mut figures = Vec::new();
 
     // Figure 7: twin disc, three applied masses.
@@ -461,7 +464,7 @@ fn pass(fields: &[PassField], k: usize) -> Result<&PassField> {
     fields
         .iter()
         .find(|f| f.pass == k)
-        .with_context(|| format!("the scenario gave no field after pass {k}"))
+        .ok_or_else(|| Error::Inconsistent(format!("the scenario gave no field after pass {k}")))
 }
 
 fn nearest_index(d_m: &[f64], d: f64) -> usize {

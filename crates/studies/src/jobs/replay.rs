@@ -2,8 +2,6 @@
 
 use std::path::{Path, PathBuf};
 
-use anyhow::{Context, Result};
-
 use tortwin_engine::sink::{Fanout, RunSummary, Sink};
 use tortwin_engine::{Engine, EngineOptions, EngineState};
 use tortwin_model::error::UsageError;
@@ -15,6 +13,7 @@ use tortwin_recording::RecordingReader;
 
 use super::load_config;
 use crate::progress::{Progress, Silent};
+use crate::{Error, Result};
 
 #[derive(Debug, Clone)]
 #[cfg_attr(feature = "cli", derive(clap::Args))]
@@ -64,7 +63,7 @@ impl ReplayArgs {
 }
 
 /// Reads a state written by `--state-out`.
-pub fn read_state(path: &Path) -> Result<EngineState> {
+fn read_state(path: &Path) -> Result<EngineState, InputError> {
     let text = std::fs::read_to_string(path)
         .map_err(|e| InputError::file(path, format!("cannot read the state: {e}")))?;
     let state: EngineState = serde_json::from_str(&text)
@@ -152,12 +151,18 @@ pub fn replay_with(
         }
         engine
             .push(event, &mut fanout)
-            .with_context(|| format!("replaying {}", args.recording.display()))?;
+            .map_err(|source| Error::Replay {
+                what: args.recording.display().to_string(),
+                source,
+            })?;
     }
     let summary = engine.finish(&mut fanout, reader.unknown_topic_messages())?;
 
     if let Some(path) = &args.state_out {
-        let text = serde_json::to_string(&engine.state()).context("cannot serialize the state")?;
+        let text = serde_json::to_string(&engine.state()).map_err(|source| Error::Json {
+            what: "the state",
+            source,
+        })?;
         tortwin_outputs::files::write_atomically(path, text.as_bytes())?;
     }
     Ok(summary)

@@ -5,13 +5,13 @@
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
-use anyhow::{Context, Result};
 use serde::Deserialize;
 
 use crate::progress::{Progress, Silent};
 use crate::strategy::search::{Method, Space, SpaceConfig, Values};
 use crate::strategy::{self, Study, Target, Traffic};
 use crate::synth::{self, Preset, SynthParams};
+use crate::{Error, Result};
 use tortwin_model::error::UsageError;
 
 #[derive(Debug, Clone)]
@@ -90,28 +90,28 @@ impl StrategyArgs {
 /// The strategy file (`--space`): every table and key optional.
 #[derive(Debug, Clone, Default, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub struct StrategyFile {
+pub(crate) struct StrategyFile {
     #[serde(default)]
-    pub target: Target,
+    pub(crate) target: Target,
     #[serde(default)]
-    pub space: SpaceOverlay,
+    pub(crate) space: SpaceOverlay,
     #[serde(default)]
-    pub search: SearchConfig,
+    pub(crate) search: SearchConfig,
 }
 
 /// `[space]`: what is not given comes from [`SpaceConfig::around_today`].
 #[derive(Debug, Clone, Default, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub struct SpaceOverlay {
-    pub pulse_g: Option<Values>,
-    pub every_axles: Option<Values>,
-    pub positions_m: Option<Vec<f64>>,
-    pub applicators: Option<Vec<usize>>,
-    pub rails: Option<Vec<Vec<String>>>,
+pub(crate) struct SpaceOverlay {
+    pub(crate) pulse_g: Option<Values>,
+    pub(crate) every_axles: Option<Values>,
+    pub(crate) positions_m: Option<Vec<f64>>,
+    pub(crate) applicators: Option<Vec<usize>>,
+    pub(crate) rails: Option<Vec<Vec<String>>>,
 }
 
 impl SpaceOverlay {
-    pub fn over(&self, base: SpaceConfig) -> SpaceConfig {
+    pub(crate) fn over(&self, base: SpaceConfig) -> SpaceConfig {
         SpaceConfig {
             pulse_g: self.pulse_g.clone().unwrap_or(base.pulse_g),
             every_axles: self.every_axles.clone().unwrap_or(base.every_axles),
@@ -125,10 +125,10 @@ impl SpaceOverlay {
 /// `[search]`.
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields, default)]
-pub struct SearchConfig {
-    pub method: Method,
+pub(crate) struct SearchConfig {
+    pub(crate) method: Method,
     /// `auto` evaluates every strategy of a space up to this size.
-    pub max_grid: usize,
+    pub(crate) max_grid: usize,
 }
 
 impl Default for SearchConfig {
@@ -141,14 +141,13 @@ impl Default for SearchConfig {
 }
 
 impl StrategyFile {
-    pub fn read(path: &Path) -> Result<Self> {
+    pub(crate) fn read(path: &Path) -> Result<Self, UsageError> {
         let text = std::fs::read_to_string(path)
             .map_err(|e| UsageError(format!("--space {}: {e}", path.display())))?;
-        Self::parse(&text)
-            .map_err(|e| UsageError(format!("--space {}: {e}", path.display())).into())
+        Self::parse(&text).map_err(|e| UsageError(format!("--space {}: {e}", path.display())))
     }
 
-    pub fn parse(text: &str) -> Result<Self, String> {
+    pub(crate) fn parse(text: &str) -> Result<Self, String> {
         toml::from_str(text).map_err(|e| e.to_string())
     }
 }
@@ -181,11 +180,15 @@ pub fn run_with(args: &StrategyArgs, progress: &dyn Progress) -> Result<(Traffic
         p.seed = args.synth_seed;
         p.trains_per_day = args.synth_trains_per_day;
         p.validate()?;
-        std::fs::create_dir_all(&args.out)
-            .with_context(|| format!("creating {}", args.out.display()))?;
+        std::fs::create_dir_all(&args.out).map_err(|source| Error::Io {
+            what: "creating",
+            path: args.out.clone(),
+            source,
+        })?;
         let path = args.out.join("traffic.mcap");
         progress.stage(&format!("writing the traffic {}", path.display()));
-        synth::generate(&p, &cfg, &path).with_context(|| format!("writing {}", path.display()))?;
+        synth::generate(&p, &cfg, &path)
+            .map_err(|e| e.context(format!("writing {}", path.display())))?;
         Traffic::read(&path)?
     } else {
         let path = args
@@ -215,7 +218,7 @@ pub fn run_with(args: &StrategyArgs, progress: &dyn Progress) -> Result<(Traffic
         )
     };
     let study = super::with_threads(args.threads, work)
-        .with_context(|| format!("strategy study on {}", traffic.source))?;
+        .map_err(|e| e.context(format!("strategy study on {}", traffic.source)))?;
     progress.stage("writing the report");
     strategy::report::write(&args.out, &traffic, &cfg, &target, &space, &study)?;
     Ok((traffic, study))

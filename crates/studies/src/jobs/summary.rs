@@ -6,7 +6,7 @@ use std::path::Path;
 use tortwin_engine::sink::RunSummary;
 
 /// A log_time as UTC, for people.
-pub fn utc(log_time_ns: u64) -> String {
+pub(crate) fn utc(log_time_ns: u64) -> String {
     let secs = (log_time_ns / 1_000_000_000) as i64;
     let nanos = (log_time_ns % 1_000_000_000) as u32;
     chrono::DateTime::from_timestamp(secs, nanos).map_or_else(

@@ -4,11 +4,11 @@
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
-use anyhow::{Context, Result};
 #[cfg(feature = "cli")]
 use clap::ArgAction;
 
 use crate::synth::{self, Preset, SynthParams, SynthReport};
+use crate::{Error, Result};
 use tortwin_model::config::ModelConfig;
 use tortwin_model::error::UsageError;
 
@@ -116,8 +116,8 @@ pub struct SynthArgs {
     pub quiet: bool,
 }
 
-/// Writes the recording and its key (beside it, see [`key_path`]); returns
-/// the key and where it was written.
+/// Writes the recording and its key (`--key`, or beside it: NAME.key.json
+/// for NAME.mcap); returns the key and where it was written.
 pub fn synth(args: &SynthArgs) -> Result<(SynthReport, PathBuf)> {
     let (params, truth) = prepare(args)?;
     let key_path = key_path(args);
@@ -129,8 +129,11 @@ pub fn synth(args: &SynthArgs) -> Result<(SynthReport, PathBuf)> {
         .into());
     }
     let report = synth::generate(&params, &truth, &args.out)
-        .with_context(|| format!("writing {}", args.out.display()))?;
-    let mut text = serde_json::to_string_pretty(&report).context("serializing the key")?;
+        .map_err(|e| e.context(format!("writing {}", args.out.display())))?;
+    let mut text = serde_json::to_string_pretty(&report).map_err(|source| Error::Json {
+        what: "the key",
+        source,
+    })?;
     text.push('\n');
     tortwin_outputs::files::write_atomically(&key_path, text.as_bytes())?;
     Ok((report, key_path))
@@ -138,7 +141,7 @@ pub fn synth(args: &SynthArgs) -> Result<(SynthReport, PathBuf)> {
 
 /// The generator's parameters and the truth configuration the arguments ask
 /// for; every check that can fail is done here, before anything is written.
-pub fn prepare(args: &SynthArgs) -> Result<(SynthParams, ModelConfig)> {
+fn prepare(args: &SynthArgs) -> Result<(SynthParams, ModelConfig)> {
     let start = chrono::DateTime::parse_from_rfc3339(&args.start).map_err(|e| {
         UsageError(format!(
             "--start {}: not an RFC 3339 time such as 2024-04-08T00:00:00Z ({e})",
@@ -189,7 +192,7 @@ pub fn prepare(args: &SynthArgs) -> Result<(SynthParams, ModelConfig)> {
 }
 
 /// `--key`, or the recording's path with `.mcap` replaced by `.key.json`.
-pub fn key_path(args: &SynthArgs) -> PathBuf {
+fn key_path(args: &SynthArgs) -> PathBuf {
     if let Some(key) = &args.key {
         return key.clone();
     }

@@ -8,7 +8,6 @@
 //! comparisons, not an `exp`. The sink keeps, per rail, travel direction
 //! and point, how many wheel passes saw mu inside and below the band.
 
-use anyhow::Result;
 use serde::{Deserialize, Serialize};
 
 use super::Traffic;
@@ -74,7 +73,7 @@ impl Default for Target {
 
 impl Target {
     /// Checks the values (a usage error naming the key otherwise).
-    pub fn check(&self, section: &Section) -> Result<(), UsageError> {
+    pub(crate) fn check(&self, section: &Section) -> Result<(), UsageError> {
         let b = &self.band;
         if !(b.lower_mu.is_finite() && b.upper_mu.is_finite() && 0.0 < b.lower_mu) {
             return Err(UsageError(format!(
@@ -116,7 +115,7 @@ impl Target {
     }
 
     /// The target rails' indices.
-    pub fn rail_indices(&self, section: &Section) -> Vec<usize> {
+    pub(crate) fn rail_indices(&self, section: &Section) -> Vec<usize> {
         (0..section.rails.len())
             .filter(|&r| self.rails.is_empty() || self.rails.contains(&section.rails[r]))
             .collect()
@@ -173,7 +172,7 @@ struct Counts {
 }
 
 /// The statistics sink of one evaluation.
-pub struct Stats {
+pub(super) struct Stats {
     mass_band: MassBand,
     params: ProductParams,
     /// [rail][direction: Up, Down]
@@ -192,13 +191,13 @@ pub struct Stats {
 }
 
 impl Stats {
-    pub fn new(
+    pub(super) fn new(
         section: &Section,
         grid: &Grid,
         cfg: &ModelConfig,
         target: &Target,
         detail: bool,
-    ) -> Result<Self> {
+    ) -> Result<Self, UsageError> {
         target.check(section)?;
         let points = grid.d_m.len();
         let rails = section.rails.len();
@@ -228,7 +227,7 @@ impl Stats {
     }
 
     /// The figures of the run.
-    pub fn figures(&self, traffic: &Traffic) -> Figures {
+    pub(super) fn figures(&self, traffic: &Traffic) -> Figures {
         let days = traffic.days();
         let rails: Vec<RailFigures> = (0..self.counts.len())
             .map(|r| self.rail_figures(r, days, traffic.axles))

@@ -6,31 +6,33 @@
 //! one [`Engine`]: the recording's passages and weather as they are, its
 //! own pulses replaced by the pulses the strategy's applicators would have
 //! fired ([`pulse_events`]: an axle counter per applicator). A sink
-//! ([`metrics::Stats`]) keeps, per rail, travel direction and grid point,
+//! (`metrics.rs`) keeps, per rail, travel direction and grid point,
 //! how many wheel passes saw mu inside, below and above the band; the
 //! figures an engineer decides on follow from those counts
-//! ([`metrics::Figures`]). [`search`] evaluates a whole space of strategies
+//! ([`Figures`]). [`search`] evaluates a whole space of strategies
 //! (every one for a small space, an optimiser for a large one), finds the
 //! Pareto front between product and coverage and recommends one;
-//! [`report`] writes the result.
+//! `report.rs` writes the result.
 
-pub mod metrics;
-pub mod report;
+mod metrics;
+pub(crate) mod report;
 pub mod search;
 
 use std::path::Path;
 use std::sync::Arc;
 
-use anyhow::{Context, Result};
 use serde::Serialize;
 
 use tortwin_engine::sink::{Fanout, Sink};
-use tortwin_engine::{Engine, EngineOptions, Grid};
+use tortwin_engine::{Engine, EngineError, EngineOptions, Grid};
 use tortwin_model::config::ModelConfig;
 use tortwin_model::error::UsageError;
+use tortwin_recording::error::InputError;
 use tortwin_recording::{Applicator, Direction, Event, EventKind, Pulse, Recording, Section};
 
-pub use metrics::{Band, Figures, Target};
+pub use metrics::{Band, CarryOn, Figures, Profile, RailFigures, Target, WorstPoint};
+
+use crate::{Error, Result};
 
 const DAY_S: f64 = 86_400.0;
 
@@ -57,7 +59,7 @@ pub struct Traffic {
 
 impl Traffic {
     /// Reads a recording (every input error names where it is).
-    pub fn read(path: &Path) -> Result<Self> {
+    pub fn read(path: &Path) -> Result<Self, InputError> {
         let r = Recording::read(path)?;
         // The span counts the measurements too, which `new` then drops.
         let span_s = (r.last_log_time_ns() - r.section_log_time_ns) as f64 * 1e-9;
@@ -71,7 +73,7 @@ impl Traffic {
     }
 
     /// Traffic from events already in replay order (measurements are dropped).
-    pub fn new(
+    pub(crate) fn new(
         source: String,
         section: Section,
         origin_ns: i64,
@@ -97,20 +99,28 @@ impl Traffic {
         }
     }
 
+    /// The engine's `source` as an error of replaying this traffic.
+    fn replay_error(&self, source: EngineError) -> Error {
+        Error::Replay {
+            what: format!("the traffic of {}", self.source),
+            source,
+        }
+    }
+
     /// Whole days the period stands for: the span rounded, at least one. A
     /// recording of one service day (05:00 to midnight) is one day.
-    pub fn days(&self) -> f64 {
+    pub(crate) fn days(&self) -> f64 {
         (self.span_s / DAY_S).round().max(1.0)
     }
 
     /// Rail indices by name, for error messages and configuration.
-    pub fn rail_index(&self, name: &str) -> Option<usize> {
+    pub(crate) fn rail_index(&self, name: &str) -> Option<usize> {
         self.section.rails.iter().position(|r| r == name)
     }
 
     /// Today's application as a strategy-like description: pulses per
     /// applicator and rail, mean mass, axles per pulse.
-    pub fn today(&self) -> Vec<TodayApplicator> {
+    pub(crate) fn today(&self) -> Vec<TodayApplicator> {
         let s = &self.section;
         let mut out: Vec<TodayApplicator> = s
             .applicators
@@ -146,16 +156,16 @@ impl Traffic {
 
 /// An applicator of the recording and what it did.
 #[derive(Debug, Clone, Serialize)]
-pub struct TodayApplicator {
-    pub id: String,
-    pub position_m: f64,
-    pub rails: Vec<String>,
-    pub nominal_pulse_g: f64,
+pub(crate) struct TodayApplicator {
+    pub(crate) id: String,
+    pub(crate) position_m: f64,
+    pub(crate) rails: Vec<String>,
+    pub(crate) nominal_pulse_g: f64,
     /// Pulse messages (one per rail).
-    pub pulses: u64,
-    pub mean_pulse_g: f64,
+    pub(crate) pulses: u64,
+    pub(crate) mean_pulse_g: f64,
     /// Axles of the traffic per pulse on one rail.
-    pub axles_per_pulse: f64,
+    pub(crate) axles_per_pulse: f64,
 }
 
 /// One application strategy: every applicator fires a pulse of `pulse_kg`
@@ -172,7 +182,7 @@ pub struct Strategy {
 
 impl Strategy {
     /// Checks the strategy fits the section (a usage error otherwise).
-    pub fn check(&self, section: &Section) -> Result<(), UsageError> {
+    pub(crate) fn check(&self, section: &Section) -> Result<(), UsageError> {
         let bad = |what: String| Err(UsageError(format!("strategy {self:?}: {what}")));
         if !(self.pulse_kg.is_finite() && self.pulse_kg > 0.0) {
             return bad("the pulse mass must be a positive number".into());
@@ -218,7 +228,7 @@ impl Strategy {
     }
 
     /// E.g. `0.200 g every 4 axles at 10 m and 300 m on high, low`.
-    pub fn describe(&self, section: &Section) -> String {
+    pub(crate) fn describe(&self, section: &Section) -> String {
         let at = self
             .positions_m
             .iter()
@@ -341,7 +351,7 @@ pub fn evaluate(
     drive(&mut engine, traffic, plan, &mut fanout)?;
     engine
         .finish(&mut fanout, 0)
-        .with_context(|| format!("replaying the traffic of {}", traffic.source))?;
+        .map_err(|source| traffic.replay_error(source))?;
     drop(fanout);
     Ok(stats.figures(traffic))
 }
@@ -356,11 +366,11 @@ pub fn drive(
     plan: &Plan,
     sink: &mut dyn Sink,
 ) -> Result<()> {
-    let context = || format!("replaying the traffic of {}", traffic.source);
+    let context = |source| traffic.replay_error(source);
     let strategy = match plan {
         Plan::Today => {
             for e in &traffic.events {
-                engine.push(e.clone(), sink).with_context(context)?;
+                engine.push(e.clone(), sink).map_err(context)?;
             }
             return Ok(());
         }
@@ -387,12 +397,12 @@ pub fn drive(
                 || (p.log_time_ns == e.log_time_ns && matches!(e.kind, EventKind::Weather(_)))
         };
         while let Some(p) = pulses.next_if(before) {
-            engine.push(p, sink).with_context(context)?;
+            engine.push(p, sink).map_err(context)?;
         }
-        engine.push(e.clone(), sink).with_context(context)?;
+        engine.push(e.clone(), sink).map_err(context)?;
     }
     for p in pulses {
-        engine.push(p, sink).with_context(context)?;
+        engine.push(p, sink).map_err(context)?;
     }
     Ok(())
 }

@@ -11,12 +11,12 @@
 use std::fmt::Write as _;
 use std::path::Path;
 
-use anyhow::{Context, Result};
 use serde::Serialize;
 
 use super::metrics::{Figures, RailFigures, Target};
 use super::search::{Evaluated, Space};
 use super::{evaluate, Plan, Strategy, Study, TodayApplicator, Traffic};
+use crate::{Error, Result};
 use tortwin_engine::sink::Sink;
 use tortwin_model::config::ModelConfig;
 use tortwin_outputs::files::write_atomically;
@@ -26,16 +26,16 @@ use tortwin_recording::Section;
 
 /// A strategy as people and scripts read it.
 #[derive(Debug, Clone, Serialize)]
-pub struct StrategyView {
-    pub description: String,
-    pub pulse_g: f64,
-    pub every_axles: u32,
-    pub positions_m: Vec<f64>,
-    pub rails: Vec<String>,
+pub(crate) struct StrategyView {
+    pub(crate) description: String,
+    pub(crate) pulse_g: f64,
+    pub(crate) every_axles: u32,
+    pub(crate) positions_m: Vec<f64>,
+    pub(crate) rails: Vec<String>,
 }
 
 impl StrategyView {
-    pub fn new(s: &Strategy, section: &Section) -> Self {
+    pub(crate) fn new(s: &Strategy, section: &Section) -> Self {
         Self {
             description: s.describe(section),
             pulse_g: s.pulse_kg * 1e3,
@@ -126,7 +126,7 @@ fn choice(e: &Evaluated, section: &Section) -> Choice {
 }
 
 /// Writes the study's result into `dir` (created if missing).
-pub fn write(
+pub(crate) fn write(
     dir: &Path,
     traffic: &Traffic,
     cfg: &ModelConfig,
@@ -134,7 +134,11 @@ pub fn write(
     space: &Space,
     study: &Study,
 ) -> Result<()> {
-    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    std::fs::create_dir_all(dir).map_err(|source| Error::Io {
+        what: "creating",
+        path: dir.to_path_buf(),
+        source,
+    })?;
     let section = &traffic.section;
 
     // Today's and the recommendation's profiles; the recommendation's field
@@ -242,7 +246,10 @@ pub fn write(
         evaluated: study.evaluated.iter().map(|e| choice(e, section)).collect(),
         model: cfg.clone(),
     };
-    let mut json = serde_json::to_string_pretty(&result).context("serializing the result")?;
+    let mut json = serde_json::to_string_pretty(&result).map_err(|source| Error::Json {
+        what: "the result",
+        source,
+    })?;
     json.push('\n');
     let md = markdown(
         traffic,
@@ -256,8 +263,11 @@ pub fn write(
     write_atomically(&dir.join("report.md"), md.as_bytes())?;
     if study.recommended.is_none() && rec_path.exists() {
         // A recording of an earlier run must not pass for this one's.
-        std::fs::remove_file(&rec_path)
-            .with_context(|| format!("removing {}", rec_path.display()))?;
+        std::fs::remove_file(&rec_path).map_err(|source| Error::Io {
+            what: "removing",
+            path: rec_path.clone(),
+            source,
+        })?;
     }
     Ok(())
 }
@@ -267,7 +277,11 @@ fn pct(v: f64) -> String {
 }
 
 /// Why the recommendation is the one, in sentences.
-pub fn recommendation_reasons(traffic: &Traffic, target: &Target, study: &Study) -> Vec<String> {
+pub(crate) fn recommendation_reasons(
+    traffic: &Traffic,
+    target: &Target,
+    study: &Study,
+) -> Vec<String> {
     let section = &traffic.section;
     let Some(r) = &study.recommended else {
         return vec![format!(

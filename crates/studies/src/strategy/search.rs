@@ -20,7 +20,6 @@
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex};
 
-use anyhow::Result;
 use argmin::core::{CostFunction, Executor};
 use argmin::solver::neldermead::NelderMead;
 use rayon::prelude::*;
@@ -28,6 +27,8 @@ use serde::{Deserialize, Serialize};
 
 use super::metrics::{Figures, Target};
 use super::{evaluate, Plan, Strategy, Traffic};
+use crate::error::optimiser;
+use crate::{Error, Result};
 use tortwin_model::config::ModelConfig;
 use tortwin_model::error::UsageError;
 
@@ -333,12 +334,12 @@ pub struct Evaluated {
 
 /// Evaluations by lattice point, shared by parallel workers.
 pub struct Searcher<'a> {
-    pub traffic: &'a Traffic,
-    pub cfg: &'a ModelConfig,
-    pub target: &'a Target,
-    pub space: &'a Space,
+    traffic: &'a Traffic,
+    cfg: &'a ModelConfig,
+    target: &'a Target,
+    space: &'a Space,
     cache: Mutex<HashMap<Key, Arc<Evaluated>>>,
-    error: Mutex<Option<anyhow::Error>>,
+    error: Mutex<Option<Error>>,
     on_evaluation: &'a (dyn Fn(usize) + Sync),
 }
 
@@ -377,7 +378,7 @@ impl<'a> Searcher<'a> {
     }
 
     /// Evaluates `k` (once).
-    pub fn eval(&self, k: Key) -> Result<Arc<Evaluated>> {
+    pub(crate) fn eval(&self, k: Key) -> Result<Arc<Evaluated>> {
         if let Some(e) = self.lock_cache().get(&k) {
             return Ok(e.clone());
         }
@@ -405,7 +406,7 @@ impl<'a> Searcher<'a> {
     }
 
     /// Evaluates every key, in parallel.
-    pub fn eval_all(&self, keys: &[Key]) -> Result<Vec<Arc<Evaluated>>> {
+    pub(crate) fn eval_all(&self, keys: &[Key]) -> Result<Vec<Arc<Evaluated>>> {
         keys.par_iter().map(|&k| self.eval(k)).collect()
     }
 
@@ -586,10 +587,13 @@ impl<'a> Searcher<'a> {
             upper,
             objective,
         };
-        let solver = NelderMead::new(simplex).with_sd_tolerance(1e-6)?;
+        let solver = NelderMead::new(simplex)
+            .with_sd_tolerance(1e-6)
+            .map_err(optimiser)?;
         Executor::new(problem, solver)
             .configure(|state| state.max_iters(NM_MAX_ITERS))
-            .run()?;
+            .run()
+            .map_err(optimiser)?;
         self.take_error()
     }
 
@@ -703,7 +707,7 @@ pub fn recommend<'e>(evaluated: &'e [Arc<Evaluated>], target: &Target) -> Option
 }
 
 /// The strategy with the best admissible coverage (ties: less product).
-pub fn best_coverage(evaluated: &[Arc<Evaluated>]) -> Option<&Evaluated> {
+pub(crate) fn best_coverage(evaluated: &[Arc<Evaluated>]) -> Option<&Evaluated> {
     evaluated
         .iter()
         .filter(|e| e.figures.admissible)
@@ -724,7 +728,7 @@ pub fn best_coverage(evaluated: &[Arc<Evaluated>]) -> Option<&Evaluated> {
 /// The admissible strategies no other admissible one beats on both product
 /// per day (less) and coverage (more), by ascending product: the choices
 /// an engineer trades between (over-applying ones are not choices).
-pub fn pareto_front(evaluated: &[Arc<Evaluated>]) -> Vec<&Evaluated> {
+pub(crate) fn pareto_front(evaluated: &[Arc<Evaluated>]) -> Vec<&Evaluated> {
     let mut v: Vec<&Evaluated> = evaluated
         .iter()
         .filter(|e| e.figures.admissible)

@@ -11,9 +11,9 @@ use tortwin_recording::Weather;
 
 #[derive(Debug, Clone, Copy)]
 pub(super) struct RainEvent {
-    pub start_ns: u64,
-    pub end_ns: u64,
-    pub mm_h: f64,
+    pub(super) start_ns: u64,
+    pub(super) end_ns: u64,
+    pub(super) mm_h: f64,
 }
 
 /// The weather's slow part, drawn once: a daily mean temperature (a random
@@ -21,10 +21,10 @@ pub(super) struct RainEvent {
 /// calendar day, and the rain events (a Poisson process).
 #[derive(Debug, Clone)]
 pub(super) struct Climate {
-    pub first_midnight_ns: u64,
+    pub(super) first_midnight_ns: u64,
     /// Per calendar day from the day before `first_midnight_ns`: (mean, amplitude) °C.
     days: Vec<(f64, f64)>,
-    pub rain: Vec<RainEvent>,
+    pub(super) rain: Vec<RainEvent>,
 }
 
 impl Climate {

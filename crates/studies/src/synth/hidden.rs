@@ -3,15 +3,14 @@
 
 use std::path::Path;
 
-use anyhow::Result;
-
+use crate::Result;
 use tortwin_model::config::ModelConfig;
 use tortwin_model::error::UsageError;
 
 /// Builds the truth configuration: the defaults, overlaid by `truth_config`
 /// (a TOML file) and then by every `--hidden` effect in turn, with the
 /// validation of [`ModelConfig`] (a bad effect names the key).
-pub fn truth_config(truth_config: Option<&Path>, hidden: &[String]) -> Result<ModelConfig> {
+pub(crate) fn truth_config(truth_config: Option<&Path>, hidden: &[String]) -> Result<ModelConfig> {
     let mut cfg = match truth_config {
         Some(path) => ModelConfig::from_file(path)?,
         None => ModelConfig::default(),
@@ -27,7 +26,7 @@ pub fn truth_config(truth_config: Option<&Path>, hidden: &[String]) -> Result<Mo
 /// `[effects.NAME]` that switches the effect on; `generic:key=value,...` as
 /// one `[[effects.generic]]` table (e.g.
 /// `generic:acts_on=pulse_mass,applicator=A1,driver=time,form=step,t0_utc=2024-04-09T12:00:00Z,f=0.6`).
-pub fn hidden_effect_toml(spec: &str) -> Result<String, UsageError> {
+pub(crate) fn hidden_effect_toml(spec: &str) -> Result<String, UsageError> {
     let bare_key = |s: &str| {
         !s.is_empty()
             && s.chars()

@@ -63,13 +63,13 @@ mod writing;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-pub use hidden::{hidden_effect_toml, truth_config};
-pub use params::{LocalFriction, Preset, SiteParam, SynthParams, DEFAULT_START_NS};
+pub(crate) use hidden::truth_config;
+pub use params::{LocalFriction, Preset, SiteParam, SynthParams};
 pub use report::{ByQuantity, Counts, NoiseKey, RainKey, RmseKey, SynthReport};
-pub use truth::generate;
+pub(crate) use truth::generate;
 
 /// The generator's name in the key and the MCAP metadata.
-pub const GENERATOR: &str = "tortwin synth";
+pub(crate) const GENERATOR: &str = "tortwin synth";
 
 const NS_PER_S: f64 = 1e9;
 const HOUR_NS: u64 = 3_600_000_000_000;
@@ -82,7 +82,7 @@ fn round_dp(x: f64, scale: f64) -> f64 {
 }
 
 /// A log_time as an RFC 3339 UTC string.
-pub fn utc(log_time_ns: u64) -> String {
+pub(crate) fn utc(log_time_ns: u64) -> String {
     let secs = (log_time_ns / 1_000_000_000) as i64;
     let nanos = (log_time_ns % 1_000_000_000) as u32;
     chrono::DateTime::from_timestamp(secs, nanos).map_or_else(

@@ -35,7 +35,7 @@ impl FromStr for Preset {
 }
 
 impl Preset {
-    pub fn as_str(self) -> &'static str {
+    pub(crate) fn as_str(self) -> &'static str {
         match self {
             Preset::Curve => "curve",
             Preset::Tangent => "tangent",
@@ -44,7 +44,7 @@ impl Preset {
 
     /// The share of trains running `down` when none is asked for: the curve
     /// is one track of a double-track line, the tangent a single track.
-    pub fn default_down_share(self) -> f64 {
+    pub(crate) fn default_down_share(self) -> f64 {
         match self {
             Preset::Curve => 0.0,
             Preset::Tangent => 0.4,
@@ -60,7 +60,7 @@ pub struct SiteParam {
 }
 
 /// Everything that decides a synthetic recording (all of it goes into the
-/// key). [`SynthParams::new`] gives the defaults of `tortwin synth`.
+/// key); its defaults are those of `tortwin synth`.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct SynthParams {
     pub seed: u64,
@@ -126,12 +126,12 @@ pub struct LocalFriction {
 }
 
 /// 2024-04-08T00:00:00Z, the default start.
-pub const DEFAULT_START_NS: u64 = 1_712_534_400_000_000_000;
+pub(crate) const DEFAULT_START_NS: u64 = 1_712_534_400_000_000_000;
 
 impl SynthParams {
     /// The defaults for a section of `length_m`: sites at 60, 210 and 460 m
     /// of 600 m, scaled with the length; applicator A1 at 10 m on both rails.
-    pub fn new(preset: Preset, length_m: f64) -> Self {
+    pub(crate) fn new(preset: Preset, length_m: f64) -> Self {
         let (section_id, rails, curve_radius_m, cant_m) = match preset {
             Preset::Curve => (
                 "curve-400".to_string(),
@@ -192,14 +192,14 @@ impl SynthParams {
     }
 
     /// The recording's end: `days` after the start (exclusive).
-    pub fn end_ns(&self) -> u64 {
+    pub(crate) fn end_ns(&self) -> u64 {
         self.start_ns
             .saturating_add(u64::from(self.days).saturating_mul(DAY_NS))
     }
 
     /// Checks that the parameters describe a recording the format allows;
     /// the error names the parameter as a command-line option.
-    pub fn validate(&self) -> Result<(), UsageError> {
+    pub(crate) fn validate(&self) -> Result<(), UsageError> {
         let bad = |what: &str, v: &dyn std::fmt::Display, must: &str| {
             Err(UsageError(format!("{what} is {v}; it must be {must}")))
         };
@@ -321,7 +321,7 @@ impl SynthParams {
     }
 
     /// The `/section` the recording describes, as the reader will type it.
-    pub fn section(&self) -> Section {
+    pub(crate) fn section(&self) -> Section {
         Section {
             section_id: self.section_id.clone(),
             length_m: self.length_m,

@@ -30,20 +30,20 @@ const TRIBOMETER_MARGIN_S: f64 = 60.0;
 /// One message of a day, with its place in the replay.
 #[derive(Debug, Clone)]
 pub(super) struct Planned {
-    pub log_time_ns: u64,
+    pub(super) log_time_ns: u64,
     /// Written at the end of the file (after every in-order message).
-    pub at_end: bool,
+    pub(super) at_end: bool,
     /// Planning order, the tie-break of equal times and topics.
-    pub seq: u64,
-    pub event: EventKind,
+    pub(super) seq: u64,
+    pub(super) event: EventKind,
     /// A pulse's mass as written, g.
-    pub pulse_mass_g: Option<f64>,
+    pub(super) pulse_mass_g: Option<f64>,
 }
 
 pub(super) struct DayPlan {
-    pub items: Vec<Planned>,
-    pub trains: Vec<TrainPlan>,
-    pub dropped_trains: u64,
+    pub(super) items: Vec<Planned>,
+    pub(super) trains: Vec<TrainPlan>,
+    pub(super) dropped_trains: u64,
 }
 
 /// A calendar day of the recording: `[from_ns, to_ns)`.
@@ -60,7 +60,7 @@ pub(super) struct Planner<'p> {
     traffic: ChaCha8Rng,
     weather_rng: ChaCha8Rng,
     tribometer: ChaCha8Rng,
-    pub climate: Climate,
+    pub(super) climate: Climate,
     next_train_seq: usize,
     axles_counted: u64,
     /// The last train's passage time and the end of its occupation, as the

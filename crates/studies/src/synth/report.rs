@@ -99,7 +99,7 @@ pub struct ByQuantity<T> {
 }
 
 impl<T> ByQuantity<T> {
-    pub fn get(&self, q: Quantity) -> &T {
+    pub(crate) fn get(&self, q: Quantity) -> &T {
         match q {
             Quantity::Mu => &self.mu,
             Quantity::Adhesion => &self.adhesion,
@@ -107,7 +107,7 @@ impl<T> ByQuantity<T> {
         }
     }
 
-    pub fn get_mut(&mut self, q: Quantity) -> &mut T {
+    pub(crate) fn get_mut(&mut self, q: Quantity) -> &mut T {
         match q {
             Quantity::Mu => &mut self.mu,
             Quantity::Adhesion => &mut self.adhesion,
@@ -116,7 +116,7 @@ impl<T> ByQuantity<T> {
     }
 
     /// The quantities in the format's order, with their values.
-    pub fn iter(&self) -> impl Iterator<Item = (Quantity, &T)> {
+    pub(crate) fn iter(&self) -> impl Iterator<Item = (Quantity, &T)> {
         QUANTITIES.into_iter().map(move |q| (q, self.get(q)))
     }
 }

@@ -30,12 +30,12 @@ impl TrainKind {
 #[derive(Debug, Clone, Copy)]
 pub(super) struct Vehicle {
     /// Length over buffers (or couplers).
-    pub length_m: f64,
-    pub bogie_centres_m: f64,
+    pub(super) length_m: f64,
+    pub(super) bogie_centres_m: f64,
     /// Axle spacing within a bogie.
-    pub wheelbase_m: f64,
+    pub(super) wheelbase_m: f64,
     /// Mean static wheel load, kN.
-    pub wheel_load_kn: f64,
+    pub(super) wheel_load_kn: f64,
 }
 
 /// Bo'Bo' locomotive (e.g. a TRAXX-like 4-axle electric, ~21 t axle load).
@@ -98,13 +98,13 @@ pub(super) fn passenger_consist(rng: &mut ChaCha8Rng) -> Vec<Vehicle> {
 /// A planned train: the typed passage plus what goes on the wire.
 #[derive(Debug, Clone)]
 pub(super) struct TrainPlan {
-    pub kind: TrainKind,
-    pub passage: Passage,
+    pub(super) kind: TrainKind,
+    pub(super) passage: Passage,
     /// Wheel loads as written, kN: `[axle * rails + rail]`.
-    pub load_kn: Vec<f64>,
-    pub log_time_ns: u64,
-    pub measured: bool,
-    pub adhesion: bool,
+    pub(super) load_kn: Vec<f64>,
+    pub(super) log_time_ns: u64,
+    pub(super) measured: bool,
+    pub(super) adhesion: bool,
 }
 
 /// Creepages of one wheel on one rail (model input, not a simulation).

@@ -6,7 +6,6 @@
 
 use std::path::Path;
 
-use anyhow::{anyhow, Context, Result};
 use rand::Rng;
 use rand_distr::{Distribution, Normal};
 
@@ -18,6 +17,7 @@ use super::report::{
 use super::traffic::TrainKind;
 use super::writing::{self, SynthFile};
 use super::{round_dp, stream, utc, Stream, GENERATOR, HOUR_NS};
+use crate::{Error, Result};
 use tortwin_engine::sink::{MeasurementOutput, Sink};
 use tortwin_engine::{Engine, EngineOptions};
 use tortwin_model::config::ModelConfig;
@@ -27,7 +27,11 @@ use tortwin_recording::{Direction, Event, EventKind, Quantity};
 /// Writes the synthetic recording `params` describes to `out` (under a
 /// temporary name, renamed when complete), with measurements from the
 /// engine run with `truth`, and returns its key.
-pub fn generate(params: &SynthParams, truth: &ModelConfig, out: &Path) -> Result<SynthReport> {
+pub(crate) fn generate(
+    params: &SynthParams,
+    truth: &ModelConfig,
+    out: &Path,
+) -> Result<SynthReport> {
     params.validate()?;
     let section = params.section();
     let origin_ns = params.start_ns as i64;
@@ -54,8 +58,9 @@ pub fn generate(params: &SynthParams, truth: &ModelConfig, out: &Path) -> Result
     let mut file = SynthFile::create(out, params)?;
     let mut counts = Counts::default();
     let mut stats = Residuals::default();
+    // `validate` refused a negative or non-finite sigma: a failure here is ours.
     let noise = Normal::new(0.0, params.noise_sigma)
-        .map_err(|e| anyhow!("noise sigma {}: {e}", params.noise_sigma))?;
+        .map_err(|e| Error::Inconsistent(format!("noise sigma {}: {e}", params.noise_sigma)))?;
     let mut noise_rng = stream(params.seed, Stream::Noise);
     let mut outlier_rng = stream(params.seed, Stream::Outliers);
     let mut outliers = Vec::new();
@@ -89,7 +94,12 @@ pub fn generate(params: &SynthParams, truth: &ModelConfig, out: &Path) -> Result
                         .trains
                         .iter()
                         .find(|t| t.passage.train_seq == passage.train_seq)
-                        .ok_or_else(|| anyhow!("train {} was not planned", passage.train_id))?;
+                        .ok_or_else(|| {
+                            Error::Inconsistent(format!(
+                                "train {} was not planned",
+                                passage.train_id
+                            ))
+                        })?;
                     counts.trains += 1;
                     counts.axles += passage.axles.len() as u64;
                     match train.kind {
@@ -104,9 +114,9 @@ pub fn generate(params: &SynthParams, truth: &ModelConfig, out: &Path) -> Result
                     )?;
                 }
                 EventKind::Pulse(pulse) => {
-                    let mass_g = item
-                        .pulse_mass_g
-                        .ok_or_else(|| anyhow!("a pulse was planned without its mass in g"))?;
+                    let mass_g = item.pulse_mass_g.ok_or_else(|| {
+                        Error::Inconsistent("a pulse was planned without its mass in g".into())
+                    })?;
                     counts.pulses += 1;
                     file.write(
                         item.log_time_ns,
@@ -124,10 +134,11 @@ pub fn generate(params: &SynthParams, truth: &ModelConfig, out: &Path) -> Result
                 EventKind::Measurement(m) => {
                     let (mut truth, baseline) = (truth_values[i], baseline_values[i]);
                     if truth.is_nan() || baseline.is_nan() {
-                        return Err(anyhow!(
-                            "the engine gave no value for the measurement at log_time {} ns",
-                            item.log_time_ns
-                        ));
+                        return Err(Error::NotSimulated {
+                            file: out.to_path_buf(),
+                            log_time_ns: item.log_time_ns,
+                            index_in_file: None,
+                        });
                     }
                     let noise = if params.noise_sigma > 0.0 {
                         noise.sample(&mut noise_rng)
@@ -160,7 +171,15 @@ pub fn generate(params: &SynthParams, truth: &ModelConfig, out: &Path) -> Result
                     stats.add(m.quantity(), truth, baseline, measured);
                     counts.measurements += 1;
                     *counts.by_quantity.get_mut(m.quantity()) += 1;
-                    let message = writing::measurement_msg(&section, m, measured)?;
+                    let message =
+                        writing::measurement_msg(&section, m, measured).ok_or_else(|| {
+                            Error::NotFinite {
+                                file: out.to_path_buf(),
+                                quantity: m.quantity().as_str(),
+                                log_time_ns: item.log_time_ns,
+                                value: measured,
+                            }
+                        })?;
                     if item.at_end {
                         at_end.push((item.log_time_ns, message, gross != 0.0));
                     } else {
@@ -214,7 +233,10 @@ pub fn generate(params: &SynthParams, truth: &ModelConfig, out: &Path) -> Result
         start_utc: utc(params.start_ns),
         start_ns: params.start_ns,
         end_ns: params.end_ns(),
-        effects: serde_json::to_value(&truth.effects).context("serializing the effects")?,
+        effects: serde_json::to_value(&truth.effects).map_err(|source| Error::Json {
+            what: "the effects",
+            source,
+        })?,
         truth_config_toml: truth.to_toml(),
         noise: NoiseKey {
             distribution: "gaussian",
@@ -266,10 +288,12 @@ fn simulate(engine: &mut Engine, events: &[Event]) -> Result<Vec<f64>> {
     struct Collect<'a>(&'a mut [f64]);
     impl Sink for Collect<'_> {
         fn measurement(&mut self, m: &MeasurementOutput<'_>) -> tortwin_engine::sink::SinkResult {
-            let slot = self
-                .0
-                .get_mut(m.index_in_file as usize)
-                .ok_or_else(|| anyhow!("measurement index {} out of range", m.index_in_file))?;
+            let slot = self.0.get_mut(m.index_in_file as usize).ok_or_else(|| {
+                Error::Inconsistent(format!(
+                    "measurement index {} out of range",
+                    m.index_in_file
+                ))
+            })?;
             *slot = m.simulated;
             Ok(())
         }

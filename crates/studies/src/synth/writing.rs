@@ -9,11 +9,10 @@ use std::fs::File;
 use std::io::BufWriter;
 use std::path::Path;
 
-use anyhow::{anyhow, Context, Result};
-
 use super::params::SynthParams;
 use super::traffic::TrainPlan;
 use super::GENERATOR;
+use crate::{Error, Result};
 use tortwin_outputs::files::PartialFile;
 use tortwin_recording::wire::{
     ApplicatorMsg, AxleMsg, CreepageMsg, MeasurementMsg, PassageMsg, PerRail, SectionMsg, SiteMsg,
@@ -21,20 +20,23 @@ use tortwin_recording::wire::{
 };
 use tortwin_recording::{Measurement, RecordingWriter, Section, Weather};
 
-/// Writes the recording under `.NAME.partial-<pid>` and renames it into
-/// place in [`SynthFile::finish`]; dropped unfinished, it deletes the
-/// temporary file.
+/// Writes the recording under `.NAME.partial-XXXXXX` and renames it into
+/// place in [`SynthFile::finish`], which consumes it; dropped unfinished, it
+/// deletes the temporary file.
 pub(super) struct SynthFile {
     // Before `temp`: on drop the writer closes the file before it is deleted.
-    writer: Option<RecordingWriter<BufWriter<File>>>,
+    writer: RecordingWriter<BufWriter<File>>,
     temp: PartialFile,
 }
 
 impl SynthFile {
     pub(super) fn create(path: &Path, p: &SynthParams) -> Result<Self> {
         let temp = PartialFile::beside(path)?;
-        let file = File::create(temp.temp_path())
-            .with_context(|| format!("creating {}", temp.temp_path().display()))?;
+        let file = File::create(temp.temp_path()).map_err(|source| Error::Io {
+            what: "creating",
+            path: temp.temp_path().to_path_buf(),
+            source,
+        })?;
         let version = env!("CARGO_PKG_VERSION");
         let options = mcap::WriteOptions::new()
             .compression(Some(mcap::Compression::Zstd))
@@ -50,50 +52,53 @@ impl SynthFile {
                 ("preset".to_owned(), p.preset.as_str().to_owned()),
             ]),
         };
-        let writer = RecordingWriter::new(BufWriter::new(file), options, Some(&metadata))
-            .with_context(|| format!("starting {}", temp.temp_path().display()))?;
-        Ok(SynthFile {
-            writer: Some(writer),
-            temp,
-        })
+        let writer = RecordingWriter::new(BufWriter::new(file), options, Some(&metadata)).map_err(
+            |source| Error::Recording {
+                what: "starting",
+                path: temp.temp_path().to_path_buf(),
+                source,
+            },
+        )?;
+        Ok(SynthFile { writer, temp })
     }
 
     pub(super) fn write<M: WireMessage>(&mut self, log_time_ns: u64, message: &M) -> Result<()> {
-        let writer = self
-            .writer
-            .as_mut()
-            .ok_or_else(|| anyhow!("{}: already finished", self.temp.final_path().display()))?;
-        writer
+        self.writer
             .write(log_time_ns, message)
-            .with_context(|| format!("writing {}", self.temp.temp_path().display()))
+            .map_err(|source| Error::Recording {
+                what: "writing",
+                path: self.temp.temp_path().to_path_buf(),
+                source,
+            })
     }
 
     /// Messages written so far.
     pub(super) fn messages(&self) -> u64 {
-        self.writer.as_ref().map_or(0, RecordingWriter::messages)
+        self.writer.messages()
     }
 
     /// Finishes the file, renames it into place and returns its size.
-    pub(super) fn finish(mut self) -> Result<u64> {
-        let writer = self
-            .writer
-            .take()
-            .ok_or_else(|| anyhow!("{}: already finished", self.temp.final_path().display()))?;
-        let temp_path = self.temp.temp_path().to_path_buf();
+    pub(super) fn finish(self) -> Result<u64> {
+        let SynthFile { writer, mut temp } = self;
+        let temp_path = temp.temp_path().to_path_buf();
+        let io = |what: &'static str| {
+            let path = temp_path.clone();
+            move |source: std::io::Error| Error::Io { what, path, source }
+        };
         let file = writer
             .finish()
-            .with_context(|| format!("finishing {}", temp_path.display()))?
+            .map_err(|source| Error::Recording {
+                what: "finishing",
+                path: temp_path.clone(),
+                source,
+            })?
             .into_inner()
             .map_err(|e| e.into_error())
-            .with_context(|| format!("flushing {}", temp_path.display()))?;
-        file.sync_all()
-            .with_context(|| format!("syncing {}", temp_path.display()))?;
-        let size = file
-            .metadata()
-            .with_context(|| format!("reading the size of {}", temp_path.display()))?
-            .len();
+            .map_err(io("flushing"))?;
+        file.sync_all().map_err(io("syncing"))?;
+        let size = file.metadata().map_err(io("reading the size of"))?.len();
         drop(file);
-        self.temp.commit()?;
+        temp.commit()?;
         Ok(size)
     }
 }
@@ -177,20 +182,17 @@ pub(super) fn weather_msg(w: &Weather) -> WeatherMsg {
     }
 }
 
-/// A measurement's `/measurement/friction` with the measured `value`,
-/// which must be finite: JSON cannot hold anything else.
+/// A measurement's `/measurement/friction` with the measured `value`;
+/// `None` when `value` is not finite: JSON cannot hold it.
 pub(super) fn measurement_msg(
     section: &Section,
     m: &Measurement,
     value: f64,
-) -> Result<MeasurementMsg> {
+) -> Option<MeasurementMsg> {
     if !value.is_finite() {
-        return Err(anyhow!(
-            "a {} measurement is {value}, which JSON cannot hold",
-            m.quantity().as_str()
-        ));
+        return None;
     }
-    Ok(MeasurementMsg {
+    Some(MeasurementMsg {
         site_id: section.sites[m.site].id.clone(),
         rail: section.rails[m.rail].clone(),
         quantity: m.quantity(),
