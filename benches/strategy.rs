@@ -15,8 +15,11 @@ use tortwin_studies::strategy::search::{Method, Searcher, Space, SpaceConfig};
 use tortwin_studies::strategy::{evaluate, Plan, Strategy, Target, Traffic};
 
 fn strategies_per_second(c: &mut Criterion) {
-    let traffic =
-        Traffic::read(&tortwin_studies::jobs::default_recording()).expect("the bundled recording");
+    let traffic = Traffic::read(std::path::Path::new(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/recordings/demo_day.mcap"
+    )))
+    .expect("the bundled recording");
     let cfg = ModelConfig::default();
     let target = Target::default();
     let mut group = c.benchmark_group("strategy_demo_day");

@@ -1,23 +1,28 @@
 //! The `tortwin` command line: parses the arguments, runs the job from the
 //! library (`tortwin_studies::jobs`), shows its progress on stderr, prints
-//! its summary and maps errors to exit codes (../shared/spec/interfaces.md):
-//! 2 for bad input (recording, configuration, command line), 1 otherwise.
+//! its summary and maps errors to exit codes (docs/spec/interfaces.md): 2
+//! for bad input (recording, tables, configuration, command line), 1
+//! otherwise.
 
+use std::io::IsTerminal as _;
 use std::process::ExitCode;
+use std::sync::Mutex;
 use std::time::{Duration, Instant};
 
 use anyhow::Result;
 use clap::{Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
-use tortwin_studies::jobs::{discover, paper, replay, strategy, summary, synth};
+use tortwin_studies::jobs::{discover, paper, replay, strategy, summary, synth, tables};
 use tortwin_studies::Progress;
 
 #[derive(Debug, Parser)]
 #[command(
     name = "tortwin",
     version,
-    about = "Digital twin of a track section for top-of-rail friction management"
+    about = "Digital twin of a track section for top-of-rail friction management",
+    after_help = "Exit status: 0 on success, 2 on bad input or usage (the message names the \
+                  file and where in it), 1 otherwise. Documentation: docs/ in the repository."
 )]
 struct Cli {
     #[command(subcommand)]
@@ -26,8 +31,16 @@ struct Cli {
 
 #[derive(Debug, Subcommand)]
 enum Command {
-    /// Replay a recording of a track section and publish the friction field.
+    /// Replay a recording of a track section and publish the friction field
+    /// (rerun recording, MCAP for Foxglove).
     Replay(replay::ReplayArgs),
+    /// Build a recording from CSV tables (section.toml, passages.csv,
+    /// pulses.csv, weather.csv, measurements.csv; docs/spec/csv-tables.md).
+    Import(tables::ImportArgs),
+    /// Replay a recording into tables: measurements with simulated values
+    /// and residuals, the field per train (long format) and per-train
+    /// summaries, as Parquet and CSV.
+    Export(tables::ExportArgs),
     /// Recompute the paper's Figures 7 and 13–17 as CSV and SVG.
     Paper(paper::PaperArgs),
     /// Write a synthetic recording (traffic, pulses, weather, noisy
@@ -71,13 +84,31 @@ fn is_input_error(err: &anyhow::Error) -> bool {
 fn run(command: Command) -> Result<()> {
     match command {
         Command::Replay(args) => {
-            let bar = Spinner::new(args.quiet, "{spinner} {elapsed} {msg}");
-            let result = replay::replay_with(&args, &mut [], &bar);
-            bar.0.finish_and_clear();
+            let display = Display::new(args.quiet);
+            let result = replay::replay_with(&args, &mut [], &display);
+            display.finish();
             let run = result?;
             if !args.quiet {
                 say(&summary::render(&args.recording, &run))?;
                 say(&replay::render_outputs(&args))?;
+            }
+        }
+        Command::Import(args) => {
+            let display = Display::new(args.quiet);
+            let result = tables::import(&args, &display);
+            display.finish();
+            let imported = result?;
+            if !args.quiet {
+                say(&tables::render_import(&args, &imported))?;
+            }
+        }
+        Command::Export(args) => {
+            let display = Display::new(args.quiet);
+            let result = tables::export(&args, &display);
+            display.finish();
+            let exported = result?;
+            if !args.quiet {
+                say(&tables::render_export(&args, &exported))?;
             }
         }
         Command::Paper(args) => {
@@ -92,9 +123,9 @@ fn run(command: Command) -> Result<()> {
         }
         Command::Discover(args) => {
             let t0 = Instant::now();
-            let bar = Spinner::new(args.quiet, "{spinner} {elapsed} {pos} engine runs  {msg}");
-            let result = discover::run_with(&args, &bar);
-            bar.0.finish_and_clear();
+            let display = Display::new(args.quiet);
+            let result = discover::run_with(&args, &display);
+            display.finish();
             let discovery = result?;
             if !args.quiet {
                 let elapsed_s = t0.elapsed().as_secs_f64();
@@ -103,9 +134,9 @@ fn run(command: Command) -> Result<()> {
         }
         Command::Strategy(args) => {
             let t0 = Instant::now();
-            let bar = Spinner::new(args.quiet, "{spinner} {elapsed} {pos} strategies  {msg}");
-            let result = strategy::run_with(&args, &bar);
-            bar.0.finish_and_clear();
+            let display = Display::new(args.quiet);
+            let result = strategy::run_with(&args, &display);
+            display.finish();
             let (traffic, study) = result?;
             if !args.quiet {
                 let elapsed_s = t0.elapsed().as_secs_f64();
@@ -127,30 +158,116 @@ fn say(text: &str) -> std::io::Result<()> {
     }
 }
 
-/// A spinner on stderr for a long command (indicatif hides it when stderr
-/// is not a terminal; `quiet` hides it always). `template` is indicatif's.
-struct Spinner(ProgressBar);
+/// A long command's progress on stderr. On a terminal: a bar with the
+/// count, the rate and the time left for a stage whose length is known, a
+/// spinner with the elapsed time otherwise. Not on a terminal (a batch
+/// run's log): one line per stage with the elapsed time, and the count a
+/// stage reached when it ends. Nothing with `--quiet`.
+struct Display {
+    bar: ProgressBar,
+    lines: bool,
+    t0: Instant,
+    stage: Mutex<Stage>,
+}
 
-impl Spinner {
-    fn new(quiet: bool, template: &str) -> Self {
+/// The stage being shown.
+#[derive(Default)]
+struct Stage {
+    total: Option<u64>,
+    done: u64,
+    started: Option<Instant>,
+}
+
+/// indicatif's templates.
+const BAR: &str =
+    "{msg}\n[{elapsed_precise}] {wide_bar} {human_pos}/{human_len} ({per_sec}, {eta} left)";
+const SPINNER: &str = "{spinner} [{elapsed_precise}] {msg}";
+
+impl Display {
+    fn new(quiet: bool) -> Self {
+        let terminal = std::io::stderr().is_terminal();
         let bar = ProgressBar::new_spinner();
-        if quiet {
+        if quiet || !terminal {
             bar.set_draw_target(ProgressDrawTarget::hidden());
+        } else {
+            bar.enable_steady_tick(Duration::from_millis(120));
         }
-        bar.set_style(
-            ProgressStyle::with_template(template)
-                .unwrap_or_else(|_| ProgressStyle::default_spinner()),
-        );
-        bar.enable_steady_tick(Duration::from_millis(120));
-        Self(bar)
+        Self {
+            bar,
+            lines: !quiet && !terminal,
+            t0: Instant::now(),
+            stage: Mutex::new(Stage::default()),
+        }
+    }
+
+    fn style(&self, template: &str) {
+        if let Ok(style) = ProgressStyle::with_template(template) {
+            self.bar.set_style(style);
+        }
+    }
+
+    /// Starts a stage: ends the one before, prints its line.
+    fn begin(&self, message: &str, total: Option<u64>) {
+        let mut stage = self.stage.lock().unwrap_or_else(|e| e.into_inner());
+        self.end(&stage);
+        *stage = Stage {
+            total,
+            done: 0,
+            started: Some(Instant::now()),
+        };
+        if self.lines {
+            let count = total.map_or(String::new(), |n| format!(" ({n} to do)"));
+            eprintln!("[{:8.1} s] {message}{count}", self.elapsed());
+        }
+        match total {
+            Some(n) => {
+                self.style(BAR);
+                self.bar.reset_eta();
+                self.bar.set_length(n);
+                self.bar.set_position(0);
+            }
+            None => {
+                self.style(SPINNER);
+                self.bar.unset_length();
+            }
+        }
+        self.bar.set_message(message.to_owned());
+    }
+
+    /// The line that closes a stage with a count, when writing lines.
+    fn end(&self, stage: &Stage) {
+        if let (true, Some(total), Some(started)) = (self.lines, stage.total, stage.started) {
+            eprintln!(
+                "[{:8.1} s]   {}/{total} done in {:.1} s",
+                self.elapsed(),
+                stage.done,
+                started.elapsed().as_secs_f64()
+            );
+        }
+    }
+
+    fn elapsed(&self) -> f64 {
+        self.t0.elapsed().as_secs_f64()
+    }
+
+    /// The job has returned: closes the last stage and clears the bar.
+    fn finish(&self) {
+        let stage = self.stage.lock().unwrap_or_else(|e| e.into_inner());
+        self.end(&stage);
+        self.bar.finish_and_clear();
     }
 }
 
-impl Progress for Spinner {
+impl Progress for Display {
     fn stage(&self, message: &str) {
-        self.0.set_message(message.to_string());
+        self.begin(message, None);
     }
-    fn done(&self, done: usize) {
-        self.0.set_position(done as u64);
+    fn stage_of(&self, message: &str, total: u64) {
+        self.begin(message, Some(total));
+    }
+    fn done(&self, done: u64) {
+        let mut stage = self.stage.lock().unwrap_or_else(|e| e.into_inner());
+        stage.done = stage.done.max(done);
+        self.bar.set_position(stage.done);
     }
 }

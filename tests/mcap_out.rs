@@ -220,7 +220,7 @@ fn run_checker(path: &Path, extra: &[&str]) -> std::process::Output {
 fn writes_every_topic_and_reads_back() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("twin.mcap");
-    let mut sink = McapSink::create(&path).unwrap();
+    let mut sink = McapSink::create(&path, None).unwrap();
     write_synthetic(&mut sink).unwrap();
     assert!(!path.exists(), "nothing under the final name before finish");
     sink.finish(&RunSummary::default()).unwrap();
@@ -426,7 +426,7 @@ fn checker_rejects_messages_that_break_their_schema() {
 fn dropped_sink_leaves_no_file() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("twin.mcap");
-    let mut sink = McapSink::create(&path).unwrap();
+    let mut sink = McapSink::create(&path, None).unwrap();
     write_synthetic(&mut sink).unwrap();
     assert_eq!(files_in(dir.path()).len(), 1, "the temporary file exists");
     drop(sink);
@@ -442,7 +442,7 @@ fn dropped_sink_leaves_no_file() {
 fn non_finite_values_are_errors() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("twin.mcap");
-    let mut sink = McapSink::create(&path).unwrap();
+    let mut sink = McapSink::create(&path, None).unwrap();
     write_synthetic(&mut sink).unwrap();
 
     let err = sink

@@ -23,7 +23,7 @@ use tortwin_studies::strategy::search::{
 use tortwin_studies::strategy::{self, evaluate, Plan, Strategy, Target, Traffic};
 
 fn demo() -> Traffic {
-    Traffic::read(&tortwin_studies::jobs::default_recording()).expect("the bundled recording")
+    Traffic::read(&common::demo_day()).expect("the bundled recording")
 }
 
 use common::tortwin;
@@ -502,7 +502,7 @@ fn the_command_writes_a_result_that_reads_back() {
     let run = run_ok(
         tortwin()
             .arg("strategy")
-            .arg(tortwin_studies::jobs::default_recording())
+            .arg(common::demo_day())
             .arg("--out")
             .arg(&out)
             .arg("--space")
@@ -524,6 +524,14 @@ fn the_command_writes_a_result_that_reads_back() {
         serde_json::from_str(&std::fs::read_to_string(out.join("strategy.json")).unwrap()).unwrap();
     assert_eq!(json["space"]["size"], 12);
     assert_eq!(json["search"]["method"], "grid");
+    // Where it came from: the traffic and the space file, by sha256.
+    for output in ["strategy.json", "recommended.rrd"] {
+        let check = common::python(
+            "check_provenance.py",
+            &[out.join(output), common::demo_day(), space.clone()],
+        );
+        common::check(&check, &format!("check_provenance.py {output}"));
+    }
     assert_eq!(json["evaluated"].as_array().unwrap().len(), 12);
     assert_eq!(json["target"]["coverage_tolerance"], 0.02);
     let rec = &json["recommended"];
@@ -627,7 +635,7 @@ fn synthetic_traffic_from_synth_parameters() {
 fn bad_input_exits_2_naming_the_problem() {
     let dir = tempfile::tempdir().unwrap();
     let truncated = dir.path().join("truncated.mcap");
-    let bytes = std::fs::read(tortwin_studies::jobs::default_recording()).unwrap();
+    let bytes = std::fs::read(common::demo_day()).unwrap();
     std::fs::write(&truncated, &bytes[..bytes.len() / 2]).unwrap();
     let cases: Vec<(&str, Option<&Path>, &str)> = vec![
         ("[space]\nrails = [[\"middle\"]]\n", None, "space.rails"),
@@ -655,8 +663,7 @@ fn bad_input_exits_2_naming_the_problem() {
     for (k, (text, recording, expect)) in cases.into_iter().enumerate() {
         let out = dir.path().join(format!("out{k}"));
         let space = write_space(dir.path(), text);
-        let recording =
-            recording.map_or_else(tortwin_studies::jobs::default_recording, Path::to_path_buf);
+        let recording = recording.map_or_else(common::demo_day, Path::to_path_buf);
         let run = tortwin()
             .arg("strategy")
             .arg(&recording)

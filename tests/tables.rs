@@ -126,23 +126,131 @@ fn column(tables: &Path, file: &str, name: &str) -> usize {
     header(tables, file).iter().position(|h| h == name).unwrap() + 1
 }
 
-/// Imports `tables`, expecting an error at `file:line:column` whose text
-/// says `says`; nothing may be left under the output name.
+/// `tortwin import tables`, expecting exit status 2 and an error at
+/// `file:line:column` whose text says `says`; nothing may be left in the
+/// output folder.
 fn fails_at(tables: &Path, file: &str, line: usize, column: usize, says: &str) {
-    let out = tables.parent().unwrap().join("bad.mcap");
-    let err = import_dir(tables, &out).unwrap_err();
-    let text = err.to_string();
+    let folder = tables.parent().unwrap().join("out");
+    let out = folder.join("bad.mcap");
+    let o = common::tortwin()
+        .arg("import")
+        .arg(tables)
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{text}");
     let at = format!("{file}:{line}:{column}: ");
     assert!(text.contains(&at), "expected {at} in: {text}");
     assert!(text.contains(says), "expected `{says}` in: {text}");
-    assert!(!out.exists(), "a failed import left {}", out.display());
+    assert!(!text.contains("panicked"), "{text}");
+    let left: Vec<_> = std::fs::read_dir(&folder).unwrap().collect();
+    assert!(left.is_empty(), "a failed import left {left:?}");
+}
+
+/// The example tables documented in docs/spec/csv-tables.md (made from the
+/// demo day by `tortwin export --inputs`) import, through the command line,
+/// into a recording that replays to the demo day's measurements bit for
+/// bit; the output's folder is made.
+#[test]
+fn the_documented_example_tables_replay_like_the_demo_day() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("new/folder/imported.mcap");
+    let examples = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("docs/examples/demo_day_tables");
+    let o = common::tortwin()
+        .arg("import")
+        .arg(&examples)
+        .arg("--out")
+        .arg(&out)
+        .output()
+        .unwrap();
+    common::check(&o, "tortwin import");
+    let stdout = String::from_utf8_lossy(&o.stdout);
     assert!(
-        matches!(
-            err,
-            tortwin_recording::tables::import::ImportError::Input(_)
+        stdout.contains(
+            "trains 40, axles 2808, pulses 2808, weather messages 144, measurements 5899"
         ),
-        "{err:?}"
+        "{stdout}"
     );
+    let (a, b) = (measurements(&bundled("demo_day.mcap")), measurements(&out));
+    assert_eq!(a.len(), 5899);
+    assert_eq!(a.len(), b.len());
+    for (x, y) in a.iter().zip(&b) {
+        assert_eq!((x.0, &x.1), (y.0, &y.1));
+        assert_eq!(x.2.to_bits(), y.2.to_bits(), "measured {x:?} vs {y:?}");
+        assert_eq!(x.3.to_bits(), y.3.to_bits(), "simulated {x:?} vs {y:?}");
+    }
+}
+
+/// `tortwin export` read back by pyarrow and pandas (tests/python/
+/// check_tables.py): the documented columns, one row per /twin/measurement
+/// of the same replay's MCAP output with its values bit for bit, one field
+/// row per grid point and one trains row per /twin/field message; the
+/// tables and the MCAP output name their input by sha256.
+#[test]
+fn exported_tables_read_back_in_pandas_equal_the_mcap_output() {
+    let dir = tempfile::tempdir().unwrap();
+    let recording = bundled("curve_day_all_effects.mcap");
+    let mcap = dir.path().join("replay/out.mcap");
+    let rrd = dir.path().join("replay/out.rrd");
+    let o = common::tortwin()
+        .arg("replay")
+        .arg(&recording)
+        .arg("--out-mcap")
+        .arg(&mcap)
+        .arg("--out-rrd")
+        .arg(&rrd)
+        .output()
+        .unwrap();
+    common::check(&o, "tortwin replay");
+    let tables = dir.path().join("tables");
+    let o = common::tortwin()
+        .arg("export")
+        .arg(&recording)
+        .arg("--out")
+        .arg(&tables)
+        .arg("--inputs")
+        .output()
+        .unwrap();
+    common::check(&o, "tortwin export");
+    let check = common::python("check_tables.py", &[&tables, &mcap]);
+    common::check(&check, "check_tables.py");
+    let summary = String::from_utf8_lossy(&check.stdout);
+    assert!(summary.contains("\"failures\": []"), "{summary}");
+    for output in [mcap, rrd, tables.join("provenance.json")] {
+        let check = common::python("check_provenance.py", &[&output, &recording]);
+        common::check(&check, &format!("check_provenance.py {}", output.display()));
+    }
+    // The inputs written beside the tables import back.
+    let back = dir.path().join("back.mcap");
+    let o = common::tortwin()
+        .arg("import")
+        .arg(tables.join("inputs"))
+        .arg("--out")
+        .arg(&back)
+        .output()
+        .unwrap();
+    common::check(&o, "tortwin import");
+    assert_eq!(measurements(&recording), measurements(&back));
+}
+
+/// An output folder that cannot be made is exit status 2 naming it.
+#[test]
+fn an_export_folder_that_cannot_be_made_is_named() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("a_file");
+    std::fs::write(&file, "x").unwrap();
+    let o = common::tortwin()
+        .arg("export")
+        .arg(bundled("demo_day.mcap"))
+        .arg("--out")
+        .arg(file.join("tables"))
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{text}");
+    assert!(text.contains("a_file/tables"), "{text}");
 }
 
 #[test]

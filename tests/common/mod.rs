@@ -26,6 +26,12 @@ pub fn reference_recording(name: &str) -> PathBuf {
     reference("recordings").join(name)
 }
 
+/// `recordings/demo_day.mcap`: the recording bundled for the README's
+/// main job.
+pub fn demo_day() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("recordings/demo_day.mcap")
+}
+
 /// The `tortwin` binary of this build.
 pub fn tortwin() -> Command {
     Command::new(env!("CARGO_BIN_EXE_tortwin"))
@@ -54,7 +60,10 @@ pub fn discover_report(recording: &std::path::Path, report: &std::path::Path) ->
         .unwrap();
     check(&o, "tortwin discover");
     eprintln!("{}", String::from_utf8_lossy(&o.stdout));
-    let text = std::fs::read_to_string(report.join("report.json")).unwrap();
+    let json = report.join("report.json");
+    let provenance = python("check_provenance.py", &[json.as_path(), recording]);
+    check(&provenance, "check_provenance.py report.json");
+    let text = std::fs::read_to_string(&json).unwrap();
     serde_json::from_str(&text).unwrap()
 }
 

@@ -76,7 +76,7 @@ def main():
             check(row.train_id == body["train_id"] and row.axle_index == body["axle_index"],
                   f"axle {row} vs {body}")
         else:
-            check(row.train_id is None and math.isnan(row.axle_index), f"rail_mu row {row}")
+            check(pd.isna(row.train_id) and pd.isna(row.axle_index), f"rail_mu row {row}")
 
     csv = pd.read_csv(f"{tables}/measurements.csv")
     check(list(csv.columns) == MEASUREMENT_COLUMNS, f"csv columns {list(csv.columns)}")

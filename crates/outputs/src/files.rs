@@ -129,6 +129,15 @@ pub fn write_atomically(path: &Path, bytes: &[u8]) -> Result<(), FileError> {
     Ok(())
 }
 
+/// Makes `folder` (and its parents) if missing, as an output folder: one
+/// that cannot be made is the user's to fix ([`FileError::Folder`]).
+pub fn make_folder(folder: &Path) -> Result<(), FileError> {
+    std::fs::create_dir_all(folder).map_err(|err| FileError::Folder {
+        folder: folder.to_path_buf(),
+        source: UsageError(err.to_string()),
+    })
+}
+
 /// An empty `.NAME.partial-XXXXXX` in the folder of `final_path`, which is
 /// made if missing.
 fn temporary_beside(final_path: &Path) -> Result<NamedTempFile, FileError> {
@@ -141,10 +150,7 @@ fn temporary_beside(final_path: &Path) -> Result<NamedTempFile, FileError> {
         Some(folder) if !folder.as_os_str().is_empty() => folder,
         _ => Path::new("."),
     };
-    std::fs::create_dir_all(folder).map_err(|err| FileError::Folder {
-        folder: folder.to_path_buf(),
-        source: UsageError(err.to_string()),
-    })?;
+    make_folder(folder)?;
     let mut prefix = OsString::from(".");
     prefix.push(file_name);
     prefix.push(".partial-");

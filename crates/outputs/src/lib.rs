@@ -7,5 +7,6 @@
 
 pub mod files;
 pub mod mcap_out;
+pub mod provenance;
 pub mod rerun_out;
 pub mod tables;

@@ -34,6 +34,7 @@ use serde::ser::{SerializeSeq, Serializer};
 use serde::Serialize;
 
 use crate::files::{FileError, PartialFile};
+use crate::provenance::Provenance;
 use tortwin_engine::sink::{
     FieldSnapshot, MeasurementOutput, PulseEvent, RunSummary, SectionInfo, Sink, SnapshotKind,
     TrainEvent,
@@ -116,8 +117,10 @@ pub struct McapSink {
 }
 
 impl McapSink {
-    /// Opens `.NAME.partial-XXXXXX` next to `path` and registers every channel.
-    pub fn create(path: &Path) -> Result<McapSink, McapError> {
+    /// Opens `.NAME.partial-XXXXXX` next to `path` and registers every
+    /// channel; with `provenance`, writes it as the metadata record
+    /// `provenance` and the configuration as the attachment `model.toml`.
+    pub fn create(path: &Path, provenance: Option<&Provenance>) -> Result<McapSink, McapError> {
         let temp = PartialFile::beside(path)?;
         let file = File::create(temp.temp_path()).map_err(|source| McapError::Io {
             path: path.to_path_buf(),
@@ -154,6 +157,23 @@ impl McapSink {
                 ]),
             })
             .map_err(mcap_error("writing the metadata"))?;
+        if let Some(p) = provenance {
+            writer
+                .write_metadata(&mcap::records::Metadata {
+                    name: "provenance".to_owned(),
+                    metadata: p.to_pairs(),
+                })
+                .map_err(mcap_error("writing the provenance"))?;
+            writer
+                .attach(&mcap::Attachment {
+                    log_time: 0,
+                    create_time: 0,
+                    name: "model.toml".to_owned(),
+                    media_type: "application/toml".to_owned(),
+                    data: std::borrow::Cow::Borrowed(p.model_toml.as_bytes()),
+                })
+                .map_err(mcap_error("attaching the configuration"))?;
+        }
 
         let no_metadata = BTreeMap::new();
         let mut channel_ids = [0; Topic::ALL.len()];

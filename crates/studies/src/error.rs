@@ -14,8 +14,11 @@ use tortwin_model::error::{ConfigError, UsageError};
 use tortwin_outputs::files::FileError;
 use tortwin_outputs::mcap_out::McapError;
 use tortwin_outputs::rerun_out::RerunError;
+use tortwin_outputs::tables::TableError;
 use tortwin_plot::PlotError;
 use tortwin_recording::error::{InputError, WriteError};
+use tortwin_recording::tables::export::ExportError;
+use tortwin_recording::tables::import::ImportError;
 
 /// What the studies and jobs return.
 pub type Result<T, E = Error> = std::result::Result<T, E>;
@@ -52,6 +55,14 @@ pub enum Error {
     Rerun(#[from] RerunError),
     #[error(transparent)]
     Plot(#[from] PlotError),
+    #[error(transparent)]
+    Table(#[from] TableError),
+    /// CSV tables that could not become a recording.
+    #[error(transparent)]
+    Import(#[from] ImportError),
+    /// A recording's inputs that could not be written as tables.
+    #[error(transparent)]
+    Export(#[from] ExportError),
     /// A synthetic recording could not be written: `what` of `path`.
     #[error("{what} {}", path.display())]
     Recording {
@@ -138,6 +149,9 @@ impl Error {
             Error::Mcap(e) => e.is_input(),
             Error::Rerun(e) => e.is_input(),
             Error::Plot(e) => e.is_input(),
+            Error::Table(TableError::File(e)) => e.is_input(),
+            Error::Import(ImportError::Input(_)) | Error::Export(ExportError::Input(_)) => true,
+            Error::Table(_) | Error::Import(_) | Error::Export(_) => false,
             Error::Context { source, .. } => source.is_input(),
             Error::Recording { .. }
             | Error::Io { .. }

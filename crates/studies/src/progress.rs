@@ -1,12 +1,18 @@
-//! Progress of a long job, for whoever shows it (the binary's spinner, a
-//! notebook, nothing). The jobs never print.
+//! Progress of a long job, for whoever shows it (the binary's bar or stage
+//! lines, a notebook, nothing). The jobs never print.
 
-/// Receives a long job's progress. Both methods default to doing nothing.
+/// Receives a long job's progress. Every method defaults to doing nothing.
 pub trait Progress: Sync {
-    /// A new stage ("reading demo_day.mcap", "step 1: fitting 6 candidates").
+    /// A new stage whose length is not known ("reading demo_day.mcap").
     fn stage(&self, _message: &str) {}
-    /// `done` units of work finished so far (engine runs, strategies).
-    fn done(&self, _done: usize) {}
+    /// A new stage of `total` units ("replaying demo_day.mcap", 6035
+    /// messages; "step 1: fitting 12 candidates", 12 fits): a display can
+    /// show a bar and an estimate of the time left.
+    fn stage_of(&self, message: &str, _total: u64) {
+        self.stage(message);
+    }
+    /// `done` units of the current stage finished so far.
+    fn done(&self, _done: u64) {}
 }
 
 /// No display.

@@ -158,6 +158,24 @@ mod summary;
 pub use error::RerunError;
 pub use sink::RerunSink;
 
+use crate::provenance::Provenance;
+
+/// Stores `provenance` as the recording property `provenance`: one text
+/// per [`Provenance::to_pairs`] key, shown in the viewer's recording panel.
+pub fn send_provenance(
+    rec: &rerun::RecordingStream,
+    provenance: &Provenance,
+) -> rerun::RecordingStreamResult<()> {
+    let mut values = rerun::AnyValues::default();
+    for (key, text) in provenance.to_pairs() {
+        // The keys are fixed, non-empty names: always valid.
+        if let Ok(field) = rerun::ComponentIdentifier::try_new(&key) {
+            values = values.with_component::<rerun::components::Text>(field, [text]);
+        }
+    }
+    rec.send_property("provenance", &values)
+}
+
 /// Name of the sequence timeline: wheel passes so far.
 pub(crate) const TIMELINE_WHEEL_PASS: &str = "wheel_pass";
 /// Name of the timestamp timeline: the events' log_time.
@@ -201,6 +219,9 @@ pub struct RerunOptions {
     pub mu_color_range: Option<[f64; 2]>,
     /// Send the default layout (see the module docs).
     pub blueprint: bool,
+    /// Stored as the recording property `provenance` (one text per
+    /// [`Provenance::to_pairs`] key), shown in the viewer's recording panel.
+    pub provenance: Option<Provenance>,
 }
 
 impl Default for RerunOptions {
@@ -214,6 +235,7 @@ impl Default for RerunOptions {
             history_every: 32,
             mu_color_range: None,
             blueprint: true,
+            provenance: None,
         }
     }
 }

@@ -24,7 +24,7 @@ use super::error::{sdk_error, RerunError};
 use super::section::log_section;
 use super::summary::summarize;
 use super::{
-    RerunOptions, BATCH_CHUNK_BYTES, G_PER_KG, MAX_BYTES_IN_FLIGHT, MG_PER_KG,
+    send_provenance, RerunOptions, BATCH_CHUNK_BYTES, G_PER_KG, MAX_BYTES_IN_FLIGHT, MG_PER_KG,
     MU_COLOR_STEPS_PER_UNIT, SERIES_CHUNK_ROWS, TIMELINE_TIME, TIMELINE_WHEEL_PASS,
 };
 use crate::files::PartialFile;
@@ -96,6 +96,10 @@ impl RerunSink {
             .map_err(sdk_error(path, || "starting the recording".to_owned()))?;
         rec.set_log_time_enabled(false);
         rec.set_log_tick_enabled(false);
+        if let Some(provenance) = &options.provenance {
+            send_provenance(&rec, provenance)
+                .map_err(sdk_error(path, || "writing the provenance".to_owned()))?;
+        }
 
         Ok(RerunSink {
             rec: Some(rec),

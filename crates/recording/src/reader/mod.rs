@@ -71,6 +71,8 @@ pub struct RecordingReader {
     section_msg: SectionMsg,
     section_log_time_ns: u64,
     unknown_topic_messages: u64,
+    /// Messages in the file, every topic (from the layout pass).
+    message_count: u64,
     finished: bool,
 }
 
@@ -87,6 +89,8 @@ impl RecordingReader {
         let Some(&first_section) = layout.sections.first() else {
             return Err(no_section());
         };
+        let message_count =
+            layout.chunks.iter().map(|c| c.message_count).sum::<u64>() + layout.loose.len() as u64;
         let mut queue = ReplayQueue::new(path, file, layout.channels, layout.chunks, layout.loose);
 
         let Some(first) = queue.next_message()? else {
@@ -130,8 +134,15 @@ impl RecordingReader {
             section_msg: msg,
             section_log_time_ns: first.key.log_time_ns,
             unknown_topic_messages: 0,
+            message_count,
             finished: false,
         })
+    }
+
+    /// How many messages the file holds (every topic, `/section` included):
+    /// the length of a replay, for a progress display.
+    pub fn message_count(&self) -> u64 {
+        self.message_count
     }
 
     /// The `/section` message as it is on the wire (grams, rail names).

@@ -56,8 +56,7 @@ struct Out {
 impl Out {
     fn create(dir: &Path, name: &str, header: &[String]) -> Result<Self, ExportError> {
         let path = dir.join(name);
-        let temp = tempfile::Builder::new()
-            .prefix(&format!(".{name}.partial-"))
+        let temp = temp_builder(&format!(".{name}.partial-"))
             .tempfile_in(dir)
             .map_err(|source| ExportError::Io {
                 what: "creating a file in",
@@ -108,6 +107,16 @@ impl Out {
         })?;
         Ok(())
     }
+}
+
+/// A temporary file named `prefix...`, made like any new file (0666 less
+/// the umask; tempfile's default is 0600) so the table it becomes is.
+fn temp_builder(prefix: &str) -> tempfile::Builder<'_, '_> {
+    let mut builder = tempfile::Builder::new();
+    builder.prefix(prefix);
+    #[cfg(unix)]
+    builder.permissions(std::os::unix::fs::PermissionsExt::from_mode(0o666));
+    builder
 }
 
 /// Writes the inputs of `recording` as tables into `dir` (created if
@@ -205,8 +214,7 @@ pub fn export_dir(recording: &Path, dir: &Path) -> Result<ExportSummary, ExportE
     // section.toml last: written whole once the recording has read through.
     let toml = section_toml(&section, reader.section_log_time_ns());
     let path = dir.join(SECTION_FILE);
-    let mut temp = tempfile::Builder::new()
-        .prefix(&format!(".{SECTION_FILE}.partial-"))
+    let mut temp = temp_builder(&format!(".{SECTION_FILE}.partial-"))
         .tempfile_in(dir)
         .map_err(|source| ExportError::Io {
             what: "creating a file in",

@@ -153,12 +153,17 @@ fn write(
         _ => PathBuf::from("."),
     };
     std::fs::create_dir_all(&folder).map_err(io("creating the folder", &folder))?;
-    let temp = tempfile::Builder::new()
-        .prefix(&format!(
-            ".{}.partial-",
-            out.file_name()
-                .map_or("recording".into(), |n| n.to_string_lossy())
-        ))
+    let prefix = format!(
+        ".{}.partial-",
+        out.file_name()
+            .map_or("recording".into(), |n| n.to_string_lossy())
+    );
+    let mut builder = tempfile::Builder::new();
+    builder.prefix(&prefix);
+    // Made like any new file (0666 less the umask), not tempfile's 0600.
+    #[cfg(unix)]
+    builder.permissions(std::os::unix::fs::PermissionsExt::from_mode(0o666));
+    let temp = builder
         .tempfile_in(&folder)
         .map_err(io("creating a file in", &folder))?;
     let write_error = |source| ImportError::Write {

@@ -266,17 +266,11 @@ pub(super) struct Evaluator<'a> {
     pub(super) active: Vec<bool>,
     cache: Mutex<HashMap<Vec<u64>, Arc<Evaluation>>>,
     runs: AtomicUsize,
-    /// Called after every engine run with the number of runs so far.
-    on_run: Box<dyn Fn(usize) + Send + Sync + 'a>,
 }
 
 impl<'a> Evaluator<'a> {
     /// `active`: the rows that count (every row when empty).
-    pub(super) fn new(
-        data: &'a Dataset,
-        active: Vec<bool>,
-        on_run: impl Fn(usize) + Send + Sync + 'a,
-    ) -> Self {
+    pub(super) fn new(data: &'a Dataset, active: Vec<bool>) -> Self {
         let active = if active.len() == data.rows.len() {
             active
         } else {
@@ -303,7 +297,6 @@ impl<'a> Evaluator<'a> {
             active,
             cache: Mutex::new(HashMap::new()),
             runs: AtomicUsize::new(0),
-            on_run: Box::new(on_run),
         }
     }
 
@@ -332,8 +325,7 @@ impl<'a> Evaluator<'a> {
     /// The simulated value of every row with `cfg`: one engine run, counted.
     pub(super) fn simulate(&self, cfg: &ModelConfig) -> Result<Vec<f64>> {
         let simulated = self.data.simulate(cfg)?;
-        let n = self.runs.fetch_add(1, Ordering::Relaxed) + 1;
-        (self.on_run)(n);
+        self.runs.fetch_add(1, Ordering::Relaxed);
         Ok(simulated)
     }
 

@@ -45,6 +45,7 @@ mod space;
 
 use std::collections::{BTreeMap, HashMap};
 use std::time::Instant;
+use tortwin_outputs::provenance::Provenance;
 
 use rayon::prelude::*;
 use serde::Serialize;
@@ -275,6 +276,9 @@ pub struct Discovery {
     pub options: Options,
     pub engine_runs: usize,
     pub elapsed_s: f64,
+    /// The recording and configuration read, the starting model, the
+    /// version and the command line (set by the job that writes the report).
+    pub provenance: Option<Provenance>,
     #[serde(skip)]
     pub start: ModelConfig,
     #[serde(skip)]
@@ -386,7 +390,7 @@ pub fn discover(
         .map(|(r, s)| r.measured - s)
         .collect();
     let outliers = screen::outliers(data, &raw_residual);
-    let ev = Evaluator::new(data, outliers.active.clone(), |runs| progress.done(runs));
+    let ev = Evaluator::new(data, outliers.active.clone());
     let n = ev.n_active();
     let drivers = Drivers::of(data);
 
@@ -494,11 +498,11 @@ pub fn discover(
         if candidates.is_empty() {
             break;
         }
-        progress.stage(&format!(
-            "step {step}: fitting {} candidates",
-            candidates.len()
-        ));
-        let fits = fit_each(&ev, &current, &candidates)?;
+        progress.stage_of(
+            &format!("step {step}: fitting {} candidates", candidates.len()),
+            candidates.len() as u64,
+        );
+        let fits = fit_each(&ev, &current, &candidates, progress)?;
         // The best directions (acts_on × driver × scope), whichever form
         // found them, in every other form: a factor clamped at 0 shows
         // first as a step, a power first as an exp.
@@ -538,8 +542,11 @@ pub fn discover(
         }
         let mut fits = fits;
         if !more.is_empty() {
-            progress.stage(&format!("step {step}: fitting {} more forms", more.len()));
-            fits.extend(fit_each(&ev, &current, &more)?);
+            progress.stage_of(
+                &format!("step {step}: fitting {} more forms", more.len()),
+                more.len() as u64,
+            );
+            fits.extend(fit_each(&ev, &current, &more, progress)?);
         }
         let mut results: Vec<(CandidateResult, Space, Vec<f64>)> = fits
             .into_iter()
@@ -894,6 +901,7 @@ pub fn discover(
         options: *options,
         engine_runs: ev.runs() + 1,
         elapsed_s: t0.elapsed().as_secs_f64(),
+        provenance: None,
         start: start.clone(),
         model: current,
         residual_before,
@@ -1119,11 +1127,15 @@ fn named_family(c: &Candidate) -> Option<Candidate> {
 }
 
 /// Each candidate fitted alone on top of `current`, in parallel.
+/// Fits each candidate alone on top of `current`, in parallel, telling
+/// `progress` how many are done.
 fn fit_each(
     ev: &Evaluator<'_>,
     current: &ModelConfig,
     candidates: &[(Candidate, Start)],
+    progress: &dyn Progress,
 ) -> Result<Vec<(Candidate, Space, fit::Fit)>> {
+    let finished = std::sync::atomic::AtomicU64::new(0);
     candidates
         .par_iter()
         .map(|(c, start)| {
@@ -1131,7 +1143,10 @@ fn fit_each(
                 base: current.clone(),
                 slots: vec![c.clone()],
             };
-            fit::fit(ev, &space, start.clone(), None).map(|f| (c.clone(), space, f))
+            let fit = fit::fit(ev, &space, start.clone(), None).map(|f| (c.clone(), space, f));
+            let n = finished.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
+            progress.done(n);
+            fit
         })
         .collect()
 }

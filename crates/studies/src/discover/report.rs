@@ -623,6 +623,10 @@ fn write_rrd(path: &Path, data: &Dataset, d: &Discovery, md: &str) -> Result<()>
         .save(file.temp_path())
         .map_err(|e| sdk("starting the recording", e))?;
     rec.set_log_time_enabled(false);
+    if let Some(provenance) = &d.provenance {
+        tortwin_outputs::rerun_out::send_provenance(&rec, provenance)
+            .map_err(|e| sdk("writing the provenance", e))?;
+    }
     rec.set_log_tick_enabled(false);
     rec.log_static("report", &rerun::TextDocument::from_markdown(md))
         .map_err(|e| sdk("the report", e))?;

@@ -3,6 +3,7 @@
 
 use std::fmt::Write as _;
 use std::path::PathBuf;
+use tortwin_outputs::provenance::Provenance;
 
 use crate::discover::{self, data::Dataset, Discovery, Options, Progress, Silent};
 use crate::Result;
@@ -86,8 +87,11 @@ pub fn run_with(args: &DiscoverArgs, progress: &dyn Progress) -> Result<Discover
     let data = Dataset::read(&args.recording)?;
 
     let work = || discover::discover(&data, &start, &options, progress);
-    let discovery = super::with_threads(args.threads, work)
+    let mut discovery = super::with_threads(args.threads, work)
         .map_err(|e| e.context(format!("discover on {}", args.recording.display())))?;
+    let mut inputs = vec![args.recording.as_path()];
+    inputs.extend(args.config.as_deref());
+    discovery.provenance = Some(Provenance::of_run(&inputs, &start)?);
     progress.stage("writing the report");
     discover::report::write(&args.report, &data, &discovery)?;
     Ok(discovery)

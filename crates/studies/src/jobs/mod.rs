@@ -11,20 +11,12 @@ pub mod replay;
 pub mod strategy;
 pub mod summary;
 pub mod synth;
+pub mod tables;
 
 use tortwin_model::config::ModelConfig;
 use tortwin_model::error::ConfigError;
 
 use crate::{Error, Result};
-
-/// The recording the main job replays when none is given: the one bundled
-/// with the repository, `recordings/demo_day.mcap`.
-pub fn default_recording() -> std::path::PathBuf {
-    let crate_dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
-    // crates/studies -> the repository.
-    let repository = crate_dir.ancestors().nth(2).unwrap_or(crate_dir);
-    repository.join("recordings").join("demo_day.mcap")
-}
 
 /// Loads the model configuration: the defaults, overlaid by `path`.
 pub(crate) fn load_config(path: Option<&std::path::Path>) -> Result<ModelConfig, ConfigError> {

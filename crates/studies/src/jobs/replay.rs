@@ -6,6 +6,7 @@ use tortwin_engine::sink::{Fanout, RunSummary, Sink};
 use tortwin_engine::{Engine, EngineOptions, EngineState};
 use tortwin_model::error::UsageError;
 use tortwin_outputs::mcap_out::McapSink;
+use tortwin_outputs::provenance::Provenance;
 use tortwin_outputs::rerun_out::{RerunOptions, RerunSink};
 use tortwin_recording::error::InputError;
 use tortwin_recording::reader::ReaderContext;
@@ -18,10 +19,11 @@ use crate::{Error, Result};
 #[derive(Debug, Clone)]
 #[cfg_attr(feature = "cli", derive(clap::Args))]
 pub struct ReplayArgs {
-    /// The recording (MCAP). Default: the bundled demo recording.
-    #[cfg_attr(feature = "cli", arg(default_value_os_t = super::default_recording()))]
+    /// The recording to replay (MCAP, docs/spec/recording-format.md), e.g.
+    /// recordings/demo_day.mcap in the repository.
     pub recording: PathBuf,
-    /// Model configuration overlaid on the built-in defaults (TOML).
+    /// Model configuration overlaid on the built-in defaults (TOML; only
+    /// the keys it changes, e.g. a `tortwin discover` model.toml).
     #[cfg_attr(feature = "cli", arg(long))]
     pub config: Option<PathBuf>,
     /// Write the MCAP output here (Foxglove-readable).
@@ -116,17 +118,35 @@ pub fn replay_with(
         |p| p.display().to_string(),
     );
     tortwin_engine::generic::check_terms_against(&cfg.effects.generic, &section, &source)?;
+    let provenance = if args.out_mcap.is_some() || args.out_rrd.is_some() {
+        let mut inputs = vec![args.recording.as_path()];
+        inputs.extend(args.config.as_deref());
+        inputs.extend(args.state_in.as_deref());
+        Some(Provenance::of_run(&inputs, &cfg)?)
+    } else {
+        None
+    };
     let mut engine = match (&saved, &args.state_in) {
         (Some(s), Some(path)) => Engine::from_state(section, cfg, opts, s)
             .map_err(|e| InputError::file(path, e.to_string()))?,
         _ => Engine::new(section, cfg, opts, reader.origin_ns()),
     };
 
-    let mut mcap = args.out_mcap.as_deref().map(McapSink::create).transpose()?;
+    let mut mcap = args
+        .out_mcap
+        .as_deref()
+        .map(|p| McapSink::create(p, provenance.as_ref()))
+        .transpose()?;
     let mut rrd = args
         .out_rrd
         .as_deref()
-        .map(|p| RerunSink::create(p, RerunOptions::default()))
+        .map(|p| {
+            let options = RerunOptions {
+                provenance: provenance.clone(),
+                ..RerunOptions::default()
+            };
+            RerunSink::create(p, options)
+        })
         .transpose()?;
     let mut fanout = Fanout::default();
     if let Some(s) = mcap.as_mut() {
@@ -139,15 +159,17 @@ pub fn replay_with(
         fanout.sinks.push(&mut **s);
     }
 
-    let mut events = 0u64;
+    progress.stage_of(
+        &format!("replaying {} (messages)", args.recording.display()),
+        reader.message_count(),
+    );
+    // The /section message was read when the reader opened.
+    let mut messages = 1u64;
     for event in reader.by_ref() {
         let event = event?;
-        events += 1;
-        if events.is_multiple_of(4096) {
-            progress.stage(&format!(
-                "{events} events, {}",
-                super::summary::utc(event.log_time_ns)
-            ));
+        messages += 1;
+        if messages.is_multiple_of(1024) {
+            progress.done(messages);
         }
         engine
             .push(event, &mut fanout)
@@ -157,6 +179,7 @@ pub fn replay_with(
             })?;
     }
     let summary = engine.finish(&mut fanout, reader.unknown_topic_messages())?;
+    progress.done(reader.message_count());
 
     if let Some(path) = &args.state_out {
         let text = serde_json::to_string(&engine.state()).map_err(|source| Error::Json {

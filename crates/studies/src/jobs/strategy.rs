@@ -4,6 +4,7 @@
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
+use tortwin_outputs::provenance::Provenance;
 
 use serde::Deserialize;
 
@@ -18,7 +19,11 @@ use tortwin_model::error::UsageError;
 #[cfg_attr(feature = "cli", derive(clap::Args))]
 pub struct StrategyArgs {
     /// The traffic: a recording (MCAP) whose own pulses are replaced by each
-    /// strategy's. Default: the bundled demo recording, unless --synth.
+    /// strategy's. Required unless --synth.
+    #[cfg_attr(
+        feature = "cli",
+        arg(required_unless_present = "synth", conflicts_with = "synth")
+    )]
     pub recording: Option<PathBuf>,
     /// The result directory: strategy.json, report.md with its plots,
     /// recommended.rrd (and traffic.mcap with --synth).
@@ -42,17 +47,22 @@ pub struct StrategyArgs {
     /// recording (written to OUT/traffic.mcap).
     #[cfg_attr(feature = "cli", arg(long))]
     pub synth: bool,
+    /// With --synth: the section, `curve` (400 m radius) or `tangent`.
     #[cfg_attr(
         feature = "cli",
         arg(long, default_value = "curve", requires = "synth")
     )]
     pub synth_preset: Preset,
+    /// With --synth: days of traffic.
     #[cfg_attr(feature = "cli", arg(long, default_value_t = 1, requires = "synth"))]
     pub synth_days: u32,
+    /// With --synth: the random seed (the same seed gives the same traffic).
     #[cfg_attr(feature = "cli", arg(long, default_value_t = 1, requires = "synth"))]
     pub synth_seed: u64,
+    /// With --synth: trains a day, both directions together.
     #[cfg_attr(feature = "cli", arg(long, default_value_t = 40, requires = "synth"))]
     pub synth_trains_per_day: u32,
+    /// With --synth: the section's length in metres.
     #[cfg_attr(
         feature = "cli",
         arg(long, default_value_t = 600.0, requires = "synth")
@@ -191,10 +201,9 @@ pub fn run_with(args: &StrategyArgs, progress: &dyn Progress) -> Result<(Traffic
             .map_err(|e| e.context(format!("writing {}", path.display())))?;
         Traffic::read(&path)?
     } else {
-        let path = args
-            .recording
-            .clone()
-            .unwrap_or_else(super::default_recording);
+        let path = args.recording.clone().ok_or_else(|| {
+            UsageError("no traffic: give a recording (REC.mcap) or --synth".into())
+        })?;
         progress.stage(&format!("reading {}", path.display()));
         Traffic::read(&path)?
     };
@@ -204,8 +213,11 @@ pub fn run_with(args: &StrategyArgs, progress: &dyn Progress) -> Result<(Traffic
     let space = Space::new(&space_cfg, &traffic)?;
     let method = args.method.unwrap_or(file.search.method);
 
-    progress.stage(&format!("{} strategies in the space", space.size()));
-    let done = |n: usize| progress.done(n);
+    progress.stage_of(
+        &format!("evaluating strategies ({} in the space)", space.size()),
+        space.size() as u64,
+    );
+    let done = |n: usize| progress.done(n as u64);
     let work = || {
         strategy::study(
             &traffic,
@@ -220,7 +232,23 @@ pub fn run_with(args: &StrategyArgs, progress: &dyn Progress) -> Result<(Traffic
     let study = super::with_threads(args.threads, work)
         .map_err(|e| e.context(format!("strategy study on {}", traffic.source)))?;
     progress.stage("writing the report");
-    strategy::report::write(&args.out, &traffic, &cfg, &target, &space, &study)?;
+    let traffic_path = match &args.recording {
+        Some(path) if !args.synth => path.clone(),
+        _ => args.out.join("traffic.mcap"),
+    };
+    let mut inputs = vec![traffic_path.as_path()];
+    inputs.extend(args.config.as_deref());
+    inputs.extend(args.space.as_deref());
+    let provenance = Provenance::of_run(&inputs, &cfg)?;
+    strategy::report::write(
+        &args.out,
+        &traffic,
+        &cfg,
+        &target,
+        &space,
+        &study,
+        &provenance,
+    )?;
     Ok((traffic, study))
 }
 

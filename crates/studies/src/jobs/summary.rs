@@ -5,16 +5,6 @@ use std::path::Path;
 
 use tortwin_engine::sink::RunSummary;
 
-/// A log_time as UTC, for people.
-pub(crate) fn utc(log_time_ns: u64) -> String {
-    let secs = (log_time_ns / 1_000_000_000) as i64;
-    let nanos = (log_time_ns % 1_000_000_000) as u32;
-    chrono::DateTime::from_timestamp(secs, nanos).map_or_else(
-        || format!("{log_time_ns} ns"),
-        |t| t.format("%Y-%m-%d %H:%M:%S UTC").to_string(),
-    )
-}
-
 pub fn render(recording: &Path, s: &RunSummary) -> String {
     let mut out = String::new();
     let b = &s.mass_balance;

@@ -10,6 +10,7 @@
 
 use std::fmt::Write as _;
 use std::path::Path;
+use tortwin_outputs::provenance::Provenance;
 
 use serde::Serialize;
 
@@ -49,6 +50,7 @@ impl StrategyView {
 #[derive(Debug, Serialize)]
 struct Result_<'a> {
     tortwin_version: &'static str,
+    provenance: &'a Provenance,
     traffic: TrafficView<'a>,
     target: &'a Target,
     space: SpaceView,
@@ -133,6 +135,7 @@ pub(crate) fn write(
     target: &Target,
     space: &Space,
     study: &Study,
+    provenance: &Provenance,
 ) -> Result<()> {
     std::fs::create_dir_all(dir).map_err(|source| Error::Io {
         what: "creating",
@@ -152,6 +155,7 @@ pub(crate) fn write(
                 RerunOptions {
                     recording_name: Some(format!("recommended: {}", r.strategy.describe(section))),
                     mu_color_range: Some([target.band.lower_mu - 0.1, target.band.upper_mu + 0.1]),
+                    provenance: Some(provenance.clone()),
                     ..RerunOptions::default()
                 },
             )?;
@@ -178,6 +182,7 @@ pub(crate) fn write(
     let reasons = recommendation_reasons(traffic, target, study);
     let result = Result_ {
         tortwin_version: env!("CARGO_PKG_VERSION"),
+        provenance,
         traffic: TrafficView {
             source: &traffic.source,
             section_id: &section.section_id,
