@@ -92,6 +92,12 @@ pub(crate) fn write(dir: &Path, data: &Dataset, d: &Discovery) -> Result<Vec<Pat
     Ok(written)
 }
 
+/// `path` made absolute, so that a command the report suggests works from
+/// the report's folder (as given when that fails).
+fn absolute(path: &Path) -> PathBuf {
+    std::path::absolute(path).unwrap_or_else(|_| path.to_path_buf())
+}
+
 /// The final configuration, whole, with a header saying where it comes from.
 pub(crate) fn model_toml(d: &Discovery) -> String {
     let mut text = String::new();
@@ -110,7 +116,8 @@ pub(crate) fn model_toml(d: &Discovery) -> String {
     );
     let _ = writeln!(
         text,
-        "# use it with: tortwin replay REC.mcap --config model.toml\n"
+        "# use it from this folder with: tortwin replay {} --config model.toml\n",
+        absolute(Path::new(&d.recording)).display()
     );
     text.push_str(&d.model.to_toml());
     text
@@ -421,8 +428,9 @@ fn markdown(data: &Dataset, d: &Discovery, residual_file: Option<&str>, distance
     );
     let _ = writeln!(
         md,
-        "Replay with the model found: `tortwin replay {} --config model.toml`.\n",
-        data.path.display()
+        "Replay with the model found (from this folder): `tortwin replay {} --config \
+         model.toml`.\n",
+        absolute(&data.path).display()
     );
 
     let _ = writeln!(md, "## RMSE per step\n");

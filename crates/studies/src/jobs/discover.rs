@@ -133,5 +133,11 @@ pub fn render(args: &DiscoverArgs, d: &Discovery, elapsed_s: f64) -> String {
         "report: {} (report.md, report.json, model.toml, residuals.rrd)",
         args.report.display()
     );
+    let _ = writeln!(
+        out,
+        "replay with the model found: tortwin replay {} --config {}",
+        args.recording.display(),
+        args.report.join("model.toml").display()
+    );
     out
 }

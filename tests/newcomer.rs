@@ -1,0 +1,148 @@
+//! The README as a newcomer meets it: the repository cloned into an empty
+//! temporary folder (nothing beside it), the README's first command run
+//! exactly as written there, its outputs checked, then every other example
+//! command of the README's `sh` blocks.
+//!
+//! The clone builds with its own target folder (`target/newcomer`, kept
+//! between runs: the first run builds everything once, as a newcomer's
+//! machine does). Commands written with `tortwin` run the clone's own build
+//! on the PATH, as `cargo install --path .` in the clone would put it. Two
+//! kinds of line are not run: `bash .ci/run` (the test command, which runs
+//! this test) and the viewer (`pip install rerun-sdk ... && rerun FILE`, a
+//! window).
+
+mod common;
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+/// The commands of the README's ```sh blocks, in order, with `\`
+/// continuations joined and `#` comments dropped.
+fn readme_commands(readme: &str) -> Vec<String> {
+    let mut commands = Vec::new();
+    let mut in_sh = false;
+    let mut pending = String::new();
+    for line in readme.lines() {
+        let trimmed = line.trim();
+        if trimmed.starts_with("```") {
+            in_sh = !in_sh && trimmed == "```sh";
+            continue;
+        }
+        if !in_sh || trimmed.is_empty() {
+            continue;
+        }
+        let code = match trimmed.find("  #") {
+            Some(k) => trimmed[..k].trim_end(),
+            None => trimmed,
+        };
+        if let Some(head) = code.strip_suffix('\\') {
+            pending.push_str(head);
+            continue;
+        }
+        pending.push_str(code);
+        commands.push(std::mem::take(&mut pending));
+    }
+    commands
+}
+
+fn run(command: &str, dir: &Path, path_var: &str, target: &Path) {
+    eprintln!("$ {command}");
+    let o = Command::new("bash")
+        .arg("-c")
+        .arg(command)
+        .current_dir(dir)
+        .env("PATH", path_var)
+        .env("CARGO_TARGET_DIR", target)
+        .output()
+        .unwrap();
+    assert!(
+        o.status.success(),
+        "`{command}` failed in a fresh clone ({})\n{}\n{}",
+        o.status,
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr)
+    );
+}
+
+#[test]
+fn the_readme_commands_work_in_a_fresh_clone() {
+    let repository = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
+    let empty = tempfile::tempdir().unwrap();
+    let clone = empty.path().join("tortwin");
+    let o = Command::new("git")
+        .arg("clone")
+        .arg("--quiet")
+        .arg(&repository)
+        .arg(&clone)
+        .output()
+        .expect("git is needed to clone the repository");
+    common::check(&o, "git clone");
+
+    let readme = std::fs::read_to_string(clone.join("README.md")).unwrap();
+    let commands = readme_commands(&readme);
+    assert_eq!(
+        commands.get(1).map(String::as_str),
+        Some("bash .ci/run"),
+        "the README's first block is the main job and the test command: {commands:?}"
+    );
+    let main_job = &commands[0];
+    assert!(
+        main_job.starts_with("cargo run --release -- "),
+        "{main_job}"
+    );
+
+    let target = PathBuf::from(env!("CARGO_BIN_EXE_tortwin"))
+        .ancestors()
+        .nth(2)
+        .unwrap()
+        .join("newcomer");
+    let bin = target.join("release");
+    let path_var = format!(
+        "{}:{}",
+        bin.display(),
+        std::env::var("PATH").unwrap_or_default()
+    );
+
+    run(main_job, &clone, &path_var, &target);
+    for output in ["out/demo.mcap", "out/demo.rrd"] {
+        assert!(clone.join(output).is_file(), "{output} missing");
+    }
+    let check = common::python(
+        "check_provenance.py",
+        &[
+            clone.join("out/demo.mcap"),
+            clone.join("recordings/demo_day.mcap"),
+        ],
+    );
+    common::check(&check, "check_provenance.py out/demo.mcap");
+
+    let mut ran = 1;
+    for command in &commands[2..] {
+        if command == "bash .ci/run" || command.contains("&& rerun ") {
+            continue;
+        }
+        run(command, &clone, &path_var, &target);
+        ran += 1;
+    }
+    assert!(ran >= 8, "only {ran} README commands ran: {commands:?}");
+    // What the README says the commands make.
+    for output in [
+        "out/imported.mcap",
+        "out/tables/measurements.parquet",
+        "out/discover/model.toml",
+        "out/clog/report.md",
+        "out/strategy/strategy.json",
+    ] {
+        assert!(clone.join(output).is_file(), "{output} missing");
+    }
+}
+
+#[test]
+fn the_readme_is_read_as_a_newcomer_reads_it() {
+    let readme = "x\n```sh\ncargo run -- a   # comment\nbash .ci/run\n```\n```toml\nk = 1\n```\n\
+                  ```sh\ntortwin b \\\n  --c d\n```\n";
+    assert_eq!(
+        readme_commands(readme),
+        ["cargo run -- a", "bash .ci/run", "tortwin b --c d"]
+    );
+}
