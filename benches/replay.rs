@@ -1,5 +1,5 @@
 //! End-to-end replay throughput with the outputs on: the reference
-//! recordings of ../shared/reference/recordings read from MCAP, stepped,
+//! recordings of tests/reference/recordings read from MCAP, stepped,
 //! and written to MCAP and rerun files. Reported as contacts per second.
 //! Peak memory is measured by scripts/bench-memory.sh (criterion cannot).
 //!
@@ -25,7 +25,7 @@ fn replay_with_outputs(c: &mut Criterion) {
     let out = tempfile::tempdir().expect("a temporary directory");
     for name in ["tangent_day", "curve_2day"] {
         let recording = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-            .join("../shared/reference/recordings")
+            .join("tests/reference/recordings")
             .join(format!("{name}.mcap"));
         let a = args(recording, out.path());
         let contacts = replay(&a, &mut [])

@@ -8,7 +8,7 @@ cargo build --release --quiet
 out=$(mktemp -d)
 trap 'rm -rf "$out"' EXIT
 recordings=("$@")
-[ ${#recordings[@]} -gt 0 ] || recordings=(../shared/reference/recordings/*.mcap)
+[ ${#recordings[@]} -gt 0 ] || recordings=(tests/reference/recordings/*.mcap)
 printf '%-28s %9s %12s %9s %14s %12s\n' recording size_MB contacts seconds contacts_per_s peak_RSS_MB
 for rec in "${recordings[@]}"; do
   /usr/bin/time -f '%e %M' -o "$out/time" ./target/release/tortwin replay "$rec" \

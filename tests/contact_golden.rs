@@ -1,5 +1,5 @@
 //! Every row of tests/reference/contact_golden.csv, the values of an
-//! independent implementation of ../shared/spec/contact.md, must be matched
+//! independent implementation of docs/spec/contact.md, must be matched
 //! to 1e-6 relative (contact.md, first paragraph).
 //!
 //! The file has one header row and one row per case; `kind` says which

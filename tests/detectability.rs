@@ -1,4 +1,4 @@
-//! Each effect of ../shared/spec/effects.md, hidden in the truth of a 3-day
+//! Each effect of docs/spec/effects.md, hidden in the truth of a 3-day
 //! synthetic recording (sigma = 0.01), leaves the paper's model (no effects)
 //! well above the noise, so the discrepancy workflow can find it. The RMSE
 //! is measured here by replaying the recording with the default model, not

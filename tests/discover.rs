@@ -1,5 +1,5 @@
 //! `tortwin discover` against recordings whose truth is known: `tortwin
-//! synth` hides one effect of ../shared/spec/effects.md (or none, or two)
+//! synth` hides one effect of docs/spec/effects.md (or none, or two)
 //! in the truth model of a 3-day recording with Gaussian noise of
 //! sigma = 0.01, and discover must name exactly the hidden effects, recover
 //! their parameters within 25 % and bring the RMSE to within 1.2 × sigma.

@@ -1,4 +1,4 @@
-//! The candidate effects of ../shared/spec/effects.md inside the engine.
+//! The candidate effects of docs/spec/effects.md inside the engine.
 //!
 //! 1. Wiring: on a section of two grid points each effect acts at its step
 //!    of "one contact" (or of a pulse, or of a reading), checked against a

@@ -1,5 +1,5 @@
 //! The paper's Figures 7 and 13 against an independent implementation of
-//! ../shared/spec/model.md (tests/reference/paper_fig7.csv and
+//! docs/spec/model.md (tests/reference/paper_fig7.csv and
 //! paper_fig13.csv), to 1e-9 relative; and model.md's check of the Figure 13
 //! numbers that the paper states in its text.
 

@@ -1,4 +1,4 @@
-//! The recording reader against ../shared/spec/recording-format.md: the
+//! The recording reader against docs/spec/recording-format.md: the
 //! reference recordings (counts and measurement order from their key and
 //! expected files), the replay order over chunk layouts, and one test per
 //! class of bad input.

@@ -1,5 +1,5 @@
 //! The engine: owns time and the section's state, and steps the product
-//! model wheel pass by wheel pass (../shared/spec/model.md, "One contact"
+//! model wheel pass by wheel pass (docs/spec/model.md, "One contact"
 //! and "Order of events").
 //!
 //! Events arrive in replay order (log_time). A train occupies the section

@@ -1,5 +1,5 @@
 //! The section's state between recordings (`--state-out`, `--state-in`;
-//! ../shared/spec/interfaces.md): everything the next day needs, in a
+//! docs/spec/interfaces.md): everything the next day needs, in a
 //! versioned JSON document. Floats are written shortest-round-trip and read
 //! back exactly, so replaying day 1 then day 2 from day 1's state gives
 //! the same bits as replaying both days at once.

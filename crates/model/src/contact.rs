@@ -1,5 +1,5 @@
 //! Wheel–rail contact mechanics: Hertz, Kalker, Polach
-//! (../shared/spec/contact.md, the contract for everything in this module).
+//! (docs/spec/contact.md, the contract for everything in this module).
 //!
 //! The product model needs two things from the contact of a wheel on a rail:
 //!
@@ -15,7 +15,7 @@
 //!    exactly rather than read from the usual tables of Hertz coefficients
 //!    (good to a percent or so): `pm` enters `fp` directly, and an
 //!    independent implementation must agree with it to 1e-6
-//!    (../shared/reference/contact_golden.csv).
+//!    (tests/reference/contact_golden.csv, copied from the independent implementation).
 //! 2. [`kalker`]: Kalker's creepage coefficients c11, c22, c23 (Kalker 1990,
 //!    Table E3), interpolated as contact.md prescribes.
 //! 3. [`polach`]: Polach's creep force model (Polach 1999, Vehicle System

@@ -1,4 +1,4 @@
-//! The candidate effects of ../shared/spec/effects.md: what the 2021 model
+//! The candidate effects of docs/spec/effects.md: what the 2021 model
 //! leaves out. Each is a pure function of the step it acts at; the engine
 //! consults the ones the configuration switches on ([`crate::config::Effects`]).
 //!

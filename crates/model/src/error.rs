@@ -3,7 +3,7 @@
 //! asks for something impossible ([`UsageError`]). A recording that breaks
 //! its format is `tortwin_recording::error::InputError`. The binary maps all
 //! three to exit status 2 and anything else to 1
-//! (../shared/spec/interfaces.md).
+//! (docs/spec/interfaces.md).
 
 /// A model configuration that cannot be used: names the key.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]

@@ -1,4 +1,4 @@
-//! Generic terms (../shared/spec/effects.md, "Generic terms"): effects
+//! Generic terms (docs/spec/effects.md, "Generic terms"): effects
 //! outside the catalogue, each a factor `g(x)` on one quantity of the model
 //! driven by one covariate `x`, or an offset on what a site measures.
 //!

@@ -1,11 +1,11 @@
-//! The model of ../shared/spec: the pure physics (no I/O, no allocation in
+//! The model of docs/spec (model.md, contact.md, effects.md): the pure physics (no I/O, no allocation in
 //! the hot paths) and its configuration.
 //!
 //! - [`product`]: product consumption, friction and transfer (Trummer et al.,
-//!   Lubricants 2021, 9, 100, eq. 1–6; ../shared/spec/model.md).
-//! - [`effects`]: the candidate extensions of ../shared/spec/effects.md.
+//!   Lubricants 2021, 9, 100, eq. 1–6; docs/spec/model.md).
+//! - [`effects`]: the candidate extensions of docs/spec/effects.md.
 //! - [`contact`]: Hertz contact, Kalker coefficients and Polach's creep force
-//!   model (../shared/spec/contact.md).
+//!   model (docs/spec/contact.md).
 //! - [`generic`]: generic terms g(x) on one model quantity.
 //! - [`config`]: the model configuration (the paper's Table 2, the contact
 //!   parameters, the effects switched on), overlaid from TOML.

@@ -2,7 +2,7 @@
 //! and transfer, after Trummer, Lee, Lewis and Six, "Modelling of Frictional
 //! Conditions in the Wheel–Rail Interface Due to Application of Top-of-Rail
 //! Products", Lubricants 2021, 9, 100. Equation numbers are the paper's; the
-//! choices the paper leaves open are fixed by ../shared/spec/model.md.
+//! choices the paper leaves open are fixed by docs/spec/model.md.
 //!
 //! Masses are in kg. Everything here is a pure function of its arguments:
 //! the engine decides which contact happens when, this module says what a

@@ -1,4 +1,4 @@
-//! What a friction measurement measures (../shared/spec/recording-format.md,
+//! What a friction measurement measures (docs/spec/recording-format.md,
 //! `/measurement/friction`): the model predicts each, a generic term on
 //! `measurement` may be scoped to one.
 

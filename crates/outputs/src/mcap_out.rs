@@ -1,11 +1,11 @@
 //! MCAP output sink: the twin's results as a recording Foxglove can open.
 //!
 //! Every channel speaks the convention of the input recordings
-//! (../shared/spec/recording-format.md): `message_encoding = "json"` and a
+//! (docs/spec/recording-format.md): `message_encoding = "json"` and a
 //! `jsonschema` schema, so Foxglove plots the fields and
 //! `tests/python/check_mcap.py` can validate every message against its
 //! channel's schema. A message's log_time is the time of the event it reports
-//! (../shared/spec/interfaces.md, "Output MCAP topics"):
+//! (docs/spec/interfaces.md, "Output MCAP topics"):
 //!
 //! | topic               | one message per                               |
 //! |---------------------|-----------------------------------------------|

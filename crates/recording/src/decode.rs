@@ -3,7 +3,7 @@
 //! [`parse`] is the grammar: serde turns the JSON into the topic's wire
 //! struct ([`crate::wire`]), and a failure names the field by its path
 //! (serde_path_to_error), e.g. `axles[1].creepage.right`. [`section`] and
-//! [`Decoder`] are the rules of ../shared/spec/recording-format.md that
+//! [`Decoder`] are the rules of docs/spec/recording-format.md that
 //! span fields, messages or the section: values in range, units converted
 //! (g -> kg, kN -> N), rails, applicators, sites and trains resolved to
 //! indices, train ids unique and one train in the section at a time.

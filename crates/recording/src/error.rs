@@ -3,7 +3,7 @@
 //!
 //! Bad input is the user's to fix, so it must say where it is: the file, and
 //! for a message the topic, its log_time and its index in the file
-//! (../shared/spec/recording-format.md).
+//! (docs/spec/recording-format.md).
 
 use std::fmt;
 use std::path::PathBuf;

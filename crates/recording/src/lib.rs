@@ -1,4 +1,4 @@
-//! tortwin's recording format, ../shared/spec/recording-format.md, stated
+//! tortwin's recording format, docs/spec/recording-format.md, stated
 //! once:
 //!
 //! - [`topic`]: the five topics, their tie-break order and their JSON

@@ -2,7 +2,7 @@
 //! declares them on their channels (`encoding = "jsonschema"`, as Foxglove
 //! and the MCAP tools expect), so a recording describes itself to any
 //! reader. They say what a JSON Schema can say of
-//! ../shared/spec/recording-format.md; the rules across fields and messages
+//! docs/spec/recording-format.md; the rules across fields and messages
 //! (rails named by the section, offsets never decreasing, one train at a
 //! time) are the reader's (`decode`).
 //!

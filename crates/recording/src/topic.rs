@@ -1,4 +1,4 @@
-//! The topics of ../shared/spec/recording-format.md: their names, their
+//! The topics of docs/spec/recording-format.md: their names, their
 //! order for ties in the replay, and what a writer declares for each.
 
 use crate::schema;

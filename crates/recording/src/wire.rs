@@ -1,5 +1,5 @@
 //! The format's JSON messages as they are on the wire: field names and units
-//! of ../shared/spec/recording-format.md (g, kN, rail names), one struct per
+//! of docs/spec/recording-format.md (g, kN, rail names), one struct per
 //! topic. The writer serializes them and the reader deserializes them, so
 //! the format is stated once.
 //!

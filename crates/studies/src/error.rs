@@ -4,7 +4,7 @@
 //! name the file, the topic and log_time, the key), and what a study adds
 //! says what it was doing ("replaying demo_day.mcap", "discover on ...").
 //! [`Error::is_input`] tells bad input (exit status 2 of the command line,
-//! ../shared/spec/interfaces.md) from everything else, so that a caller
+//! docs/spec/interfaces.md) from everything else, so that a caller
 //! classifies an error without walking its sources.
 
 use std::path::PathBuf;

@@ -1,7 +1,7 @@
 //! The model configuration: the built-in defaults (the paper's Table 2, the
 //! contact constants and Polach's dry set, `crates/model/config/default.toml`) overlaid by
 //! a user's TOML file that sets only the keys it changes
-//! (../shared/spec/interfaces.md).
+//! (docs/spec/interfaces.md).
 //!
 //! The overlay is parsed into a mirror of [`ModelConfig`] whose fields are all
 //! optional and whose tables deny unknown keys, so a misspelt key, a wrong

@@ -1,6 +1,6 @@
 //! MCAP -> typed events, in replay order, streaming.
 //!
-//! The replay order of ../shared/spec/recording-format.md is by `log_time`,
+//! The replay order of docs/spec/recording-format.md is by `log_time`,
 //! ties by topic (`/section`, `/train/passage`, `/applicator/pulse`,
 //! `/measurement/friction`, `/environment/weather`, then unknown topics),
 //! then by the message's index in the file. Files are not written in that

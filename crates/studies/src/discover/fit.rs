@@ -1,4 +1,4 @@
-//! Fitting the candidate effects of ../shared/spec/effects.md by re-running
+//! Fitting the candidate effects of docs/spec/effects.md by re-running
 //! the engine.
 //!
 //! Every parameter is fitted in a bounded, transformed coordinate `u` in

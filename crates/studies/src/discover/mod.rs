@@ -12,7 +12,7 @@
 //!    they explain (eta²). `diagnose::noise_estimate` estimates the
 //!    measurement noise from axle-to-axle differences, independently of
 //!    the fit.
-//! 3. **Candidates.** Every effect of ../shared/spec/effects.md not yet in
+//! 3. **Candidates.** Every effect of docs/spec/effects.md not yet in
 //!    the model is fitted by re-running the engine (`fit.rs`), the candidates
 //!    in parallel (rayon), and judged by two criteria: the Bayesian
 //!    information criterion must drop by more than

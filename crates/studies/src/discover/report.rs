@@ -2,7 +2,7 @@
 //!
 //! | file | what |
 //! |---|---|
-//! | `report.json` | [`super::Discovery`]: `effects_found`, `rmse_before`, `rmse_after`, `noise_estimate` (../shared/spec/interfaces.md), then the steps, criteria and covariate rankings |
+//! | `report.json` | [`super::Discovery`]: `effects_found`, `rmse_before`, `rmse_after`, `noise_estimate` (docs/spec/interfaces.md), then the steps, criteria and covariate rankings |
 //! | `model.toml` | the final configuration, whole; loads back with `--config` |
 //! | `report.md` | the narrative, with the plots below |
 //! | `rmse_by_step.svg/.csv` | RMSE of the model after each step, and the noise estimate |

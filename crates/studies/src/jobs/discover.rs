@@ -1,4 +1,4 @@
-//! `tortwin discover`: which effects of ../shared/spec/effects.md does the
+//! `tortwin discover`: which effects of docs/spec/effects.md does the
 //! model miss in a recording? (See [`crate::discover`] for the workflow.)
 
 use std::fmt::Write as _;

@@ -1,4 +1,4 @@
-//! The `tortwin` commands as library functions (../shared/spec/interfaces.md).
+//! The `tortwin` commands as library functions (docs/spec/interfaces.md).
 //!
 //! Each job takes its options (a plain struct; with the `cli` feature it is
 //! also the command's `clap::Args`), writes its files and returns what it

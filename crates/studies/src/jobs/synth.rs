@@ -15,7 +15,7 @@ use tortwin_model::error::UsageError;
 #[derive(Debug, Clone)]
 #[cfg_attr(feature = "cli", derive(clap::Args))]
 pub struct SynthArgs {
-    /// The recording to write (MCAP, ../shared/spec/recording-format.md).
+    /// The recording to write (MCAP, docs/spec/recording-format.md).
     #[cfg_attr(feature = "cli", arg(long))]
     pub out: PathBuf,
     /// The key JSON (what was hidden, counts, RMSE baseline vs truth).

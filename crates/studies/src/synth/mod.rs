@@ -1,7 +1,7 @@
 //! Synthetic recordings: days of traffic on a track section, written in
-//! ../shared/spec/recording-format.md, whose measurements are what the
+//! docs/spec/recording-format.md, whose measurements are what the
 //! project's one engine computes with a *truth* model configuration (the
-//! defaults, possibly with hidden effects of ../shared/spec/effects.md),
+//! defaults, possibly with hidden effects of docs/spec/effects.md),
 //! plus Gaussian noise.
 //!
 //! A synthetic day is the test bench of the discrepancy workflow: the
