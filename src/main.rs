@@ -116,7 +116,10 @@ fn run(command: Command) -> Result<()> {
             say(&paper::render(&report))?;
         }
         Command::Synth(args) => {
-            let (report, key_path) = synth::synth(&args)?;
+            let display = Display::new(args.quiet);
+            let result = synth::synth_with(&args, &display);
+            display.finish();
+            let (report, key_path) = result?;
             if !args.quiet {
                 say(&synth::render(&args.out, &key_path, &report))?;
             }

@@ -197,7 +197,7 @@ pub fn run_with(args: &StrategyArgs, progress: &dyn Progress) -> Result<(Traffic
         })?;
         let path = args.out.join("traffic.mcap");
         progress.stage(&format!("writing the traffic {}", path.display()));
-        synth::generate(&p, &cfg, &path)
+        synth::generate(&p, &cfg, &path, progress)
             .map_err(|e| e.context(format!("writing {}", path.display())))?;
         Traffic::read(&path)?
     } else {

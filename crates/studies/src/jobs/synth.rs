@@ -119,6 +119,14 @@ pub struct SynthArgs {
 /// Writes the recording and its key (`--key`, or beside it: NAME.key.json
 /// for NAME.mcap); returns the key and where it was written.
 pub fn synth(args: &SynthArgs) -> Result<(SynthReport, PathBuf)> {
+    synth_with(args, &crate::progress::Silent)
+}
+
+/// [`synth`], telling `progress` how many days are simulated.
+pub fn synth_with(
+    args: &SynthArgs,
+    progress: &dyn crate::progress::Progress,
+) -> Result<(SynthReport, PathBuf)> {
     let (params, truth) = prepare(args)?;
     let key_path = key_path(args);
     if key_path == args.out {
@@ -128,7 +136,7 @@ pub fn synth(args: &SynthArgs) -> Result<(SynthReport, PathBuf)> {
         ))
         .into());
     }
-    let report = synth::generate(&params, &truth, &args.out)
+    let report = synth::generate(&params, &truth, &args.out, progress)
         .map_err(|e| e.context(format!("writing {}", args.out.display())))?;
     let mut text = serde_json::to_string_pretty(&report).map_err(|source| Error::Json {
         what: "the key",

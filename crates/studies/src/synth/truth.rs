@@ -4,6 +4,7 @@
 //! day's messages are written as they were planned, the tribometer readings
 //! kept for the end of the file if asked.
 
+use crate::progress::Progress;
 use std::path::Path;
 
 use rand::Rng;
@@ -31,6 +32,7 @@ pub(crate) fn generate(
     params: &SynthParams,
     truth: &ModelConfig,
     out: &Path,
+    progress: &dyn Progress,
 ) -> Result<SynthReport> {
     params.validate()?;
     let section = params.section();
@@ -69,7 +71,11 @@ pub(crate) fn generate(
     let mut at_end: Vec<(u64, MeasurementMsg, bool)> = Vec::new();
 
     file.write(params.start_ns, &writing::section_msg(&section, params))?;
-    for day in planner.days() {
+    let days = planner.days();
+    let n_days = days.len() as u64;
+    progress.stage_of("simulating the traffic, day by day", n_days);
+    for (done, day) in days.into_iter().enumerate() {
+        progress.done(done as u64);
         let mut plan = planner.plan_day(day);
         counts.dropped_trains += plan.dropped_trains;
         plan.items
@@ -192,6 +198,7 @@ pub(crate) fn generate(
             }
         }
     }
+    progress.done(n_days);
     for (log_time_ns, message, gross) in &at_end {
         if *gross {
             outliers.push(file.messages());
