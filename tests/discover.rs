@@ -402,5 +402,10 @@ fn a_starting_effect_is_refitted() {
     );
     assert!(report["rmse_after"].as_f64().unwrap() <= 1.2 * SIGMA);
     let model = ModelConfig::from_file(&report_dir.join("model.toml")).unwrap();
-    assert_eq!(model.effects.rail_ageing.map(|e| e.tau_s), Some(tau));
+    assert_eq!(
+        model
+            .effects
+            .param(tortwin_model::effects::Named::RailAgeing, 0),
+        Some(tau)
+    );
 }

@@ -34,7 +34,7 @@ use tortwin_model::config::ModelConfig;
 use tortwin_model::contact::{
     self, HertzContact, HertzShape, KalkerCoefficients, PolachInput, Steel,
 };
-use tortwin_model::effects::TimeEffects;
+use tortwin_model::effects::{Named, TimeEffects};
 use tortwin_model::error::{ConfigError, UsageError};
 use tortwin_model::generic::{ActsOn, Driver};
 use tortwin_model::product;
@@ -321,7 +321,7 @@ impl Engine {
         let grid = Grid::new(section.length_m, section.nominal_wheel_diameter_m);
         let points = grid.d_m.len();
 
-        let bands = cfg.effects.bogie_bands.is_some();
+        let bands = cfg.effects.is_on(Named::BogieBands);
         let mut track_info = Vec::new();
         let mut rail_tracks = Vec::new();
         let mut reading_track = Vec::new();
@@ -386,8 +386,8 @@ impl Engine {
             .map(|n| product::revolution_factor(&cfg.product, n as u32 + 1))
             .collect();
         let time_effects = TimeEffects {
-            ageing_tau_s: cfg.effects.rail_ageing.map(|e| e.tau_s),
-            rain_k_per_mm: cfg.effects.rain_washoff.map(|e| e.k_per_mm),
+            ageing_tau_s: cfg.effects.param(Named::RailAgeing, 0),
+            rain_k_per_mm: cfg.effects.param(Named::RainWashoff, 0),
         };
         let n_tracks = track_info.len();
         let generic = Arc::new(GenericSet::compile(

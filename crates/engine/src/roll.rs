@@ -10,7 +10,7 @@ use super::{
     enters_at_zero, Engine, EngineError, SnapshotKind, TrackState, TrainRecord, NO_APPLICATOR,
 };
 use crate::sink::{FieldSnapshot, Sink, WheelContacts};
-use tortwin_model::effects::{self, TimeEffects};
+use tortwin_model::effects::{self, Named, TimeEffects};
 use tortwin_model::generic::ActsOn;
 use tortwin_model::product::{self, ContactConditions, ProductParams};
 
@@ -325,35 +325,31 @@ impl Engine {
             transfer_factor: self
                 .cfg
                 .effects
-                .speed_transfer
-                .map_or(1.0, |e| effects::speed_transfer_factor(speed_mps, e.n))
+                .param(Named::SpeedTransfer, 0)
+                .map_or(1.0, |n| effects::speed_transfer_factor(speed_mps, n))
                 * transfer_generic,
             consumption_generic,
             transfer_varies: generic.varies(ActsOn::Transfer, r),
             consumption_varies: generic.varies(ActsOn::Consumption, r),
             generic: Arc::clone(generic),
             rail: r,
-            temperature_beta: self
-                .cfg
-                .effects
-                .temperature_consumption
-                .map(|e| e.beta_per_k),
+            temperature_beta: self.cfg.effects.param(Named::TemperatureConsumption, 0),
             temperature_factor: self
                 .cfg
                 .effects
-                .temperature_consumption
+                .param(Named::TemperatureConsumption, 0)
                 .filter(|_| self.timeline.is_constant())
-                .map(|e| {
+                .map(|beta_per_k| {
                     effects::temperature_factor(
                         self.timeline.last().current.air_temperature_c,
-                        e.beta_per_k,
+                        beta_per_k,
                     )
                 }),
             reservoir: self
                 .cfg
                 .effects
-                .wheel_edge_reservoir
-                .map(|e| (e.alpha, e.r)),
+                .get(Named::WheelEdgeReservoir)
+                .map(|p| (p[0], p[1])),
             observe,
         };
 

@@ -90,10 +90,8 @@ impl TimeEffects {
 
 // ------------------------------------------------------------- the table
 
-use crate::config::{
-    BogieBands, Effects, RailAgeing, RainWashoff, SpeedTransfer, TemperatureConsumption,
-    WheelEdgeReservoir,
-};
+#[cfg(test)]
+use crate::config::Effects;
 
 /// The named effects of effects.md, in its order.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
@@ -184,8 +182,10 @@ impl Param {
     }
 }
 
-/// A named effect as data: what validation, synth, discover and the
-/// reports read. The physics is the function of the row's step, above.
+/// A named effect as data: what the configuration (parsing, validation,
+/// writing), synth, discover and the reports read. The physics is the
+/// function of the row's step, above; [`crate::config::Effects`] holds the
+/// parameters of the effects that are on, in the order of `params`.
 #[derive(Debug, Clone, Copy)]
 pub struct EffectSpec {
     pub effect: Named,
@@ -194,20 +194,10 @@ pub struct EffectSpec {
     /// Where it acts (effects.md).
     pub step: &'static str,
     pub params: &'static [Param],
-    /// Its parameters in `effects` (in the order of `params`), `None` if off.
-    pub get: fn(&Effects) -> Option<Vec<f64>>,
-    /// Switches it on with `params` (in the order of `params`).
-    pub set: fn(&mut Effects, &[f64]),
-    /// Switches it off.
-    pub unset: fn(&mut Effects),
 }
 
 /// `tau_s` of `rail_ageing`: the search range 60 s to 1e6 s.
 const TAU_SEARCH_S: (f64, f64) = (60.0, 1e6);
-
-fn p(params: &[f64], i: usize) -> f64 {
-    params.get(i).copied().unwrap_or(f64::NAN)
-}
 
 /// Every named effect, in the order of effects.md.
 pub(crate) static EFFECTS: [EffectSpec; 6] = [
@@ -223,9 +213,6 @@ pub(crate) static EFFECTS: [EffectSpec; 6] = [
             search: TAU_SEARCH_S,
             transform: Transform::Log,
         }],
-        get: |e| e.rail_ageing.map(|x| vec![x.tau_s]),
-        set: |e, v| e.rail_ageing = Some(RailAgeing { tau_s: p(v, 0) }),
-        unset: |e| e.rail_ageing = None,
     },
     EffectSpec {
         effect: Named::RainWashoff,
@@ -239,9 +226,6 @@ pub(crate) static EFFECTS: [EffectSpec; 6] = [
             search: (0.0, 20.0),
             transform: Transform::LogLike { base: 21.0 },
         }],
-        get: |e| e.rain_washoff.map(|x| vec![x.k_per_mm]),
-        set: |e, v| e.rain_washoff = Some(RainWashoff { k_per_mm: p(v, 0) }),
-        unset: |e| e.rain_washoff = None,
     },
     EffectSpec {
         effect: Named::TemperatureConsumption,
@@ -255,13 +239,6 @@ pub(crate) static EFFECTS: [EffectSpec; 6] = [
             search: (-0.3, 0.3),
             transform: Transform::Linear,
         }],
-        get: |e| e.temperature_consumption.map(|x| vec![x.beta_per_k]),
-        set: |e, v| {
-            e.temperature_consumption = Some(TemperatureConsumption {
-                beta_per_k: p(v, 0),
-            })
-        },
-        unset: |e| e.temperature_consumption = None,
     },
     EffectSpec {
         effect: Named::SpeedTransfer,
@@ -275,9 +252,6 @@ pub(crate) static EFFECTS: [EffectSpec; 6] = [
             search: (-10.0, 10.0),
             transform: Transform::Linear,
         }],
-        get: |e| e.speed_transfer.map(|x| vec![x.n]),
-        set: |e, v| e.speed_transfer = Some(SpeedTransfer { n: p(v, 0) }),
-        unset: |e| e.speed_transfer = None,
     },
     EffectSpec {
         effect: Named::WheelEdgeReservoir,
@@ -301,27 +275,31 @@ pub(crate) static EFFECTS: [EffectSpec; 6] = [
                 transform: Transform::LogLike { base: 1000.0 },
             },
         ],
-        get: |e| e.wheel_edge_reservoir.map(|x| vec![x.alpha, x.r]),
-        set: |e, v| {
-            e.wheel_edge_reservoir = Some(WheelEdgeReservoir {
-                alpha: p(v, 0),
-                r: p(v, 1),
-            })
-        },
-        unset: |e| e.wheel_edge_reservoir = None,
     },
     EffectSpec {
         effect: Named::BogieBands,
         name: "bogie_bands",
         step: "layout: two tracks on the rail named `high`",
         params: &[],
-        get: |e| e.bogie_bands.map(|_| vec![]),
-        set: |e, _| e.bogie_bands = Some(BogieBands {}),
-        unset: |e| e.bogie_bands = None,
     },
 ];
 
 impl Named {
+    /// Every named effect, in the order of effects.md (and of `EFFECTS`).
+    pub const ALL: [Named; 6] = [
+        Named::RailAgeing,
+        Named::RainWashoff,
+        Named::TemperatureConsumption,
+        Named::SpeedTransfer,
+        Named::WheelEdgeReservoir,
+        Named::BogieBands,
+    ];
+
+    /// The effect called `name` in `[effects.NAME]`.
+    pub fn from_name(name: &str) -> Option<Named> {
+        Named::ALL.into_iter().find(|e| e.name() == name)
+    }
+
     /// Its row of `EFFECTS`, the table of the effects.
     pub fn spec(self) -> &'static EffectSpec {
         &EFFECTS[self as usize]
@@ -394,13 +372,15 @@ mod tests {
                     assert!((param.unit_of(x) - u).abs() < 1e-9, "{}", param.name);
                 }
             }
+            assert_eq!(Named::ALL[k], spec.effect);
+            assert_eq!(Named::from_name(spec.name), Some(spec.effect));
             let mut effects = Effects::default();
-            assert_eq!((spec.get)(&effects), None);
+            assert_eq!(effects.get(spec.effect), None);
             let values: Vec<f64> = spec.params.iter().map(|p| p.at(0.5)).collect();
-            (spec.set)(&mut effects, &values);
-            assert_eq!((spec.get)(&effects), Some(values));
+            effects.set(spec.effect, &values);
+            assert_eq!(effects.get(spec.effect), Some(values.as_slice()));
             assert_eq!(effects.names(), vec![spec.name]);
-            (spec.unset)(&mut effects);
+            effects.unset(spec.effect);
             assert_eq!(effects, Effects::default());
         }
     }

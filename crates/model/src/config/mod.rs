@@ -11,11 +11,13 @@
 
 pub mod generic;
 
+use std::collections::BTreeMap;
 use std::path::Path;
 
 use serde::{Deserialize, Serialize};
 
 use crate::contact::PolachParams;
+use crate::effects::Named;
 use crate::error::ConfigError;
 use crate::product::ProductParams;
 
@@ -55,78 +57,185 @@ impl PolachConfig {
     }
 }
 
-/// `rail_ageing` (effects.md): rail product dries out between touches.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct RailAgeing {
-    pub tau_s: f64,
-}
-
-/// `rain_washoff` (effects.md): rain washes rail product off.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct RainWashoff {
-    pub k_per_mm: f64,
-}
-
-/// `temperature_consumption` (effects.md): consumption follows air temperature.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct TemperatureConsumption {
-    pub beta_per_k: f64,
-}
-
-/// `speed_transfer` (effects.md): transfer depends on train speed.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct SpeedTransfer {
-    pub n: f64,
-}
-
-/// `wheel_edge_reservoir` (effects.md): product parked at the band's edge.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct WheelEdgeReservoir {
-    pub alpha: f64,
-    pub r: f64,
-}
-
-/// `bogie_bands` (effects.md): two bands on the rail named `high`.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct BogieBands {}
-
-/// The candidate effects of effects.md; `None` = off (the default), and
-/// the generic terms (none by default).
-#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
+/// The candidate effects of effects.md and the generic terms: the named
+/// effects that are on, each with its parameters in the order of its row in
+/// [`crate::effects::EFFECTS`] (the table is their one description: name,
+/// parameters, units, ranges), and the generic terms (none by default).
+///
+/// In TOML and JSON a named effect is a table `[effects.NAME]` of its
+/// parameters (`[effects.rail_ageing]` with `tau_s = 7200.0`; an effect
+/// without parameters is an empty table), and the generic terms are the
+/// array of tables `[[effects.generic]]`.
+#[derive(Debug, Clone, PartialEq, Default)]
 pub struct Effects {
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub rail_ageing: Option<RailAgeing>,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub rain_washoff: Option<RainWashoff>,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub temperature_consumption: Option<TemperatureConsumption>,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub speed_transfer: Option<SpeedTransfer>,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub wheel_edge_reservoir: Option<WheelEdgeReservoir>,
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub bogie_bands: Option<BogieBands>,
+    named: BTreeMap<Named, Vec<f64>>,
     /// `[[effects.generic]]`: factors outside the catalogue (effects.md,
     /// "Generic terms"), in the order they were given.
-    #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub generic: Vec<GenericTerm>,
 }
 
 impl Effects {
+    /// The parameters of `effect` (in the order of its row), `None` if off.
+    pub fn get(&self, effect: Named) -> Option<&[f64]> {
+        self.named.get(&effect).map(Vec::as_slice)
+    }
+
+    /// Parameter `k` of `effect` (its row's order), `None` if off.
+    pub fn param(&self, effect: Named, k: usize) -> Option<f64> {
+        self.get(effect).and_then(|p| p.get(k).copied())
+    }
+
+    pub fn is_on(&self, effect: Named) -> bool {
+        self.named.contains_key(&effect)
+    }
+
+    /// Switches `effect` on with `params` (in the order of its row; a
+    /// missing one is NaN, which [`ModelConfig::validate`] refuses).
+    pub fn set(&mut self, effect: Named, params: &[f64]) {
+        let n = effect.spec().params.len();
+        let values = (0..n)
+            .map(|k| params.get(k).copied().unwrap_or(f64::NAN))
+            .collect();
+        self.named.insert(effect, values);
+    }
+
+    /// Switches `effect` off.
+    pub fn unset(&mut self, effect: Named) {
+        self.named.remove(&effect);
+    }
+
     /// The names of the effects that are on, in the order of effects.md.
     pub fn names(&self) -> Vec<&'static str> {
+        self.named.keys().map(|e| e.name()).collect()
+    }
+}
+
+/// One named effect's parameters as a table, in the order of its row.
+struct ParamTable<'a>(&'static [crate::effects::Param], &'a [f64]);
+
+impl Serialize for ParamTable<'_> {
+    fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        use serde::ser::SerializeMap;
+        let mut map = serializer.serialize_map(Some(self.0.len()))?;
+        for (param, value) in self.0.iter().zip(self.1) {
+            map.serialize_entry(param.name, value)?;
+        }
+        map.end()
+    }
+}
+
+impl Serialize for Effects {
+    fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        use serde::ser::SerializeMap;
+        let generic = usize::from(!self.generic.is_empty());
+        let mut map = serializer.serialize_map(Some(self.named.len() + generic))?;
+        for (effect, values) in &self.named {
+            let spec = effect.spec();
+            map.serialize_entry(spec.name, &ParamTable(spec.params, values))?;
+        }
+        if !self.generic.is_empty() {
+            map.serialize_entry("generic", &self.generic)?;
+        }
+        map.end()
+    }
+}
+
+/// A named effect's table read by its row: every parameter present, no
+/// other key. The error says which, as serde's own do.
+fn named_params<E: serde::de::Error>(
+    effect: Named,
+    mut table: BTreeMap<String, f64>,
+) -> Result<Vec<f64>, E> {
+    let spec = effect.spec();
+    let names: Vec<&str> = spec.params.iter().map(|p| p.name).collect();
+    let values = spec
+        .params
+        .iter()
+        .map(|param| {
+            table
+                .remove(param.name)
+                .ok_or_else(|| E::missing_field(param.name))
+        })
+        .collect::<Result<Vec<f64>, E>>()?;
+    if let Some(extra) = table.keys().next() {
+        return Err(E::unknown_field(extra, leak(&names)));
+    }
+    Ok(values)
+}
+
+/// The names serde's "expected one of" lists want, as a `'static` slice:
+/// the table's names are `'static` already, so this only collects them.
+fn leak(names: &[&'static str]) -> &'static [&'static str] {
+    static ALL_PARAMS: std::sync::OnceLock<Vec<Vec<&'static str>>> = std::sync::OnceLock::new();
+    let all = ALL_PARAMS.get_or_init(|| {
         crate::effects::EFFECTS
             .iter()
-            .filter(|spec| (spec.get)(self).is_some())
-            .map(|spec| spec.name)
+            .map(|spec| spec.params.iter().map(|p| p.name).collect())
             .collect()
+    });
+    all.iter()
+        .find(|list| list.as_slice() == names)
+        .map_or(&[], Vec::as_slice)
+}
+
+/// The keys `[effects]` may hold: the named effects and `generic`.
+fn effect_keys() -> &'static [&'static str] {
+    static KEYS: std::sync::OnceLock<Vec<&'static str>> = std::sync::OnceLock::new();
+    KEYS.get_or_init(|| {
+        Named::ALL
+            .iter()
+            .map(|e| e.name())
+            .chain(["generic"])
+            .collect()
+    })
+}
+
+/// The named effects that are on, with their parameters.
+type NamedParams = BTreeMap<Named, Vec<f64>>;
+
+/// Reads `[effects]` by the table: a named effect's key, then its table;
+/// `generic` with `read_generic`.
+fn read_effects<'de, A, G>(
+    mut map: A,
+    mut read_generic: impl FnMut(&mut A) -> Result<G, A::Error>,
+) -> Result<(NamedParams, Option<G>), A::Error>
+where
+    A: serde::de::MapAccess<'de>,
+{
+    use serde::de::Error as _;
+    let mut named = BTreeMap::new();
+    let mut generic = None;
+    while let Some(key) = map.next_key::<String>()? {
+        if key == "generic" {
+            generic = Some(read_generic(&mut map)?);
+            continue;
+        }
+        let Some(effect) = Named::from_name(&key) else {
+            return Err(A::Error::unknown_field(&key, effect_keys()));
+        };
+        let table: BTreeMap<String, f64> = map.next_value()?;
+        named.insert(effect, named_params(effect, table)?);
+    }
+    Ok((named, generic))
+}
+
+impl<'de> Deserialize<'de> for Effects {
+    fn deserialize<D: serde::Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
+        struct Visitor;
+        impl<'de> serde::de::Visitor<'de> for Visitor {
+            type Value = Effects;
+            fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+                f.write_str("a table of effects")
+            }
+            fn visit_map<A: serde::de::MapAccess<'de>>(self, map: A) -> Result<Effects, A::Error> {
+                let (named, generic) = read_effects(map, |m| m.next_value::<Vec<GenericTerm>>())?;
+                Ok(Effects {
+                    named,
+                    generic: generic.unwrap_or_default(),
+                })
+            }
+        }
+        deserializer.deserialize_map(Visitor)
     }
 }
 
@@ -155,19 +264,36 @@ struct Overlay {
     effects: EffectsOverlay,
 }
 
-/// The effects of an overlay: the named ones as in [`Effects`]; the generic
-/// terms as raw tables, parsed one by one so that an error names the term.
-#[derive(Debug, Default, Deserialize)]
-#[serde(deny_unknown_fields)]
+/// The effects of an overlay: the named ones read by the table as in
+/// [`Effects`]; the generic terms as raw tables, parsed one by one so that
+/// an error names the term.
+#[derive(Debug, Default)]
 struct EffectsOverlay {
-    rail_ageing: Option<RailAgeing>,
-    rain_washoff: Option<RainWashoff>,
-    temperature_consumption: Option<TemperatureConsumption>,
-    speed_transfer: Option<SpeedTransfer>,
-    wheel_edge_reservoir: Option<WheelEdgeReservoir>,
-    bogie_bands: Option<BogieBands>,
-    #[serde(default)]
+    named: BTreeMap<Named, Vec<f64>>,
     generic: Vec<toml::Value>,
+}
+
+impl<'de> Deserialize<'de> for EffectsOverlay {
+    fn deserialize<D: serde::Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
+        struct Visitor;
+        impl<'de> serde::de::Visitor<'de> for Visitor {
+            type Value = EffectsOverlay;
+            fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+                f.write_str("a table of effects")
+            }
+            fn visit_map<A: serde::de::MapAccess<'de>>(
+                self,
+                map: A,
+            ) -> Result<EffectsOverlay, A::Error> {
+                let (named, generic) = read_effects(map, |m| m.next_value::<Vec<toml::Value>>())?;
+                Ok(EffectsOverlay {
+                    named,
+                    generic: generic.unwrap_or_default(),
+                })
+            }
+        }
+        deserializer.deserialize_map(Visitor)
+    }
 }
 
 /// Declares an overlay struct of optional fields and its merge into the full one.
@@ -252,13 +378,7 @@ impl ModelConfig {
             })?;
             self.effects.generic.push(term);
         }
-        let mine = &mut self.effects;
-        mine.rail_ageing = e.rail_ageing.or(mine.rail_ageing);
-        mine.rain_washoff = e.rain_washoff.or(mine.rain_washoff);
-        mine.temperature_consumption = e.temperature_consumption.or(mine.temperature_consumption);
-        mine.speed_transfer = e.speed_transfer.or(mine.speed_transfer);
-        mine.wheel_edge_reservoir = e.wheel_edge_reservoir.or(mine.wheel_edge_reservoir);
-        mine.bogie_bands = e.bogie_bands.or(mine.bogie_bands);
+        self.effects.named.extend(e.named);
         self.validate(source_name)
     }
 
@@ -394,11 +514,9 @@ impl ModelConfig {
             "finite and > 0",
         )?;
         let e = &self.effects;
-        for spec in &crate::effects::EFFECTS {
-            let Some(values) = (spec.get)(e) else {
-                continue;
-            };
-            for (param, &x) in spec.params.iter().zip(&values) {
+        for (effect, values) in &e.named {
+            let spec = effect.spec();
+            for (param, &x) in spec.params.iter().zip(values) {
                 let key = format!("effects.{}.{}", spec.name, param.name);
                 check(&key, x, param.is_valid(x), &param.rule())?;
             }
@@ -483,10 +601,11 @@ mod tests {
         assert_eq!(c.product.cm_kg, 3.5e-5);
         let c =
             ModelConfig::from_overlay_str("[effects.rail_ageing]\ntau_s = 7200.0\n", "t").unwrap();
-        assert_eq!(c.effects.rail_ageing, Some(RailAgeing { tau_s: 7200.0 }));
+        assert_eq!(c.effects.get(Named::RailAgeing), Some(&[7200.0][..]));
         assert_eq!(c.product, ModelConfig::default().product);
         let c = ModelConfig::from_overlay_str("[effects.bogie_bands]\n", "t").unwrap();
-        assert!(c.effects.bogie_bands.is_some());
+        assert!(c.effects.is_on(Named::BogieBands));
+        assert_eq!(c.effects.get(Named::BogieBands), Some(&[][..]));
     }
 
     fn err(text: &str) -> ConfigError {
@@ -509,6 +628,10 @@ mod tests {
         assert_eq!(e.key, "effects.rail_ageing.tau_s", "{e}");
         let e = err("[effects.rail_ageing]\n");
         assert!(e.to_string().contains("tau_s"), "{e}");
+        let e = err("[effects.rail_ageing]\ntau_s = 1.0\nbeta = 2.0\n");
+        assert!(e.to_string().contains("beta"), "{e}");
+        let e = err("[effects.rail_ageing]\ntau_s = \"long\"\n");
+        assert_eq!(e.key, "effects.rail_ageing.tau_s", "{e}");
         let e = err("[effects.moon_phase]\nx = 1\n");
         assert!(e.key.contains("moon_phase"), "{e}");
         let e = err("[effects.speed_transfer]\nn = 11\n");
@@ -522,8 +645,8 @@ mod tests {
     #[test]
     fn round_trips_through_toml() {
         let mut c = ModelConfig::default();
-        c.effects.rail_ageing = Some(RailAgeing { tau_s: 3600.0 });
-        c.effects.bogie_bands = Some(BogieBands {});
+        c.effects.set(Named::RailAgeing, &[3600.0]);
+        c.effects.set(Named::BogieBands, &[]);
         let text = c.to_toml();
         let back = ModelConfig::from_overlay_str(&text, "round trip").unwrap();
         assert_eq!(back, c);

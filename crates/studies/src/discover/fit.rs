@@ -57,14 +57,9 @@ pub(super) enum Candidate {
 
 impl Candidate {
     /// Every named effect, in the order of effects.md.
-    pub(super) const ALL: [Candidate; 6] = [
-        Candidate::Named(Named::RailAgeing),
-        Candidate::Named(Named::RainWashoff),
-        Candidate::Named(Named::TemperatureConsumption),
-        Candidate::Named(Named::SpeedTransfer),
-        Candidate::Named(Named::WheelEdgeReservoir),
-        Candidate::Named(Named::BogieBands),
-    ];
+    pub(super) fn all() -> Vec<Candidate> {
+        Named::ALL.into_iter().map(Candidate::Named).collect()
+    }
 
     /// The effect's name in effects.md (`generic` for a generic term).
     pub(super) fn name(&self) -> &'static str {
@@ -131,7 +126,7 @@ impl Candidate {
     /// Switches the effect on in `effects` with `params`.
     pub(super) fn set(&self, effects: &mut Effects, params: &[f64]) {
         match self {
-            Candidate::Named(n) => (n.spec().set)(effects, params),
+            Candidate::Named(n) => effects.set(*n, params),
             Candidate::Generic(g) => g.set(effects, params.first().copied().unwrap_or(f64::NAN)),
         }
     }
@@ -139,7 +134,7 @@ impl Candidate {
     /// Switches the effect off in `effects`.
     pub(super) fn unset(&self, effects: &mut Effects) {
         match self {
-            Candidate::Named(n) => (n.spec().unset)(effects),
+            Candidate::Named(n) => effects.unset(*n),
             Candidate::Generic(g) => effects.generic.retain(|t| !g.is(t)),
         }
     }
@@ -147,7 +142,7 @@ impl Candidate {
     /// The effect's parameters in `effects`, `None` when it is off.
     pub(super) fn get(&self, effects: &Effects) -> Option<Vec<f64>> {
         match self {
-            Candidate::Named(n) => (n.spec().get)(effects),
+            Candidate::Named(n) => effects.get(*n).map(<[f64]>::to_vec),
             Candidate::Generic(g) => g.get(effects).map(|p| vec![p]),
         }
     }
@@ -385,7 +380,7 @@ impl<'a> Evaluator<'a> {
 /// reservoir's `r` when `alpha` = 0 (nothing is ever parked).
 fn cache_key(cfg: &ModelConfig) -> Vec<u64> {
     let mut key = Vec::with_capacity(16);
-    for c in Candidate::ALL {
+    for c in Candidate::all() {
         match c.get(&cfg.effects) {
             None => key.push(0),
             Some(mut p) => {
@@ -859,7 +854,7 @@ mod tests {
 
     #[test]
     fn transforms_round_trip_and_hit_the_bounds() {
-        for c in Candidate::ALL {
+        for c in Candidate::all() {
             for i in 0..c.dims() {
                 for u in [0.0, 0.1, 0.37, 0.5, 0.9, 1.0] {
                     let p = c.param(i, u);
@@ -878,7 +873,7 @@ mod tests {
 
     #[test]
     fn every_candidate_sets_a_valid_config() {
-        for c in Candidate::ALL {
+        for c in Candidate::all() {
             let space = Space {
                 base: ModelConfig::default(),
                 slots: vec![c.clone()],

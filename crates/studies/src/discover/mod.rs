@@ -56,7 +56,7 @@ use fit::{Candidate, Evaluator, Space, Start};
 use space::Drivers;
 use tortwin_model::config::{ModelConfig, TermEffect};
 use tortwin_model::effects::Named;
-use tortwin_model::generic::{ActsOn, FormKind};
+use tortwin_model::generic::{ActsOn, Driver, FormKind};
 
 /// The thresholds of the selection.
 #[derive(Debug, Clone, Copy, Serialize)]
@@ -81,7 +81,7 @@ impl Default for Options {
             bic_threshold: -10.0,
             min_excess_share: 0.25,
             unexplained_ratio: 1.1,
-            max_steps: Candidate::ALL.len(),
+            max_steps: Named::ALL.len(),
         }
     }
 }
@@ -292,7 +292,7 @@ pub struct Discovery {
 /// The effects on in `cfg`, with their parameters: the named ones in the
 /// order of effects.md, then the generic terms in their order.
 pub(crate) fn effects_of(cfg: &ModelConfig) -> Vec<EffectParams> {
-    let mut list: Vec<EffectParams> = Candidate::ALL
+    let mut list: Vec<EffectParams> = Candidate::all()
         .iter()
         .filter_map(|c| {
             c.get(&cfg.effects).map(|p| EffectParams {
@@ -406,7 +406,7 @@ pub fn discover(
     // to axle (a load-driven one) inflates the first estimate, so it is
     // estimated again as the model grows, the smallest kept.
     let mut noise_now = noise_estimate;
-    let mut accepted: Vec<Candidate> = Candidate::ALL
+    let mut accepted: Vec<Candidate> = Candidate::all()
         .into_iter()
         .filter(|c| c.get(&start.effects).is_some())
         .collect();
@@ -442,7 +442,7 @@ pub fn discover(
         ev.simulate(&current)?
     };
     for step in 1..=options.max_steps {
-        let mut candidates: Vec<(Candidate, Start)> = Candidate::ALL
+        let mut candidates: Vec<(Candidate, Start)> = Candidate::all()
             .into_iter()
             .filter(|c| !accepted.contains(c))
             // Without a rail named `high` the effect does nothing.
@@ -517,7 +517,7 @@ pub fn discover(
             .filter(|(c, _, f)| {
                 f.eval.sse < sse
                     && matches!(c, Candidate::Generic(g)
-                        if g.driver.is_some_and(|d| d != tortwin_model::generic::Driver::Time))
+                        if g.driver.is_some_and(|d| d != Driver::Time))
             })
             .collect();
         improving.sort_by(|a, b| a.2.eval.sse.total_cmp(&b.2.eval.sse));
@@ -627,6 +627,7 @@ pub fn discover(
         // A named effect that describes the data (nearly) as well as the
         // best generic term is the better statement: it goes first.
         prefer_named(&mut results, n, options);
+        prefer_direct_drivers(&mut results);
         prefer_narrow_offsets(&mut results, n);
 
         // The current model's held-out SSE: every block predicted as it is.
@@ -723,10 +724,9 @@ pub fn discover(
                 .iter()
                 .enumerate()
                 .filter_map(|(i, a)| match a {
-                    Candidate::Generic(g) => g
-                        .driver
-                        .filter(|&d| d != tortwin_model::generic::Driver::Time)
-                        .map(|d| (i, g, d)),
+                    Candidate::Generic(g) => {
+                        g.driver.filter(|&d| d != Driver::Time).map(|d| (i, g, d))
+                    }
                     _ => None,
                 })
                 .flat_map(|(i, g, d)| {
@@ -772,7 +772,7 @@ pub fn discover(
         // Backward: an effect added earlier that the model no longer needs
         // (it stood in for what came later) is taken out again.
         if accepted.len() > 1 {
-            let starting = Candidate::ALL
+            let starting = Candidate::all()
                 .iter()
                 .filter(|c| c.get(&start.effects).is_some())
                 .count();
@@ -910,7 +910,7 @@ pub fn discover(
 }
 
 fn is_time_step(space: &Space) -> bool {
-    matches!(space.slots.first(), Some(Candidate::Generic(g)) if g.driver == Some(tortwin_model::generic::Driver::Time))
+    matches!(space.slots.first(), Some(Candidate::Generic(g)) if g.driver == Some(Driver::Time))
 }
 
 fn is_step_slot(space: &Space) -> bool {
@@ -937,7 +937,6 @@ fn refine_step(
     space: &Space,
     u: &[f64],
 ) -> Result<Option<Fitted>> {
-    use tortwin_model::generic::Driver;
     let Some(Candidate::Generic(slot)) = space.slots.first() else {
         return Ok(None);
     };
@@ -1111,7 +1110,6 @@ fn readable_between(lo: f64, hi: f64) -> f64 {
 /// `temperature_consumption` is consumption × exp of air temperature,
 /// `speed_transfer` transfer × power of speed), for an unscoped term.
 fn named_family(c: &Candidate) -> Option<Candidate> {
-    use tortwin_model::generic::Driver;
     match c {
         Candidate::Generic(g) if g.scope().keys() == 0 => match (g.acts_on, g.driver) {
             (ActsOn::Consumption, Some(Driver::AirTemperatureC)) => {
@@ -1236,6 +1234,59 @@ fn prefer_narrow_offsets(results: &mut [(CandidateResult, Space, Vec<f64>)], n: 
         .filter(|(_, s, sse)| within(s) && n as f64 * (sse / best_sse).ln() < NARROW_MARGIN)
         .max_by(|a, b| a.1.keys().cmp(&b.1.keys()).then(b.2.total_cmp(&a.2)));
     if let Some((k, _, _)) = narrowest {
+        results[best..=k].rotate_right(1);
+    }
+}
+
+/// How directly a driver can cause a change of the model's quantities, for
+/// [`prefer_direct_drivers`]: rain wets the rail, temperature changes the
+/// product, the wheel's own speed, load and creepage act at the contact;
+/// relative humidity in a weather log rises with rain and falls with
+/// temperature, so it often stands in for them; a step in time stands in
+/// for anything.
+fn directness(driver: Option<Driver>) -> u8 {
+    match driver {
+        Some(Driver::PrecipitationMmH) => 0,
+        Some(Driver::AirTemperatureC) => 1,
+        Some(Driver::SpeedMps | Driver::WheelLoadKn | Driver::Creepage) => 2,
+        Some(Driver::RelativeHumidity) => 3,
+        Some(Driver::Time) | None => 4,
+    }
+}
+
+/// Two generic terms on the same quantity and scope whose drivers split the
+/// measurements identically (rain at or above 0.8 mm/h exactly when
+/// humidity is at or above 0.88) fit to the same residual: the recording
+/// cannot tell them apart. The one with the more direct driver
+/// ([`directness`]) goes first; the report lists the other beside it with
+/// the same ΔBIC.
+fn prefer_direct_drivers(results: &mut [(CandidateResult, Space, Vec<f64>)]) {
+    let passing = |r: &CandidateResult| r.passes_bic && r.passes_share;
+    let Some(best) = results.iter().position(|r| passing(&r.0)) else {
+        return;
+    };
+    let slot = |space: &Space| match space.slots.first() {
+        Some(Candidate::Generic(g)) => Some(g.clone()),
+        _ => None,
+    };
+    let Some(first) = slot(&results[best].1) else {
+        return;
+    };
+    let best_sse = results[best].0.sse;
+    let tied = |r: &CandidateResult| (r.sse - best_sse).abs() <= 1e-9 * best_sse;
+    let better = results
+        .iter()
+        .enumerate()
+        .skip(best + 1)
+        .filter(|(_, r)| passing(&r.0) && tied(&r.0))
+        .filter_map(|(k, r)| slot(&r.1).map(|g| (k, g)))
+        .filter(|(_, g)| {
+            g.acts_on == first.acts_on
+                && g.scope() == first.scope()
+                && directness(g.driver) < directness(first.driver)
+        })
+        .min_by_key(|(k, g)| (directness(g.driver), *k));
+    if let Some((k, _)) = better {
         results[best..=k].rotate_right(1);
     }
 }

@@ -102,7 +102,11 @@ mod tests {
         assert!(hidden_effect_toml("rail ageing").is_err());
         assert!(hidden_effect_toml("x]\n[product:cn=1").is_err());
         let cfg = truth_config(None, &["rail_ageing:tau_s=7200".into()]).unwrap();
-        assert_eq!(cfg.effects.rail_ageing.map(|e| e.tau_s), Some(7200.0));
+        assert_eq!(
+            cfg.effects
+                .param(tortwin_model::effects::Named::RailAgeing, 0),
+            Some(7200.0)
+        );
         assert!(truth_config(None, &["rail_ageing:tau_s=-1".into()]).is_err());
         assert!(truth_config(None, &["no_such_effect".into()]).is_err());
     }
