@@ -41,7 +41,9 @@ def from_pairs(pairs):
     inputs = []
     k = 0
     while f"input.{k}.sha256" in pairs:
-        inputs.append({"path": pairs[f"input.{k}.path"], "bytes": int(pairs[f"input.{k}.bytes"]),
+        inputs.append({"path": pairs[f"input.{k}.path"],
+                       "absolute_path": pairs.get(f"input.{k}.absolute_path"),
+                       "bytes": int(pairs[f"input.{k}.bytes"]),
                        "sha256": pairs[f"input.{k}.sha256"]})
         k += 1
     return {"tool": pairs.get("tool"), "command_line": pairs.get("command_line"),
@@ -104,8 +106,8 @@ def main():
         if len(got) < len(inputs):
             failures.append(f"{len(got)} inputs named, expected {len(inputs)}")
         for want, have in zip(inputs, got):
-            if os.path.abspath(have["path"]) != os.path.abspath(want):
-                failures.append(f"input path {have['path']} vs {want}")
+            if os.path.realpath(have.get("absolute_path") or "") != os.path.realpath(want):
+                failures.append(f"input {have.get('absolute_path')} ({have['path']}) vs {want}")
             if have["sha256"] != sha256(want) or have["bytes"] != os.path.getsize(want):
                 failures.append(f"{want}: sha256/size {have['sha256']} {have['bytes']} differ")
     print(json.dumps({"output": output, "failures": failures}))

@@ -22,6 +22,8 @@ use tortwin_recording::error::InputError;
 pub struct InputFile {
     /// The path as the user gave it.
     pub path: String,
+    /// The same file as an absolute path (where the run was started).
+    pub absolute_path: String,
     pub bytes: u64,
     /// Lower-case hex.
     pub sha256: String,
@@ -50,6 +52,10 @@ impl InputFile {
             .collect();
         Ok(Self {
             path: path.display().to_string(),
+            absolute_path: std::path::absolute(path)
+                .unwrap_or_else(|_| path.to_path_buf())
+                .display()
+                .to_string(),
             bytes,
             sha256,
         })
@@ -106,7 +112,8 @@ impl Provenance {
 
     /// As flat string pairs (an MCAP metadata record, rerun properties):
     /// `tool`, `command_line`, `model_toml`, and per input `k`
-    /// `input.k.path`, `input.k.bytes`, `input.k.sha256`.
+    /// `input.k.path`, `input.k.absolute_path`, `input.k.bytes`,
+    /// `input.k.sha256`.
     pub fn to_pairs(&self) -> BTreeMap<String, String> {
         let mut pairs = BTreeMap::from([
             ("tool".to_owned(), self.tool.clone()),
@@ -115,6 +122,10 @@ impl Provenance {
         ]);
         for (k, input) in self.inputs.iter().enumerate() {
             pairs.insert(format!("input.{k}.path"), input.path.clone());
+            pairs.insert(
+                format!("input.{k}.absolute_path"),
+                input.absolute_path.clone(),
+            );
             pairs.insert(format!("input.{k}.bytes"), input.bytes.to_string());
             pairs.insert(format!("input.{k}.sha256"), input.sha256.clone());
         }
@@ -138,6 +149,7 @@ mod tests {
             "ba7816bf8f01cfea414140de5dae2223b00361a396177a9cb410ff61f20015ad"
         );
         assert_eq!(input.bytes, 3);
+        assert!(Path::new(&input.absolute_path).is_absolute());
         let missing = InputFile::hash(&dir.path().join("nope")).unwrap_err();
         assert!(missing.to_string().contains("nope"), "{missing}");
     }
