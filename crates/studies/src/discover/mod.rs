@@ -867,13 +867,14 @@ pub fn discover(
         .filter(|e| !start_effects.iter().any(|s| s.same_effect(e)))
         .cloned()
         .collect();
-    let verdict = verdict(
+    let mut verdict = verdict(
         &effects_found,
         rmse_before,
         rmse_after,
         noise_estimate,
         unexplained.as_ref(),
     );
+    verdict.push_str(&ties(&steps));
     let rmse_after_all_rows = {
         let all: f64 = residual_after.iter().map(|r| r * r).sum();
         rmse(all, residual_after.len())
@@ -1383,6 +1384,44 @@ fn verdict(
                 at.measurements,
                 at.mean_residual,
                 100.0 * at.share_of_excess
+            ));
+        }
+    }
+    text
+}
+
+/// What the recording could not decide: for each accepted candidate, the
+/// others of its step that fit exactly as well (the same SSE to 1e-9), in
+/// words; empty when there are none.
+fn ties(steps: &[Step]) -> String {
+    let mut text = String::new();
+    for step in steps {
+        let Some(accepted) = &step.accepted else {
+            continue;
+        };
+        let Some(chosen) = step.candidates.iter().find(|c| &c.label == accepted) else {
+            continue;
+        };
+        let equal: Vec<&str> = step
+            .candidates
+            .iter()
+            // A named effect and its generic equivalent tie by construction
+            // (temperature_consumption is consumption × exp of temperature):
+            // only generic terms of different drivers or quantities count.
+            .filter(|c| chosen.name == "generic" && c.name == "generic")
+            .filter(|c| c.label != chosen.label)
+            .filter(|c| (c.sse - chosen.sse).abs() <= 1e-9 * chosen.sse)
+            .map(|c| c.label.as_str())
+            .collect();
+        if !equal.is_empty() {
+            text.push_str(&format!(
+                concat!(
+                    " The recording cannot tell {} from {}: they fit exactly as well, so these ",
+                    "measurements cannot decide which one acts (where drivers tie, the more ",
+                    "direct one is named: rain, temperature, the wheel, humidity, time)."
+                ),
+                accepted,
+                equal.join(", ")
             ));
         }
     }
