@@ -270,3 +270,54 @@ fn a_closed_stdout_is_not_a_panic() {
         String::from_utf8_lossy(&out.stderr)
     );
 }
+
+/// In a log (stderr not a terminal) a long command says where it is: a line
+/// per stage with the elapsed time and what it counts, and the count it
+/// reached; with --quiet, nothing.
+#[test]
+fn progress_in_a_log_is_one_line_per_stage_with_counts() {
+    let recording = reference("tangent_day.mcap");
+    let out = tortwin().arg("replay").arg(&recording).output().unwrap();
+    assert!(out.status.success());
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    let lines: Vec<&str> = stderr.lines().collect();
+    assert_eq!(lines.len(), 2, "{stderr}");
+    let stage = regex_free_parse(lines[0]);
+    assert!(
+        stage.1.starts_with("replaying ") && stage.1.ends_with(" to do)"),
+        "{stderr}"
+    );
+    // The count is the file's messages, and the end line reaches it.
+    let total: u64 = stage
+        .1
+        .rsplit_once('(')
+        .and_then(|(_, n)| n.split_whitespace().next())
+        .and_then(|n| n.parse().ok())
+        .unwrap_or_else(|| panic!("no count in {stderr}"));
+    let end = regex_free_parse(lines[1]);
+    let took: f64 = end
+        .1
+        .trim()
+        .strip_prefix(&format!("{total}/{total} done in "))
+        .and_then(|t| t.strip_suffix(" s"))
+        .and_then(|t| t.parse().ok())
+        .unwrap_or_else(|| panic!("not an end line: {stderr}"));
+    // Each figure is rounded to 0.1 s.
+    assert!((took - (end.0 - stage.0)).abs() <= 0.15, "{stderr}");
+    let quiet = tortwin()
+        .arg("replay")
+        .arg(&recording)
+        .arg("-q")
+        .output()
+        .unwrap();
+    assert!(quiet.stderr.is_empty() && quiet.stdout.is_empty());
+}
+
+/// `[   12.3 s] text` as (12.3, "text").
+fn regex_free_parse(line: &str) -> (f64, String) {
+    let (head, text) = line
+        .strip_prefix('[')
+        .and_then(|l| l.split_once(" s] "))
+        .unwrap_or_else(|| panic!("not a stage line: {line:?}"));
+    (head.trim().parse().unwrap(), text.to_string())
+}
