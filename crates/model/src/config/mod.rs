@@ -147,7 +147,6 @@ fn named_params<E: serde::de::Error>(
     mut table: BTreeMap<String, f64>,
 ) -> Result<Vec<f64>, E> {
     let spec = effect.spec();
-    let names: Vec<&str> = spec.params.iter().map(|p| p.name).collect();
     let values = spec
         .params
         .iter()
@@ -158,36 +157,23 @@ fn named_params<E: serde::de::Error>(
         })
         .collect::<Result<Vec<f64>, E>>()?;
     if let Some(extra) = table.keys().next() {
-        return Err(E::unknown_field(extra, leak(&names)));
+        return Err(E::custom(format!(
+            "unknown field `{extra}` of `{}`, expected {}",
+            spec.name,
+            one_of(spec.params.iter().map(|p| p.name))
+        )));
     }
     Ok(values)
 }
 
-/// The names serde's "expected one of" lists want, as a `'static` slice:
-/// the table's names are `'static` already, so this only collects them.
-fn leak(names: &[&'static str]) -> &'static [&'static str] {
-    static ALL_PARAMS: std::sync::OnceLock<Vec<Vec<&'static str>>> = std::sync::OnceLock::new();
-    let all = ALL_PARAMS.get_or_init(|| {
-        crate::effects::EFFECTS
-            .iter()
-            .map(|spec| spec.params.iter().map(|p| p.name).collect())
-            .collect()
-    });
-    all.iter()
-        .find(|list| list.as_slice() == names)
-        .map_or(&[], Vec::as_slice)
-}
-
-/// The keys `[effects]` may hold: the named effects and `generic`.
-fn effect_keys() -> &'static [&'static str] {
-    static KEYS: std::sync::OnceLock<Vec<&'static str>> = std::sync::OnceLock::new();
-    KEYS.get_or_init(|| {
-        Named::ALL
-            .iter()
-            .map(|e| e.name())
-            .chain(["generic"])
-            .collect()
-    })
+/// `` `a`, `b` or `c` `` (`no field` for none), as serde's messages say it.
+fn one_of<'a>(names: impl Iterator<Item = &'a str>) -> String {
+    let names: Vec<String> = names.map(|n| format!("`{n}`")).collect();
+    match names.as_slice() {
+        [] => "no field".into(),
+        [one] => one.clone(),
+        [init @ .., last] => format!("{} or {last}", init.join(", ")),
+    }
 }
 
 /// The named effects that are on, with their parameters.
@@ -211,7 +197,10 @@ where
             continue;
         }
         let Some(effect) = Named::from_name(&key) else {
-            return Err(A::Error::unknown_field(&key, effect_keys()));
+            return Err(A::Error::custom(format!(
+                "unknown field `{key}`, expected {}",
+                one_of(Named::ALL.iter().map(|e| e.name()).chain(["generic"]))
+            )));
         };
         let table: BTreeMap<String, f64> = map.next_value()?;
         named.insert(effect, named_params(effect, table)?);
