@@ -52,6 +52,9 @@ const EPS_REACH: f64 = 0.05;
 const EPS_STEP: f64 = 1.05;
 /// A change point keeps at least this share of the rows on each side.
 const MIN_SIDE: f64 = 0.04;
+/// The same for the step form of a direction already found in another
+/// form (at least 5 rows each side in any case).
+const MIN_SIDE_FORM: f64 = 0.002;
 /// A time change point is tried when the split explains more than this
 /// times `ln n σ²`.
 const CHANGE_POINT_CHI2: f64 = 4.0;
@@ -162,7 +165,12 @@ fn median(sorted: &[f64]) -> f64 {
 /// The best single split of `residual` along `x` over the rows in `mask`
 /// (active rows with a finite x): the threshold between the two sides and
 /// the SSE it explains, `n1 n2 / n (m1 − m2)²`.
-pub(super) fn best_split(x: &[f64], residual: &[f64], mask: &[bool]) -> Option<(f64, f64)> {
+pub(super) fn best_split(
+    x: &[f64],
+    residual: &[f64],
+    mask: &[bool],
+    min_share: f64,
+) -> Option<(f64, f64)> {
     let mut pts: Vec<(f64, f64)> = x
         .iter()
         .zip(residual)
@@ -176,7 +184,7 @@ pub(super) fn best_split(x: &[f64], residual: &[f64], mask: &[bool]) -> Option<(
     }
     pts.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
     let total: f64 = pts.iter().map(|p| p.1).sum();
-    let min_side = ((n as f64 * MIN_SIDE).ceil() as usize).max(5);
+    let min_side = ((n as f64 * min_share).ceil() as usize).max(5);
     let mut left = 0.0;
     let mut best: Option<(f64, f64)> = None;
     for k in 1..n {
@@ -308,7 +316,7 @@ pub(super) fn propose(
     let sigma2 = noise.map_or(0.0, |s| s * s);
     let n_active = active.iter().filter(|a| **a).count().max(2) as f64;
     for mask in &masks {
-        if let Some((x0, gain)) = best_split(times, &residual, mask) {
+        if let Some((x0, gain)) = best_split(times, &residual, mask, MIN_SIDE) {
             let x0 = x0.round();
             if gain > CHANGE_POINT_CHI2 * n_active.ln() * sigma2
                 && !change_points.iter().any(|&c| (c - x0).abs() < 60.0)
@@ -331,7 +339,7 @@ pub(super) fn propose(
         }
         let best = masks
             .iter()
-            .filter_map(|mask| best_split(drivers.values(driver), &residual, mask))
+            .filter_map(|mask| best_split(drivers.values(driver), &residual, mask, MIN_SIDE))
             .max_by(|a, b| a.1.total_cmp(&b.1));
         if let Some((x0, gain)) = best {
             if gain > CHANGE_POINT_CHI2 * n_active.ln() * sigma2 {
@@ -786,7 +794,9 @@ pub(super) fn other_forms(
         .zip(active)
         .map(|(row, &a)| a && rail.is_none_or(|r| r == row.rail))
         .collect();
-    if let Some((x0, _)) = best_split(drivers.values(driver), residual, &mask) {
+    // The direction is known to matter here: a step may sit where few rows
+    // are (heavy rain is rare), the fit and the acceptance rules decide.
+    if let Some((x0, _)) = best_split(drivers.values(driver), residual, &mask, MIN_SIDE_FORM) {
         let c = Candidate::Generic(GenericSlot::factor(
             slot.acts_on,
             driver,
@@ -814,11 +824,11 @@ mod tests {
             .iter()
             .map(|&v| if v >= 120.0 { 0.05 } else { 0.0 } + 0.001 * (v * 7.0).sin())
             .collect();
-        let (x0, gain) = best_split(&x, &r, &[true; 200]).unwrap();
+        let (x0, gain) = best_split(&x, &r, &[true; 200], MIN_SIDE).unwrap();
         assert!((x0 - 119.5).abs() < 1e-9, "{x0}");
         // n1 n2 / n (Δm)² = 120 · 80 / 200 · 0.05² = 0.12 (plus a sliver).
         assert!((gain - 0.12).abs() < 0.01, "{gain}");
-        assert!(best_split(&x[..10], &r[..10], &[true; 10]).is_none());
+        assert!(best_split(&x[..10], &r[..10], &[true; 10], MIN_SIDE).is_none());
     }
 
     #[test]
