@@ -19,12 +19,14 @@ use tortwin_recording::{Applicator, Direction, Quantity, Section, Site};
 const ORIGIN_NS: u64 = 1_700_000_000_000_000_000;
 const TRAIN_NS: u64 = ORIGIN_NS + 60_000_000_000;
 const TRAIN_END_NS: u64 = TRAIN_NS + 95_500_000_000;
-const ALL_TOPICS: [&str; 5] = [
+const ALL_TOPICS: [&str; 7] = [
     "/twin/section",
     "/twin/train",
     "/twin/pulse",
     "/twin/measurement",
     "/twin/field",
+    "/foxglove/track",
+    "/foxglove/log",
 ];
 
 fn section() -> Section {
@@ -245,11 +247,17 @@ fn writes_every_topic_and_reads_back() {
             .as_ref()
             .expect("every channel has a schema");
         assert_eq!(schema.encoding, "jsonschema");
+        let name = schema.name.clone();
         let schema: Value = serde_json::from_slice(&schema.data).unwrap();
-        assert_eq!(
-            schema["$schema"],
-            "https://json-schema.org/draft/2020-12/schema"
-        );
+        if name.starts_with("foxglove.") {
+            // Foxglove's own schema, as its npm package has it.
+            assert_eq!(schema["title"], name.as_str());
+        } else {
+            assert_eq!(
+                schema["$schema"],
+                "https://json-schema.org/draft/2020-12/schema"
+            );
+        }
         let value: Value = serde_json::from_slice(&message.data).unwrap();
         by_topic
             .entry(message.channel.topic.clone())
@@ -263,6 +271,10 @@ fn writes_every_topic_and_reads_back() {
     assert_eq!(
         counts,
         BTreeMap::from([
+            // A train, a pulse line per applicator and rail.
+            ("/foxglove/log", 3),
+            // One scene once both tracks' snapshots are in.
+            ("/foxglove/track", 1),
             ("/twin/field", 2),
             ("/twin/measurement", 3),
             ("/twin/pulse", 2),
@@ -291,9 +303,19 @@ fn writes_every_topic_and_reads_back() {
     assert_eq!(train["end_time_ns"].as_u64(), Some(TRAIN_END_NS));
     assert_eq!(train["duration_s"].as_f64(), Some(95.5));
 
+    // The pulses before the train, written with its snapshot.
     let pulses = &by_topic["/twin/pulse"];
-    assert_eq!(pulses[1].0, ORIGIN_NS + 1_001);
+    assert_eq!(pulses[1].0, TRAIN_END_NS);
     assert_eq!(pulses[1].1["rail"], "low");
+    assert_eq!(pulses[1].1["pulses"], 1);
+    assert_eq!(
+        pulses[1].1["first_time_ns"].as_u64(),
+        Some(ORIGIN_NS + 1_001)
+    );
+    assert_eq!(
+        pulses[1].1["last_time_ns"].as_u64(),
+        Some(ORIGIN_NS + 1_001)
+    );
     // 1e-4 kg is 0.1 g, to the last bit of the g -> kg -> g round trip.
     assert!((pulses[1].1["mass_g"].as_f64().unwrap() - 0.1).abs() <= 1e-16);
 
@@ -339,17 +361,52 @@ fn writes_every_topic_and_reads_back() {
     assert_eq!(low["rail"], "low");
     assert_eq!(high["band"], "top");
     assert_eq!(high["wheel_pass"], 24);
-    assert_eq!(low["mu"][4].as_f64(), Some(field_values(1).mu[4]));
+    // mu to 1e-4: the double nearest the 4-decimal value, printed short.
+    let mu = field_values(1).mu[4];
+    assert_eq!(low["mu"][4].as_f64(), Some((mu * 1e4).round() / 1e4));
+    assert_eq!(low["mu"][4].to_string(), "0.314");
     assert_eq!(high["rail_mass_mg"][2].as_f64(), Some(2.5));
     assert_eq!(high["rail_mass_mg"][3].as_f64(), Some(0.0));
     assert_eq!(high["wheel_mass_mg"][5].as_f64(), Some(1.25));
-    for key in ["d_m", "mu", "adhesion", "rail_mass_mg", "wheel_mass_mg"] {
+    // No distances: they are /twin/section's grid_d_m.
+    assert!(high.get("d_m").is_none());
+    for key in ["mu", "adhesion", "rail_mass_mg", "wheel_mass_mg"] {
         assert_eq!(high[key].as_array().unwrap().len(), 11, "{key}");
     }
 
+    // The Foxglove scene: both tracks' lines, a colour per grid point, and
+    // the labels.
+    let (t, scene) = &by_topic["/foxglove/track"][0];
+    assert_eq!(*t, TRAIN_END_NS);
+    let entities = scene["entities"].as_array().unwrap();
+    let ids: Vec<&str> = entities.iter().map(|e| e["id"].as_str().unwrap()).collect();
+    assert_eq!(ids, ["track/high/top", "track/low/top", "labels"]);
+    let line = &entities[1]["lines"][0];
+    assert_eq!(line["points"].as_array().unwrap().len(), 11);
+    assert_eq!(line["colors"].as_array().unwrap().len(), 11);
+    let texts: Vec<&str> = entities[2]["texts"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|t| t["text"].as_str().unwrap())
+        .collect();
+    assert!(
+        texts.contains(&"A1 (6 m)") && texts.contains(&"site M1 (20 m)"),
+        "{texts:?}"
+    );
+    let logs: Vec<(&str, &str)> = by_topic["/foxglove/log"]
+        .iter()
+        .map(|(_, l)| (l["name"].as_str().unwrap(), l["message"].as_str().unwrap()))
+        .collect();
+    assert_eq!(
+        logs[0],
+        ("trains", "train F-1234 down, 18.0 m/s (65 km/h), 12 axles")
+    );
+    assert_eq!(logs[1], ("A1", "1 pulse, 0.100 g in all, on the high rail"));
+
     let summary = mcap::Summary::read(&bytes).unwrap().expect("a summary");
-    assert_eq!(summary.stats.as_ref().unwrap().message_count, 9);
-    assert_eq!(summary.channels.len(), 5);
+    assert_eq!(summary.stats.as_ref().unwrap().message_count, 13);
+    assert_eq!(summary.channels.len(), 7);
     assert!(!summary.chunk_indexes.is_empty());
     assert!(summary
         .chunk_indexes

@@ -6,7 +6,10 @@
 #![warn(unreachable_pub)]
 
 pub mod files;
+pub mod foxglove;
+pub mod geometry;
 pub mod mcap_out;
 pub mod provenance;
 pub mod rerun_out;
+pub mod scale;
 pub mod tables;

@@ -1,0 +1,429 @@
+//! Foxglove's well-known message types, JSON-encoded, for the MCAP output:
+//! the coloured track as a `foxglove.SceneUpdate` and trains, pulses and
+//! warnings as `foxglove.Log`, so that Foxglove's 3D and Log panels show
+//! them without setup.
+//!
+//! The schemas are Foxglove's own JSON Schemas, copied from the
+//! `@foxglove/schemas` npm package (see `schemas/foxglove/README.md`) and
+//! written into the file as they are; the types below serialize to exactly
+//! the fields those schemas require, and the tests validate every message
+//! against the npm package's schemas.
+
+use serde::Serialize;
+use serde_json::value::RawValue;
+
+use crate::geometry::Plan;
+use crate::scale::{mu_class, mu_class_color, MU_CLASSES};
+
+pub(crate) const SCENE_UPDATE_SCHEMA: &str = include_str!("../schemas/foxglove/SceneUpdate.json");
+pub(crate) const LOG_SCHEMA: &str = include_str!("../schemas/foxglove/Log.json");
+
+/// The frame every scene entity is drawn in: the section's plan
+/// ([`crate::geometry`]), x and y in m, z up.
+pub const FRAME_ID: &str = "section";
+
+/// `foxglove.LogLevel`.
+#[derive(Debug, Clone, Copy)]
+pub(crate) enum LogLevel {
+    Info = 2,
+    Warning = 3,
+}
+
+#[derive(Serialize)]
+pub(crate) struct Time {
+    sec: u64,
+    nsec: u32,
+}
+
+impl Time {
+    pub(crate) fn from_ns(ns: u64) -> Time {
+        Time {
+            sec: ns / 1_000_000_000,
+            nsec: (ns % 1_000_000_000) as u32,
+        }
+    }
+}
+
+/// `foxglove.Log`.
+#[derive(Serialize)]
+pub(crate) struct Log<'a> {
+    timestamp: Time,
+    level: u8,
+    message: &'a str,
+    name: &'a str,
+    file: &'static str,
+    line: u32,
+}
+
+impl<'a> Log<'a> {
+    pub(crate) fn new(log_time_ns: u64, level: LogLevel, name: &'a str, message: &'a str) -> Self {
+        Log {
+            timestamp: Time::from_ns(log_time_ns),
+            level: level as u8,
+            message,
+            name,
+            file: "",
+            line: 0,
+        }
+    }
+}
+
+#[derive(Serialize, Clone, Copy)]
+struct Vector3 {
+    x: f64,
+    y: f64,
+    z: f64,
+}
+
+#[derive(Serialize, Clone, Copy)]
+struct Quaternion {
+    x: f64,
+    y: f64,
+    z: f64,
+    w: f64,
+}
+
+#[derive(Serialize, Clone, Copy)]
+struct Pose {
+    position: Vector3,
+    orientation: Quaternion,
+}
+
+const IDENTITY: Pose = Pose {
+    position: Vector3 {
+        x: 0.0,
+        y: 0.0,
+        z: 0.0,
+    },
+    orientation: Quaternion {
+        x: 0.0,
+        y: 0.0,
+        z: 0.0,
+        w: 1.0,
+    },
+};
+
+/// `foxglove.Color`, each channel 0 to 1.
+#[derive(Serialize, Clone, Copy)]
+struct Color {
+    r: f64,
+    g: f64,
+    b: f64,
+    a: f64,
+}
+
+impl Color {
+    fn rgb([r, g, b]: [u8; 3]) -> Color {
+        // Four decimals: the 256 levels of a channel stay apart, and the
+        // same colour is the same text in every message.
+        let channel = |c: u8| (f64::from(c) / 255.0 * 1e4).round() / 1e4;
+        Color {
+            r: channel(r),
+            g: channel(g),
+            b: channel(b),
+            a: 1.0,
+        }
+    }
+}
+
+#[derive(Serialize)]
+struct KeyValuePair {
+    key: &'static str,
+    value: String,
+}
+
+/// `foxglove.LinePrimitive`.
+#[derive(Serialize)]
+struct LinePrimitive<'a> {
+    #[serde(rename = "type")]
+    kind: u8,
+    pose: Pose,
+    thickness: f64,
+    scale_invariant: bool,
+    points: &'a RawValue,
+    color: Color,
+    colors: Box<RawValue>,
+    indices: [u32; 0],
+}
+
+/// `foxglove.TextPrimitive`.
+#[derive(Serialize)]
+struct TextPrimitive {
+    pose: Pose,
+    billboard: bool,
+    font_size: f64,
+    scale_invariant: bool,
+    color: Color,
+    text: String,
+}
+
+/// `foxglove.SceneEntity`.
+#[derive(Serialize)]
+struct SceneEntity<'a> {
+    timestamp: Time,
+    frame_id: &'static str,
+    id: String,
+    lifetime: Time,
+    frame_locked: bool,
+    metadata: Vec<KeyValuePair>,
+    arrows: [u8; 0],
+    cubes: [u8; 0],
+    spheres: [u8; 0],
+    cylinders: [u8; 0],
+    lines: Vec<LinePrimitive<'a>>,
+    triangles: [u8; 0],
+    texts: Vec<TextPrimitive>,
+    models: [u8; 0],
+}
+
+/// `foxglove.SceneUpdate`.
+#[derive(Serialize)]
+pub(crate) struct SceneUpdate<'a> {
+    deletions: [u8; 0],
+    entities: Vec<SceneEntity<'a>>,
+}
+
+/// Metres rounded to the millimetre (the plan is drawn, not surveyed).
+fn mm(x: f64) -> f64 {
+    (x * 1e3).round() / 1e3
+}
+
+/// What the scene needs of the section, computed once at `begin`.
+pub(crate) struct TrackScene {
+    /// Per track, the plan position of each grid point, as JSON: the same
+    /// text in every update, serialized once.
+    points: Vec<Box<RawValue>>,
+    /// Per mu class, its colour as JSON.
+    palette: Vec<String>,
+    /// Reused text of an update's colours.
+    colors: std::cell::RefCell<String>,
+    /// Per track, "track/<rail>/<band>".
+    ids: Vec<String>,
+    /// Per track, the mu class of each grid point at the last snapshot.
+    classes: Vec<Vec<u16>>,
+    /// Per track, the train and wheel pass of the last snapshot.
+    last: Vec<Option<(String, u64)>>,
+    /// Labels at the sites and applicators, and the colour key.
+    labels: Vec<(Vector3, String)>,
+    thickness_m: f64,
+    font_size_m: f64,
+}
+
+/// A site or applicator to label: `(position_m, text)`.
+pub(crate) type Label = (f64, String);
+
+impl TrackScene {
+    pub(crate) fn new(
+        plan: &Plan,
+        grid_d_m: &[f64],
+        tracks: &[(String, String)],
+        labels: &[Label],
+    ) -> TrackScene {
+        let points = plan
+            .track_offsets_m
+            .iter()
+            .map(|&offset| {
+                let points: Vec<Vector3> = grid_d_m
+                    .iter()
+                    .map(|&d| {
+                        let [x, y] = plan.xy(d, offset);
+                        Vector3 {
+                            x: mm(x),
+                            y: mm(y),
+                            z: 0.0,
+                        }
+                    })
+                    .collect();
+                raw(&points)
+            })
+            .collect();
+        let palette = (0..=MU_CLASSES)
+            .map(|class| {
+                serde_json::to_string(&Color::rgb(mu_class_color(class)))
+                    .unwrap_or_else(|_| "{}".to_owned())
+            })
+            .collect();
+        let ids = tracks
+            .iter()
+            .map(|(rail, band)| format!("track/{rail}/{band}"))
+            .collect();
+        // Labels outside the leftmost rail, the colour key before d = 0.
+        let outside = plan.rail_offsets_m.iter().copied().fold(0.0, f64::max) + plan.gauge_m;
+        let mut placed: Vec<(Vector3, String)> = labels
+            .iter()
+            .map(|(d, text)| {
+                let [x, y] = plan.xy(*d, outside);
+                (
+                    Vector3 {
+                        x: mm(x),
+                        y: mm(y),
+                        z: 0.0,
+                    },
+                    text.clone(),
+                )
+            })
+            .collect();
+        let [x, y] = plan.xy(0.0, -outside);
+        placed.push((
+            Vector3 {
+                x: mm(x - 2.0 * plan.gauge_m),
+                y: mm(y),
+                z: 0.0,
+            },
+            "mu: blue < 0.30 too much product | green 0.30-0.40 target band | yellow-red > 0.40 dry"
+                .to_owned(),
+        ));
+        TrackScene {
+            points,
+            palette,
+            colors: std::cell::RefCell::new(String::new()),
+            ids,
+            classes: vec![Vec::new(); tracks.len()],
+            last: vec![None; tracks.len()],
+            labels: placed,
+            thickness_m: plan.gauge_m / 6.0,
+            font_size_m: plan.gauge_m / 2.0,
+        }
+    }
+
+    /// Records a track's snapshot.
+    pub(crate) fn set(&mut self, track: usize, mu: &[f64], train_id: &str, wheel_pass: u64) {
+        if let Some(classes) = self.classes.get_mut(track) {
+            classes.clear();
+            classes.extend(mu.iter().map(|&m| mu_class(m)));
+            self.last[track] = Some((train_id.to_owned(), wheel_pass));
+        }
+    }
+
+    /// The scene as it stands: every track that has had a snapshot, and the
+    /// labels.
+    pub(crate) fn update(&self, log_time_ns: u64) -> SceneUpdate<'_> {
+        let mut entities = Vec::with_capacity(self.ids.len() + 1);
+        for (track, id) in self.ids.iter().enumerate() {
+            let Some((train_id, wheel_pass)) = &self.last[track] else {
+                continue;
+            };
+            entities.push(SceneEntity {
+                metadata: vec![
+                    KeyValuePair {
+                        key: "train_id",
+                        value: train_id.clone(),
+                    },
+                    KeyValuePair {
+                        key: "wheel_pass",
+                        value: wheel_pass.to_string(),
+                    },
+                ],
+                lines: vec![LinePrimitive {
+                    kind: 0,
+                    pose: IDENTITY,
+                    thickness: self.thickness_m,
+                    scale_invariant: false,
+                    points: &self.points[track],
+                    color: Color::rgb([128, 128, 128]),
+                    colors: self.colors_json(&self.classes[track]),
+                    indices: [],
+                }],
+                texts: Vec::new(),
+                ..entity(log_time_ns, id.clone())
+            });
+        }
+        entities.push(SceneEntity {
+            texts: self
+                .labels
+                .iter()
+                .map(|(at, text)| TextPrimitive {
+                    pose: Pose {
+                        position: *at,
+                        orientation: IDENTITY.orientation,
+                    },
+                    billboard: true,
+                    font_size: self.font_size_m,
+                    scale_invariant: false,
+                    color: Color::rgb([30, 30, 30]),
+                    text: text.clone(),
+                })
+                .collect(),
+            ..entity(log_time_ns, "labels".to_owned())
+        });
+        SceneUpdate {
+            deletions: [],
+            entities,
+        }
+    }
+}
+
+impl TrackScene {
+    /// The colours of `classes` as a JSON array, from the palette's texts.
+    fn colors_json(&self, classes: &[u16]) -> Box<RawValue> {
+        let mut text = self.colors.borrow_mut();
+        text.clear();
+        text.push('[');
+        for (i, &class) in classes.iter().enumerate() {
+            if i > 0 {
+                text.push(',');
+            }
+            text.push_str(&self.palette[usize::from(class.min(MU_CLASSES))]);
+        }
+        text.push(']');
+        RawValue::from_string(text.clone()).unwrap_or_else(|_| empty_array())
+    }
+}
+
+/// `value` as JSON text, once.
+fn raw<T: Serialize>(value: &T) -> Box<RawValue> {
+    serde_json::value::to_raw_value(value).unwrap_or_else(|_| empty_array())
+}
+
+fn empty_array() -> Box<RawValue> {
+    RawValue::from_string("[]".to_owned()).unwrap_or_default()
+}
+
+/// An empty entity in the section frame that stays until replaced.
+fn entity<'a>(log_time_ns: u64, id: String) -> SceneEntity<'a> {
+    SceneEntity {
+        timestamp: Time::from_ns(log_time_ns),
+        frame_id: FRAME_ID,
+        id,
+        lifetime: Time { sec: 0, nsec: 0 },
+        frame_locked: false,
+        metadata: Vec::new(),
+        arrows: [],
+        cubes: [],
+        spheres: [],
+        cylinders: [],
+        lines: Vec::new(),
+        triangles: [],
+        texts: Vec::new(),
+        models: [],
+    }
+}
+
+/// "high rail after train P-00012: mu below the target band (< 0.30) over
+/// 10-95 m, lowest 0.21 at 12 m", or `None` when no point is below `low`.
+pub(crate) fn below_band_warning(
+    rail_label: &str,
+    train_id: &str,
+    d_m: &[f64],
+    mu: &[f64],
+    low: f64,
+) -> Option<String> {
+    let below: Vec<usize> = (0..mu.len().min(d_m.len()))
+        .filter(|&i| mu[i] < low)
+        .collect();
+    let (&first, &last) = (below.first()?, below.last()?);
+    let lowest = below
+        .iter()
+        .copied()
+        .min_by(|&a, &b| mu[a].total_cmp(&mu[b]))
+        .unwrap_or(first);
+    let length_m = below.len() as f64
+        * match d_m {
+            [a, b, ..] => b - a,
+            _ => 0.0,
+        };
+    Some(format!(
+        "{rail_label} after train {train_id}: mu below the target band (< {low:.2}) on {length_m:.0} m between {:.0} and {:.0} m, lowest {:.3} at {:.0} m",
+        d_m[first], d_m[last], mu[lowest], d_m[lowest]
+    ))
+}

@@ -1,0 +1,151 @@
+//! The MCAP output in Foxglove: every message on a `foxglove.*` channel
+//! validates against Foxglove's own JSON Schemas (the `@foxglove/schemas`
+//! npm package that .ci/run installs into tests/js, read through node by
+//! tests/python/check_foxglove.py), and the layout shipped in
+//! docs/foxglove names only topics, sites and rails the file has and is the
+//! one scripts/foxglove_layout.py makes from the demo day today.
+
+mod common;
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use common::{demo_day, python, tortwin};
+
+fn shipped_layout() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("docs/foxglove/tortwin-layout.json")
+}
+
+fn check(mcap: &Path, layout: Option<&Path>) -> std::process::Output {
+    let mut args = vec![mcap.as_os_str().to_owned()];
+    if let Some(layout) = layout {
+        args.push("--layout".into());
+        args.push(layout.as_os_str().to_owned());
+    }
+    let output = python("check_foxglove.py", &args);
+    assert_ne!(
+        output.status.code(),
+        Some(3),
+        "check_foxglove.py lacks a tool: pip install -r tests/python/requirements.txt and \
+         npm ci --prefix tests/js\n{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    output
+}
+
+fn replay_demo(dir: &Path) -> PathBuf {
+    let mcap = dir.join("demo.mcap");
+    let out = tortwin()
+        .arg("replay")
+        .arg(demo_day())
+        .arg("--out-mcap")
+        .arg(&mcap)
+        .arg("--quiet")
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    mcap
+}
+
+#[test]
+fn foxglove_topics_validate_against_foxglove_schemas_and_the_layout_fits() {
+    let dir = tempfile::tempdir().unwrap();
+    let mcap = replay_demo(dir.path());
+
+    let output = check(&mcap, Some(&shipped_layout()));
+    let stdout = String::from_utf8_lossy(&output.stdout);
+    assert!(
+        output.status.success(),
+        "{stdout}{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    // One scene per train (40 on the demo day), a log line per train and more.
+    assert!(
+        stdout.contains("/foxglove/track\tfoxglove.SceneUpdate\t40 messages valid"),
+        "{stdout}"
+    );
+    assert!(stdout.contains("/foxglove/log\tfoxglove.Log"), "{stdout}");
+    assert!(stdout.contains("layout: 3 topics"), "{stdout}");
+
+    // The shipped layout is what the script makes of this output today.
+    let fresh = dir.path().join("layout.json");
+    let script = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("scripts/foxglove_layout.py");
+    let python = std::env::var("TORTWIN_PYTHON").unwrap_or_else(|_| "python3".to_owned());
+    let out = std::process::Command::new(python)
+        .arg(script)
+        .arg(&mcap)
+        .arg(&fresh)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert_eq!(
+        std::fs::read_to_string(&fresh).unwrap(),
+        std::fs::read_to_string(shipped_layout()).unwrap(),
+        "docs/foxglove/tortwin-layout.json is stale: rerun scripts/foxglove_layout.py on \
+         the demo day's output"
+    );
+}
+
+#[test]
+fn the_checker_rejects_a_broken_foxglove_message_and_a_layout_naming_a_missing_topic() {
+    let dir = tempfile::tempdir().unwrap();
+    let bad = dir.path().join("bad.mcap");
+    {
+        let schema = std::fs::read(
+            PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+                .join("crates/outputs/schemas/foxglove/Log.json"),
+        )
+        .unwrap();
+        let file = std::io::BufWriter::new(std::fs::File::create(&bad).unwrap());
+        let mut writer = mcap::Writer::new(file).unwrap();
+        let schema_id = writer
+            .add_schema("foxglove.Log", "jsonschema", &schema)
+            .unwrap();
+        let channel = writer
+            .add_channel(schema_id, "/foxglove/log", "json", &BTreeMap::new())
+            .unwrap();
+        // Level 9 does not exist, and `file` and `line` are missing.
+        let data =
+            br#"{"timestamp": {"sec": 1, "nsec": 0}, "level": 9, "message": "x", "name": "y"}"#;
+        writer
+            .write_to_known_channel(
+                &mcap::records::MessageHeader {
+                    channel_id: channel,
+                    sequence: 0,
+                    log_time: 1,
+                    publish_time: 1,
+                },
+                data,
+            )
+            .unwrap();
+        writer.finish().unwrap();
+    }
+    let output = check(&bad, None);
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(output.status.code(), Some(1), "{stderr}");
+    assert!(stderr.contains("/foxglove/log message 0"), "{stderr}");
+    assert!(stderr.contains("'file' is a required property"), "{stderr}");
+
+    // A layout that names a topic the output does not have.
+    let mcap = replay_demo(dir.path());
+    let layout = std::fs::read_to_string(shipped_layout())
+        .unwrap()
+        .replace("/foxglove/log", "/foxglove/logs");
+    let wrong = dir.path().join("wrong.json");
+    std::fs::write(&wrong, layout).unwrap();
+    let output = check(&mcap, Some(&wrong));
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(output.status.code(), Some(1), "{stderr}");
+    assert!(
+        stderr.contains("/foxglove/logs, which the file does not have"),
+        "{stderr}"
+    );
+}
