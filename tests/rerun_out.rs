@@ -89,13 +89,14 @@ fn field(track: usize, wheel_pass: u64) -> Field {
     }
 }
 
-/// What a run logged on the `time` series: per entity, `(log_time_ns, value)`.
-type Logged = BTreeMap<String, Vec<(u64, f64)>>;
+/// What a run logged on the `time` series: per entity, `(log_time_ns, values)`.
+type Logged = BTreeMap<String, Vec<(u64, Vec<f64>)>>;
 
 /// A synthetic run: `trains` trains of eight axles over three tracks, a
 /// pulse before each, a measurement after each, and wheel snapshots for the
 /// second train. Returns the pulses and measurements as the rrd must hold
-/// them (pulses in g).
+/// them: a train's pulses summed per applicator and rail (g) at its first
+/// snapshot, a measurement as [measured, simulated].
 fn feed(sink: &mut dyn Sink, trains: u64) -> Result<Logged, tortwin_engine::sink::SinkError> {
     let mut logged = Logged::new();
     let section = section();
@@ -123,10 +124,16 @@ fn feed(sink: &mut dyn Sink, trains: u64) -> Result<Logged, tortwin_engine::sink
                 mass_kg: 0.0019 + 0.0001 * train as f64,
             };
             sink.pulse(&pulse)?;
+            // The first snapshot of the train: its first wheel's on the
+            // second train, else the train's.
+            let first_snapshot_s = if train == 2 { 1 } else { AXLES };
             logged
                 .entry(format!("/applicator/A1/{}", pulse.rail_name))
                 .or_default()
-                .push((pulse.log_time_ns, pulse.mass_kg * 1e3));
+                .push((
+                    start_ns + first_snapshot_s * 1_000_000_000,
+                    vec![pulse.mass_kg * 1e3],
+                ));
         }
         sink.train(&TrainEvent {
             log_time_ns: start_ns,
@@ -186,13 +193,10 @@ fn feed(sink: &mut dyn Sink, trains: u64) -> Result<Logged, tortwin_engine::sink
                 simulated: 0.24 + 0.012 * train as f64,
             };
             sink.measurement(&m)?;
-            let base = format!("/sites/S1/{}/{}", m.rail_name, m.quantity.as_str());
-            for (leaf, value) in [("measured", m.measured), ("simulated", m.simulated)] {
-                logged
-                    .entry(format!("{base}/{leaf}"))
-                    .or_default()
-                    .push((m.log_time_ns, value));
-            }
+            logged
+                .entry(format!("/sites/S1/{}/{}", m.rail_name, m.quantity.as_str()))
+                .or_default()
+                .push((m.log_time_ns, vec![m.measured, m.simulated]));
         }
     }
     Ok(logged)
@@ -207,8 +211,24 @@ fn series_json(logged: &Logged) -> serde_json::Value {
         .into()
 }
 
-/// Runs the checker on `rrd` with `expected`; panics with its output on failure.
+/// What every expectation carries: the grid and the section's plan.
+fn with_section(mut expected: serde_json::Value) -> serde_json::Value {
+    let section = section();
+    expected["d_m"] = json!((0..GRID_POINTS)
+        .map(|i| i as f64 * SPACING_M)
+        .collect::<Vec<_>>());
+    expected["section"] = json!({
+        "length_m": section.length_m,
+        "curve_radius_m": section.curve_radius_m,
+        "rails": section.rails,
+    });
+    expected
+}
+
+/// Runs the checker on `rrd` with `expected` (and the section); panics with
+/// its output on failure.
 fn check_rrd(rrd: &Path, expected: serde_json::Value, dir: &Path, name: &str) {
+    let expected = with_section(expected);
     let expected_path = dir.join(format!("{name}.json"));
     std::fs::write(&expected_path, expected.to_string()).expect("writing expected values");
     let output = common::python("check_rrd.py", &[rrd, &expected_path]);
@@ -261,8 +281,8 @@ fn rerun_reads_back_the_fields_the_sink_was_given() {
         std::fs::copy(&rrd, &keep).expect("copying the recording to $TORTWIN_KEEP_RRD");
     }
 
-    let grid_d_m: Vec<f64> = (0..GRID_POINTS).map(|i| i as f64 * SPACING_M).collect();
-    // high/top (track 1) after the last train: the heatmap holds K = 2 of 3 trains.
+    // high/top (track 1) after the last train: blocks of B = 2 trains, the
+    // third train the first row of the second block.
     check_rrd(
         &rrd,
         json!({
@@ -270,16 +290,15 @@ fn rerun_reads_back_the_fields_the_sink_was_given() {
             "band": "top",
             "wheel_pass": TRAINS * AXLES,
             "mu": field(1, TRAINS * AXLES).mu,
-            "d_m": grid_d_m,
             "check_history": true,
-            "history_rows": 2,
+            "history_logged_at": [AXLES, 2 * AXLES, 3 * AXLES],
             "blueprint": true,
         }),
         dir.path(),
         "last_train_high_top",
     );
-    // high/gauge_corner (track 0) after the first train: a one-row heatmap
-    // (the viewer stretches it), and the band's name in its views.
+    // high/gauge_corner (track 0) after the first train: a one-row block,
+    // and the band drawn beside its rail.
     check_rrd(
         &rrd,
         json!({
@@ -288,7 +307,6 @@ fn rerun_reads_back_the_fields_the_sink_was_given() {
             "wheel_pass": AXLES,
             "mu": field(0, AXLES).mu,
             "check_history": true,
-            "history_rows": 1,
             "blueprint": true,
         }),
         dir.path(),
@@ -311,10 +329,11 @@ fn rerun_reads_back_the_fields_the_sink_was_given() {
 }
 
 #[test]
-fn the_heatmap_is_logged_every_n_trains_and_after_the_last() {
+fn the_history_is_logged_every_n_trains_and_when_a_block_is_full() {
     let dir = tempfile::tempdir().expect("creating a temporary directory");
-    // E = 2 over three trains: after the second, and the third's at finish
-    // (where its snapshot was). E = 3: after the third only, not twice.
+    // Blocks of B = 3 trains. E = 2 over three trains: after the second,
+    // and after the third, which fills the block. E = 3: after the third
+    // only, not twice.
     for (every, logged_at) in [(2, vec![2 * AXLES, 3 * AXLES]), (3, vec![3 * AXLES])] {
         let rrd = dir.path().join(format!("every_{every}.rrd"));
         let mut sink = RerunSink::create(
@@ -339,7 +358,6 @@ fn the_heatmap_is_logged_every_n_trains_and_after_the_last() {
                     "wheel_pass": TRAINS * AXLES,
                     "mu": field(track, TRAINS * AXLES).mu,
                     "check_history": true,
-                    "history_rows": 3,
                     "history_logged_at": logged_at,
                     "blueprint": true,
                 }),
@@ -352,30 +370,36 @@ fn the_heatmap_is_logged_every_n_trains_and_after_the_last() {
 
 #[test]
 fn a_long_run_comes_back_whole() {
-    // Longer than a chunk of every kind: the profiles (a few hundred
-    // snapshots a chunk), the pulse series (SERIES_CHUNK_ROWS values) and
-    // the default heatmap cadence and depth.
+    // Longer than a chunk of every kind: the snapshots (a few hundred a
+    // chunk), a measurement series (SERIES_CHUNK_ROWS rows a chunk) and the
+    // default history blocks and cadence.
     const LONG: u64 = 600;
     let dir = tempfile::tempdir().expect("creating a temporary directory");
     let rrd = dir.path().join("long.rrd");
     let options = RerunOptions::default();
-    let (every, rows) = (options.history_every as u64, options.history_rows as u64);
+    let every = options.history_every as u64;
     let mut sink = RerunSink::create(&rrd, options).expect("creating the rerun sink");
     let mut logged = feed(&mut sink, LONG).expect("feeding the sink");
     let first_ns = ORIGIN_NS + (LONG + 1) * TRAIN_INTERVAL_NS;
     for i in 0..2 * SERIES_CHUNK_ROWS as u64 + 7 {
-        let pulse = PulseEvent {
+        let m = MeasurementOutput {
             log_time_ns: first_ns + i * 1_000_000_000,
-            applicator_id: "A1",
-            rail: 0,
+            index_in_file: 10_000 + i,
+            site_id: "S1",
+            site: 0,
             rail_name: "high",
-            mass_kg: 1e-3 + 1e-7 * i as f64,
+            rail: 0,
+            quantity: Quantity::Mu,
+            train_id: Some("T1"),
+            axle_index: Some(0),
+            measured: 0.3 + 1e-6 * i as f64,
+            simulated: 0.31 - 1e-6 * i as f64,
         };
-        sink.pulse(&pulse).expect("a pulse");
+        sink.measurement(&m).expect("a measurement");
         logged
-            .entry("/applicator/A1/high".to_owned())
+            .entry("/sites/S1/high/mu".to_owned())
             .or_default()
-            .push((pulse.log_time_ns, pulse.mass_kg * 1e3));
+            .push((m.log_time_ns, vec![m.measured, m.simulated]));
     }
     sink.finish(&RunSummary::default())
         .expect("finishing the sink");
@@ -394,7 +418,6 @@ fn a_long_run_comes_back_whole() {
         });
         if wheel_pass == LONG * AXLES {
             expected["check_history"] = json!(true);
-            expected["history_rows"] = json!(rows.min(LONG));
             expected["history_logged_at"] = json!(logged_at);
             expected["series"] = series_json(&logged);
         }

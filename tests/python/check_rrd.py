@@ -10,14 +10,20 @@ the crate's rerun dependency).
    package ships) must pass.
 2. The file must hold exactly one recording, with an rrd footer (proof that
    the writer closed it), and the timelines `wheel_pass` and `time`.
-3. The `mu` profile of one track, `/field/<rail>/<band>/mu` (a BarChart), at
-   one snapshot must equal the expected values at the precision it is stored
-   in: F64 exactly, F32 as the expected values rounded to f32 (any other
-   buffer type fails).
-4. Every track's mu profile has a static colour of its own; pulses and site
-   measurements (`/applicator/**`, `/sites/**`) are on the `time` timeline
-   only (on `wheel_pass` a train's measurements would stack).
-5. With "blueprint": the layout the viewer opens (see `blueprint_checks`).
+3. The curve: the track's points (`/curve/mu/tracks/<rail>/<band>`, static
+   positions) lie where docs/spec/interfaces.md "The section on a plan"
+   puts them, computed here independently: on the arc of radius R + o about
+   (0, -R), at arc length d along the centre line (or at (d, o) on tangent
+   track), within 1 mm; at the snapshot their class ids are the documented
+   mu classes of the expected mu, and the annotation context at `/curve/mu`
+   gives every class the documented colour (the stops of "Colour scales",
+   interpolated here).
+4. The mu profile (`/profiles/mu/<rail>/<band>/mu`) at the snapshot is one
+   line through grid points (x = d, y = -mu * length) that stays within
+   5e-4 of mu at every grid point.
+5. Pulses and site measurements (`/applicator/**`, `/sites/**`) are on the
+   `time` timeline only (on `wheel_pass` a train's measurements would stack).
+6. With "blueprint": the layout the viewer opens (see `blueprint_checks`).
 
 EXPECTED.json:
 
@@ -25,17 +31,20 @@ EXPECTED.json:
       "rail": "high", "band": "top",       # plain names (no escaping needed)
       "wheel_pass": 16,                    # the snapshot, on the wheel_pass timeline
       "mu": [0.31, 0.30, ...],             # the expected values, one per grid point
-      "tolerance": 0.0,                    # optional, absolute; default exact
-      "d_m": [0.0, 1.0, ...],              # optional: the expected abscissa
-      "check_history": true,               # optional: the newest row of
-                                           #   mu_history at that snapshot is mu (f16)
-      "history_rows": 2,                   # optional: rows mu_history holds then
+      "mu_rounded": 1e-4,                  # optional: mu was rounded to this (a
+                                           #   class may then differ at an edge)
+      "d_m": [0.0, 1.0, ...],              # the grid
+      "section": {"length_m": 100.0, "curve_radius_m": 300.0,   # null on tangent track
+                  "rails": ["high", "low"]},
+      "check_history": true,               # optional: a block of the track's
+                                           #   history was logged at the snapshot
+                                           #   and its newest row is mu's classes
       "history_logged_at": [16, 24],       # optional: exactly the wheel_pass values
-                                           #   at which mu_history was logged
+                                           #   at which the track's history was logged
       "blueprint": true,                   # optional: require a blueprint store
                                            #   laid out as `blueprint_checks` says
       "series": {                          # optional: per Scalars entity, every
-        "/applicator/A1/high": [[t, v], ...]   # (time in ns, value) it holds on
+        "/applicator/A1/high": [[t, [v]], ...]   # (time in ns, values) it holds on
       }                                    #   `time`, exactly, none missing or extra
     }
 
@@ -77,14 +86,6 @@ def verify_with_cli(rrd: Path) -> None:
         )
 
 
-def tensor_values(cell: object, what: str) -> tuple[list[int], list[float]]:
-    """A TensorData cell as read from arrow: [{"shape": [...], "buffer": [...]}]."""
-    if not isinstance(cell, list) or len(cell) != 1 or not isinstance(cell[0], dict):
-        raise CheckFailed(f"{what}: expected one tensor, got {cell!r:.200}")
-    tensor = cell[0]
-    return [int(n) for n in tensor["shape"]], [float(v) for v in tensor["buffer"]]
-
-
 def logged_at(table, column: str, timeline: str) -> list[int]:
     """The times at which `column` has a non-null cell, ascending, without repeats."""
     if column not in table.column_names:
@@ -94,13 +95,13 @@ def logged_at(table, column: str, timeline: str) -> list[int]:
     return sorted({t for t, cell in zip(times, cells) if cell is not None})
 
 
-def last_index_at(table, column: str, timeline: str, time: int) -> int:
-    """The row of the last non-null cell of `column` logged exactly at `time`."""
+def last_cell_at(table, column: str, timeline: str, time: int) -> object:
+    """The last non-null cell of `column` logged exactly at `time` (latest-at wins)."""
     if column not in table.column_names:
         raise CheckFailed(f"no column {column}; columns: {table.column_names}")
     times = table.column(timeline).to_pylist()
     cells = table.column(column).to_pylist()
-    found = [i for i, (t, cell) in enumerate(zip(times, cells)) if t == time and cell is not None]
+    found = [cell for t, cell in zip(times, cells) if t == time and cell is not None]
     if not found:
         logged = logged_at(table, column, timeline)
         raise CheckFailed(
@@ -109,31 +110,199 @@ def last_index_at(table, column: str, timeline: str, time: int) -> int:
     return found[-1]
 
 
-def last_cell_at(table, column: str, timeline: str, time: int) -> object:
-    """The last non-null cell of `column` logged exactly at `time` (latest-at wins)."""
-    return table.column(column)[last_index_at(table, column, timeline, time)].as_py()
-
-
-def buffer_type(table, column: str, index: int) -> str:
-    """The TensorBuffer variant ("F32", "F64", ...) of a one-tensor cell."""
-    tensor = table.column(column)[index].values
-    union = tensor.field("buffer")
-    code = union.type_codes[0].as_py()
-    return union.type[list(union.type.type_codes).index(code)].name
+def static_cell(store, entity: str, column: str) -> object:
+    table = store.reader(index=None, contents=entity).to_arrow_table()
+    if column not in table.column_names or table.num_rows != 1:
+        raise CheckFailed(f"{entity}: no static {column} ({table.column_names})")
+    return table.column(column)[0].as_py()
 
 
 def to_f32(value: float) -> float:
     return struct.unpack("f", struct.pack("f", value))[0]
 
 
-def compare(what: str, actual: list[float], expected: list[float], tolerance: float) -> None:
-    if len(actual) != len(expected):
-        raise CheckFailed(f"{what}: {len(actual)} values, expected {len(expected)}")
-    for i, (a, e) in enumerate(zip(actual, expected)):
-        if not (math.isfinite(a) and abs(a - e) <= tolerance):
+# The documented mu scale (docs/spec/interfaces.md, "Colour scales"),
+# written again here from the text: classes 0.01 wide from 0 to 0.80, each
+# coloured by the piecewise-linear scale at its middle.
+MU_CLASSES = 80
+MU_STOPS = [
+    (0.00, (25, 30, 100)),
+    (0.15, (49, 84, 170)),
+    (0.30, (150, 200, 235)),
+    (0.30, (0, 140, 70)),
+    (0.40, (170, 220, 120)),
+    (0.40, (255, 230, 110)),
+    (0.50, (250, 150, 60)),
+    (0.60, (225, 70, 40)),
+    (0.70, (170, 15, 40)),
+    (0.80, (100, 0, 30)),
+]
+
+
+def mu_class(mu: float) -> int:
+    k = math.floor(mu / 0.01)
+    return 1 if k < 0 else min(k + 1, MU_CLASSES)
+
+
+def mu_colour(mu: float) -> tuple[int, int, int]:
+    if mu <= MU_STOPS[0][0]:
+        return MU_STOPS[0][1]
+    below = max(i for i, (at, _) in enumerate(MU_STOPS) if at <= mu)
+    if below + 1 >= len(MU_STOPS):
+        return MU_STOPS[-1][1]
+    (a, ca), (b, cb) = MU_STOPS[below], MU_STOPS[below + 1]
+    t = (mu - a) / (b - a)
+    # Round half away from zero, as Rust's f64::round.
+    return tuple(int(math.floor(x + (y - x) * t + 0.5)) for x, y in zip(ca, cb))
+
+
+def class_colour(k: int) -> tuple[int, int, int]:
+    return mu_colour((2 * k - 1) / 200)
+
+
+def plan_offsets(section: dict) -> dict[str, float]:
+    """Lateral offset of each rail: the drawn gauge max(L/40, 2 m), the
+    rails evenly across it from the left (outside), `high` first and `low`
+    last on a curve."""
+    gauge = max(section["length_m"] / 40.0, 2.0)
+    rails = list(section["rails"])
+    if section.get("curve_radius_m") is not None:
+        rank = {"high": 0, "low": 2}
+        rails.sort(key=lambda r: rank.get(r, 1))
+    span = max(len(rails) - 1, 0)
+    return {
+        rail: (span / 2 - place) * gauge / max(span, 1) for place, rail in enumerate(rails)
+    }, gauge
+
+
+def curve_checks(store, expected: dict) -> list[str]:
+    rail, band = expected["rail"], expected["band"]
+    section = expected["section"]
+    d_m = [float(d) for d in expected["d_m"]]
+    offsets, gauge = plan_offsets(section)
+    offset = offsets[rail]
+    if band != "top":
+        offset -= math.copysign(1.0, offset) * gauge / 5
+    radius = section.get("curve_radius_m")
+    entity = f"/curve/mu/tracks/{rail}/{band}"
+    positions = static_cell(store, entity, f"{entity}:Points2D:positions")
+    if len(positions) != len(d_m):
+        raise CheckFailed(f"{entity}: {len(positions)} points for {len(d_m)} grid points")
+    worst = 0.0
+    for (x, y), d in zip(positions, d_m):
+        if radius is None:
+            err = math.hypot(x - d, y - offset)
+        else:
+            r = math.hypot(x, y + radius)
+            arc = math.atan2(x, y + radius) * radius
+            err = max(abs(r - (radius + offset)), abs(arc - d))
+        worst = max(worst, err)
+    if worst > 1e-3:
+        raise CheckFailed(f"{entity}: a point is {worst:.4f} m off the documented plan")
+    done = [
+        f"{entity}: {len(d_m)} points on the "
+        + (f"arc of radius {radius} + {offset:.2f} m" if radius else f"line at {offset:.2f} m")
+        + f", worst {worst * 1e3:.3f} mm"
+    ]
+
+    # The scale: every class's colour in the annotation context.
+    context = static_cell(store, "/curve/mu", "/curve/mu:AnnotationContext:context")[0]
+    colours = {}
+    for entry in context:
+        info = entry["class_description"]["info"]
+        rgba = info["color"]
+        colours[int(info["id"])] = ((rgba >> 24) & 255, (rgba >> 16) & 255, (rgba >> 8) & 255)
+    for k in range(1, MU_CLASSES + 1):
+        if colours.get(k) != class_colour(k):
+            raise CheckFailed(f"/curve/mu: class {k} coloured {colours.get(k)}, documented {class_colour(k)}")
+    done.append(f"/curve/mu: {MU_CLASSES} classes coloured as documented")
+
+    # The snapshot's classes.
+    mu = [float(v) for v in expected["mu"]]
+    rounded = float(expected.get("mu_rounded", 0.0))
+    table = store.reader(index="wheel_pass", contents=entity).to_arrow_table()
+    ids = last_cell_at(table, f"{entity}:Points2D:class_ids", "wheel_pass", int(expected["wheel_pass"]))
+    if len(ids) != len(mu):
+        raise CheckFailed(f"{entity}: {len(ids)} class ids for {len(mu)} values")
+    for i, (got, m) in enumerate(zip(ids, mu)):
+        edge = abs(m * 100 - round(m * 100)) * 0.01 <= rounded
+        if got != mu_class(m) and not (edge and abs(got - mu_class(m)) == 1):
             raise CheckFailed(
-                f"{what}[{i}] = {a!r}, expected {e!r} (tolerance {tolerance})"
+                f"{entity}[{i}]: class {got} (colour {colours.get(got)}), mu {m} is class {mu_class(m)}"
             )
+    done.append(f"{entity} at wheel_pass {expected['wheel_pass']}: {len(mu)} points coloured by mu")
+
+    # The profile line.
+    entity = f"/profiles/mu/{rail}/{band}/mu"
+    table = store.reader(index="wheel_pass", contents=entity).to_arrow_table()
+    strips = last_cell_at(table, f"{entity}:LineStrips2D:strips", "wheel_pass", int(expected["wheel_pass"]))
+    if len(strips) != 1:
+        raise CheckFailed(f"{entity}: {len(strips)} strips, expected one line")
+    line = strips[0]
+    length = float(section["length_m"])
+    grid = {to_f32(d): i for i, d in enumerate(d_m)}
+    kept = []
+    for x, y in line:
+        if x not in grid:
+            raise CheckFailed(f"{entity}: point at x = {x} is not a grid point")
+        i = grid[x]
+        if abs(y - to_f32(-mu[i] * length)) > (1e-6 + rounded) * length:
+            raise CheckFailed(f"{entity}: point {i} at y = {y}, mu there is {mu[i]}")
+        kept.append(i)
+    if not kept or kept[0] != 0 or kept[-1] != len(mu) - 1:
+        raise CheckFailed(f"{entity}: the line does not run from the first to the last grid point")
+    tolerance = 5e-4 + rounded + 1e-6
+    for a, b in zip(kept, kept[1:]):
+        for i in range(a, b + 1):
+            t = (d_m[i] - d_m[a]) / (d_m[b] - d_m[a])
+            between = mu[a] + t * (mu[b] - mu[a])
+            if abs(mu[i] - between) > tolerance:
+                raise CheckFailed(f"{entity}: the line is {abs(mu[i] - between):.2e} off mu at grid point {i}")
+    done.append(f"{entity}: a line through {len(kept)} of {len(mu)} points within 5e-4 of mu")
+    return done
+
+
+def history_checks(store, expected: dict) -> list[str]:
+    rail, band = expected["rail"], expected["band"]
+    root = f"/history/{rail}/{band}"
+    schema_text = str(store.schema())
+    blocks = [e for e in entities_in(schema_text) if e.startswith(root + "/block_")]
+    if not blocks:
+        raise CheckFailed(f"no history blocks under {root}")
+    column = "SegmentationImage:buffer"
+    times = set()
+    found = None
+    wheel_pass = int(expected["wheel_pass"])
+    for block in blocks:
+        table = store.reader(index="wheel_pass", contents=block).to_arrow_table()
+        name = f"{block}:{column}"
+        at = logged_at(table, name, "wheel_pass")
+        times.update(at)
+        if wheel_pass in at:
+            found = (block, table)
+    done = []
+    if "history_logged_at" in expected:
+        want = sorted(int(t) for t in expected["history_logged_at"])
+        if sorted(times) != want:
+            raise CheckFailed(f"{root}: logged at wheel_pass {sorted(times)}, expected {want}")
+        done.append(f"{root}: logged at {sorted(times)}")
+    if expected.get("check_history"):
+        if found is None:
+            raise CheckFailed(f"{root}: nothing logged at wheel_pass {wheel_pass}")
+        block, table = found
+        buffer = last_cell_at(table, f"{block}:{column}", "wheel_pass", wheel_pass)
+        flat = bytes(buffer[0]) if isinstance(buffer[0], (list, bytes)) else bytes(buffer)
+        mu = [float(v) for v in expected["mu"]]
+        if len(flat) % len(mu):
+            raise CheckFailed(f"{block}: {len(flat)} bytes are not rows of {len(mu)}")
+        newest = list(flat[-len(mu):])
+        rounded = float(expected.get("mu_rounded", 0.0))
+        for i, (got, m) in enumerate(zip(newest, mu)):
+            edge = abs(m * 100 - round(m * 100)) * 0.01 <= rounded
+            if got != mu_class(m) and not (edge and abs(got - mu_class(m)) == 1):
+                raise CheckFailed(f"{block}: newest row [{i}] = class {got}, mu {m} is {mu_class(m)}")
+        done.append(f"{block} at wheel_pass {wheel_pass}: {len(flat) // len(mu)} rows, newest is mu's classes")
+    return done
 
 
 def check(rrd: Path, expected: dict) -> list[str]:
@@ -155,81 +324,16 @@ def check(rrd: Path, expected: dict) -> list[str]:
         raise CheckFailed(f"{rrd} has no readable rrd footer: {err}") from err
     store = lazy.stream().collect()
 
-    timeline = "wheel_pass"
     schema_text = str(store.schema())
-    for name in (timeline, "time"):
+    for name in ("wheel_pass", "time"):
         if name not in schema_text:
             raise CheckFailed(f"timeline {name!r} missing; schema:\n{schema_text}")
 
-    rail, band = expected["rail"], expected["band"]
-    entity = f"/field/{rail}/{band}/mu"
-    time = int(expected["wheel_pass"])
-    tolerance = float(expected.get("tolerance", 0.0))
-    mu = [float(v) for v in expected["mu"]]
-
-    table = store.reader(index=timeline, contents=entity).to_arrow_table()
-    column = f"{entity}:BarChart:values"
-    index = last_index_at(table, column, timeline, time)
-    shape, values = tensor_values(
-        table.column(column)[index].as_py(), f"{entity} values at {timeline} {time}"
-    )
-    if shape != [len(values)]:
-        raise CheckFailed(f"{entity}: values shape {shape} is not a vector")
-    stored = buffer_type(table, column, index)
-    if stored == "F32":
-        want = [to_f32(v) for v in mu]
-    elif stored == "F64":
-        want = mu
-    else:
-        raise CheckFailed(f"{entity}: values stored as {stored}, expected F32 or F64")
-    compare(f"{entity} at {timeline} {time}", values, want, tolerance)
-    done = [f"{entity} at {timeline} {time}: {len(mu)} values match ({stored})"]
-
-    if "d_m" in expected:
-        # Logged once, statically: read it from the static-only view.
-        static = store.reader(index=None, contents=entity).to_arrow_table()
-        column = f"{entity}:BarChart:abscissa"
-        if column not in static.column_names or static.num_rows != 1:
-            raise CheckFailed(f"{entity}: no static abscissa ({static.column_names})")
-        _, abscissa = tensor_values(static.column(column)[0].as_py(), f"{entity} abscissa")
-        compare(f"{entity} abscissa", abscissa, [float(d) for d in expected["d_m"]], 1e-9)
-        done.append(f"{entity} abscissa is d_m")
-
-    if expected.get("check_history"):
-        history = f"/field/{rail}/{band}/mu_history"
-        table = store.reader(index=timeline, contents=history).to_arrow_table()
-        if "history_logged_at" in expected:
-            want_times = sorted(int(t) for t in expected["history_logged_at"])
-            got = logged_at(table, f"{history}:Tensor:data", timeline)
-            if got != want_times:
-                raise CheckFailed(
-                    f"{history}: logged at {timeline} {got}, expected {want_times}"
-                )
-            done.append(f"{history} logged at {timeline} {got}")
-        shape, flat = tensor_values(
-            last_cell_at(table, f"{history}:Tensor:data", timeline, time),
-            f"{history} at {timeline} {time}",
-        )
-        if len(shape) != 2 or shape[1] != len(mu) or shape[0] * shape[1] != len(flat):
-            raise CheckFailed(f"{history}: shape {shape}, expected [rows, {len(mu)}]")
-        if "history_rows" in expected and shape[0] != int(expected["history_rows"]):
-            raise CheckFailed(
-                f"{history}: {shape[0]} rows, expected {expected['history_rows']}"
-            )
-        newest = flat[-len(mu):]
-        # The heatmap is f16 (11 significant bits): compare at that precision.
-        compare(
-            f"{history} newest row",
-            newest,
-            mu,
-            max(tolerance, 2.0**-11 * max(1.0, max(abs(v) for v in mu))),
-        )
-        done.append(f"{history} at {timeline} {time}: {shape[0]} rows, newest is mu")
-
-    done += colour_checks(store, schema_text)
+    done = curve_checks(store, expected)
+    if expected.get("check_history") or "history_logged_at" in expected:
+        done += history_checks(store, expected)
     done += time_only_checks(store, schema_text)
     done += series_checks(store, expected.get("series", {}))
-
     if expected.get("blueprint"):
         done += blueprint_checks(reader, blueprints, store, expected)
     return done
@@ -247,8 +351,8 @@ def series_checks(store, series: dict) -> list[str]:
             raise CheckFailed(f"{entity}: no scalars; columns: {table.column_names}")
         times = table.column("time").cast(pa.int64()).to_pylist()
         cells = table.column(column).to_pylist()
-        got = sorted((t, cell[0]) for t, cell in zip(times, cells) if cell is not None)
-        want = sorted((int(t), float(v)) for t, v in points)
+        got = sorted((t, [float(v) for v in cell]) for t, cell in zip(times, cells) if cell is not None)
+        want = sorted((int(t), [float(v) for v in values]) for t, values in points)
         if got != want:
             diff = next(
                 (f"#{i}: got {g}, expected {w}" for i, (g, w) in enumerate(zip(got, want)) if g != w),
@@ -269,23 +373,6 @@ def entities_in(schema_text: str) -> list[str]:
             if "Entity path:" in line
         }
     )
-
-
-def colour_checks(store, schema_text: str) -> list[str]:
-    """Every track's mu profile has its own fixed (static) colour."""
-    profiles = [
-        e for e in entities_in(schema_text) if e.startswith("/field/") and e.endswith("/mu")
-    ]
-    colours = {}
-    for entity in profiles:
-        static = store.reader(index=None, contents=entity).to_arrow_table()
-        column = f"{entity}:BarChart:color"
-        if column not in static.column_names or static.num_rows != 1:
-            raise CheckFailed(f"{entity}: no static colour ({static.column_names})")
-        colours[entity] = static.column(column)[0].as_py()[0]
-    if len(set(colours.values())) != len(colours):
-        raise CheckFailed(f"tracks share a colour: {colours}")
-    return [f"{len(colours)} tracks, {len(colours)} distinct colours"]
 
 
 def time_only_checks(store, schema_text: str) -> list[str]:
@@ -313,7 +400,6 @@ KNOWN_VIEW_CLASSES = {
 }
 PANEL_HIDDEN, PANEL_COLLAPSED = 1, 2
 PLAY_FOLLOWING = 3
-VIEW_FIT_FILL = 2
 
 
 def boundary_kinds(range_struct) -> list[tuple[str, str]]:
@@ -330,10 +416,8 @@ def blueprint_checks(reader, blueprints, store, expected: dict) -> list[str]:
     """The default layout: what the viewer opens, reached from the viewport.
 
     - every view has a class the viewer knows;
-    - the track's mu profile has a BarChart view of its own, named after its
-      rail and band, and no BarChart view mixes entities (one track per view);
-    - with check_history: the track's mu_history has a Tensor view stretched
-      to fill it, whose name states the colour range the entity carries;
+    - 2D views of the curve by mu and by product, of the profiles, and of
+      the track's mu history;
     - every TimeSeries view shows the whole run on `time` (visible range and
       x axis infinite at both ends);
     - the time panel is on `time` and follows the data (opens at the end),
@@ -387,51 +471,19 @@ def blueprint_checks(reader, blueprints, store, expected: dict) -> list[str]:
             raise CheckFailed(f"blueprint: view {name!r} has unknown class {class_!r}")
 
     rail, band = expected["rail"], expected["band"]
-    track = f"{rail} rail ({band.replace('_', ' ')} band)"
-    entity = f"/field/{rail}/{band}/mu"
     done = []
-
-    profile = [
-        (name, queries)
-        for class_, name, queries in infos.values()
-        if class_ == "BarChart" and f"+ {entity}" in queries
-    ]
-    if not profile:
-        shown = sorted(q for _, _, qs in infos.values() for q in qs)
-        raise CheckFailed(f"no blueprint view shows {entity}; view queries: {shown}")
-    for name, queries in profile:
-        if not name.startswith(f"{track}: mu"):
-            raise CheckFailed(f"blueprint: the view of {entity} is named {name!r}, not {track!r}")
-    for class_, name, queries in infos.values():
-        if class_ == "BarChart" and (len(queries) != 1 or "*" in queries[0]):
-            raise CheckFailed(f"blueprint: bar chart {name!r} shows {queries}, not one track")
-    done.append(f"blueprint: {entity} in its own bar chart {profile[0][0]!r}")
-
-    if expected.get("check_history"):
-        history = f"/field/{rail}/{band}/mu_history"
-        heatmaps = [
-            path
-            for path, (class_, _, queries) in infos.items()
-            if class_ == "Tensor" and f"+ {history}" in queries
-        ]
-        if not heatmaps:
-            raise CheckFailed(f"blueprint: no Tensor view of {history}")
-        static = store.reader(index=None, contents=history).to_arrow_table()
-        column = f"{history}:Tensor:value_range"
-        if column not in static.column_names or static.num_rows != 1:
-            raise CheckFailed(f"{history}: no static value range ({static.column_names})")
-        low, high = static.column(column)[0].as_py()[0]
-        mu = [float(v) for v in expected["mu"]]
-        if not low <= min(mu) <= max(mu) <= high:
-            raise CheckFailed(f"{history}: colour range [{low}, {high}] misses mu {min(mu)}..{max(mu)}")
-        for path in heatmaps:
-            name = infos[path][1]
-            if f"{low:.2f} → {high:.2f}" not in name:
-                raise CheckFailed(f"blueprint: heatmap {name!r} does not state [{low:.2f}, {high:.2f}]")
-            fit = component(f"{path}/TensorViewFit", "TensorViewFit:scaling")
-            if fit != [VIEW_FIT_FILL]:
-                raise CheckFailed(f"blueprint: heatmap {name!r} fit {fit}, expected Fill")
-        done.append(f"blueprint: {history} stretched, colour {low:.2f} → {high:.2f} in its name")
+    for query, what in [
+        ("+ /curve/mu/**", "the curve coloured by mu"),
+        ("+ /curve/product/**", "the curve coloured by product"),
+        ("+ /profiles/mu/**", "the mu profiles"),
+        ("+ /profiles/product/**", "the product profiles"),
+        (f"+ /history/{rail}/{band}/**", "the track's mu history"),
+    ]:
+        views = [name for class_, name, queries in infos.values() if class_ == "2D" and query in queries]
+        if not views:
+            shown = sorted(q for _, _, qs in infos.values() for q in qs)
+            raise CheckFailed(f"blueprint: no 2D view shows {what} ({query}); view queries: {shown}")
+        done.append(f"blueprint: {what} in {views[0]!r}")
 
     series_views = [path for path, (class_, _, _) in infos.items() if class_ == "TimeSeries"]
     for path in series_views:

@@ -1,111 +1,152 @@
 //! What the sink holds back and sends as columns (see "Memory and size" in
-//! the module docs): a track's profiles, a chunk of about
-//! [`super::BATCH_CHUNK_BYTES`] per quantity; a pulse or measurement series,
-//! [`super::SERIES_CHUNK_ROWS`] values; and a track's mu history, logged
-//! whole as a heatmap.
+//! the module docs): a track's rows (the curve's classes and the profile
+//! lines of each snapshot), a pulse or measurement series
+//! ([`super::SERIES_CHUNK_ROWS`] values), and the block of the mu history
+//! being filled.
 
-use std::collections::VecDeque;
-
-use rerun::datatypes::{TensorBuffer, TensorData};
-use rerun::external::arrow::datatypes::{ArrowPrimitiveType, Float16Type};
+use rerun::components::ClassId;
+use rerun::datatypes::ChannelDatatype;
 use rerun::{EntityPath, RecordingStream, RecordingStreamError, TimeColumn};
 
 use super::entities::TrackEntities;
 use super::{TIMELINE_TIME, TIMELINE_WHEEL_PASS};
 
-/// `half::f16`, named through arrow so the crate needs no `half` dependency.
-pub(super) type F16 = <Float16Type as ArrowPrimitiveType>::Native;
-
 /// A track's entities and what the sink holds back for it.
 pub(super) struct TrackState {
+    /// The track's index in the engine's order.
+    pub(super) index: usize,
     pub(super) entities: TrackEntities,
-    /// mu after each of the last K trains, oldest first.
-    pub(super) history: VecDeque<Vec<F16>>,
-    /// Trains added to `history` since it was last logged.
-    pub(super) history_unlogged: usize,
+    /// Rows not sent yet.
+    pub(super) pending: PendingRows,
+    /// The mu classes of the trains of the block being filled, a row of
+    /// grid points per train (u8: the scale has 80 classes).
+    pub(super) block: Vec<u8>,
+    /// Index of that block (rows `block_index * B ..`).
+    pub(super) block_index: usize,
+    /// Trains added to the block since it was last logged.
+    pub(super) block_unlogged: usize,
     /// `(log_time_ns, wheel_pass)` of the last train snapshot: where the
-    /// heatmap is logged at finish if that train's was not.
+    /// block is logged at finish if it was not.
     pub(super) last_train: Option<(u64, u64)>,
-    /// Profiles not sent yet.
-    pub(super) pending: PendingProfiles,
 }
 
 impl TrackState {
-    pub(super) fn new(entities: TrackEntities) -> Self {
+    pub(super) fn new(index: usize, entities: TrackEntities) -> Self {
         TrackState {
+            index,
             entities,
-            history: VecDeque::new(),
-            history_unlogged: 0,
+            pending: PendingRows::default(),
+            block: Vec::new(),
+            block_index: 0,
+            block_unlogged: 0,
             last_train: None,
-            pending: PendingProfiles::default(),
         }
     }
 }
 
-/// A track's profiles not sent yet, a row per snapshot; the quantities
-/// share the times.
+/// A track's snapshots not sent yet; the entities share the times.
 #[derive(Default)]
-pub(super) struct PendingProfiles {
+pub(super) struct PendingRows {
     pub(super) times_ns: Vec<i64>,
     pub(super) wheel_passes: Vec<i64>,
-    /// mu, adhesion, rail product (mg), wheel product (mg), as f32.
-    pub(super) values: [Vec<Vec<f32>>; 4],
+    /// The curve's mu classes, every snapshot's grid points one after the other.
+    pub(super) mu_ids: Vec<u16>,
+    /// The curve's rail product classes, likewise.
+    pub(super) mass_ids: Vec<u16>,
+    /// A simplified line per snapshot: mu, adhesion, rail product, wheel
+    /// product, in their views' coordinates.
+    pub(super) strips: [Vec<Vec<[f32; 2]>>; 4],
 }
 
-/// A scalar series on `time`, buffered until it is sent as columns.
+impl PendingRows {
+    pub(super) fn len(&self) -> usize {
+        self.times_ns.len()
+    }
+}
+
+/// A scalar series on `time` (`width` values per row), buffered until it
+/// is sent as columns.
 #[derive(Default)]
 pub(super) struct Series {
+    pub(super) width: usize,
     pub(super) times_ns: Vec<i64>,
     pub(super) values: Vec<f64>,
 }
 
-/// Sends a track's buffered profiles, a chunk per quantity.
-pub(super) fn send_profiles(
+/// Sends a track's buffered rows: a chunk per entity.
+pub(super) fn send_rows(
     rec: &RecordingStream,
     track: &mut TrackState,
+    grid_len: usize,
 ) -> Result<(), RecordingStreamError> {
     let pending = std::mem::take(&mut track.pending);
-    if pending.times_ns.is_empty() {
+    let rows = pending.len();
+    if rows == 0 {
         return Ok(());
     }
-    for (path, rows) in track.entities.profiles().into_iter().zip(pending.values) {
-        let indexes = [
+    let indexes = || {
+        [
             TimeColumn::new_timestamp_nanos_since_epoch(
                 TIMELINE_TIME,
                 pending.times_ns.iter().copied(),
             ),
             TimeColumn::new_sequence(TIMELINE_WHEEL_PASS, pending.wheel_passes.iter().copied()),
-        ];
+        ]
+    };
+    let lengths = std::iter::repeat_n(grid_len, rows);
+    for (path, ids) in [
+        (&track.entities.curve_mu, pending.mu_ids),
+        (&track.entities.curve_product, pending.mass_ids),
+    ] {
         rec.send_columns(
             path.clone(),
-            indexes,
-            rerun::BarChart::update_fields()
-                .with_many_values(rows)
+            indexes(),
+            rerun::Points2D::update_fields()
+                .with_class_ids(ids.into_iter().map(ClassId::from))
+                .columns(lengths.clone())?,
+        )?;
+    }
+    for (path, strips) in track.entities.profiles().into_iter().zip(pending.strips) {
+        rec.send_columns(
+            path.clone(),
+            indexes(),
+            rerun::LineStrips2D::update_fields()
+                .with_strips(strips)
                 .columns_of_unit_batches()?,
         )?;
     }
     Ok(())
 }
 
-/// Logs a track's heatmap: its history as it stands, at the thread's time.
-pub(super) fn log_history(
+/// Logs the block being filled as a segmentation image (a row per train,
+/// a column per grid point), at the thread's time.
+pub(super) fn log_block(
     rec: &RecordingStream,
     track: &mut TrackState,
     grid_len: usize,
 ) -> Result<(), RecordingStreamError> {
-    let rows = track.history.len();
-    let flat: Vec<F16> = track.history.iter().flatten().copied().collect();
-    let heatmap = TensorData::new(
-        vec![rows as u64, grid_len as u64],
-        TensorBuffer::F16(flat.into()),
-    )
-    .with_dim_names(["train (newest at the bottom)", "grid point i (d = i*C)"]);
+    let rows = track.block.len() / grid_len.max(1);
+    if rows == 0 {
+        return Ok(());
+    }
+    let path = block_path(&track.entities.history, track.block_index);
     rec.log(
-        track.entities.mu_history.clone(),
-        &rerun::Tensor::new(heatmap),
+        path,
+        &rerun::SegmentationImage::new(
+            track.block.clone(),
+            rerun::components::ImageFormat::segmentation(
+                [grid_len as u32, rows as u32],
+                ChannelDatatype::U8,
+            ),
+        ),
     )?;
-    track.history_unlogged = 0;
+    track.block_unlogged = 0;
     Ok(())
+}
+
+/// `history/<rail>/<band>/block_0003`.
+pub(super) fn block_path(history: &EntityPath, block: usize) -> EntityPath {
+    history.join(&EntityPath::from_single_string(format!("block_{block:04}")))
 }
 
 /// Sends a buffered series as one chunk on `time`.
@@ -114,11 +155,13 @@ pub(super) fn send_series(
     path: EntityPath,
     series: Series,
 ) -> Result<(), RecordingStreamError> {
+    let rows = series.times_ns.len();
     let time = TimeColumn::new_timestamp_nanos_since_epoch(TIMELINE_TIME, series.times_ns);
     rec.send_columns(
         path,
         [time],
-        rerun::Scalars::new(series.values).columns_of_unit_batches()?,
+        rerun::Scalars::new(series.values)
+            .columns(std::iter::repeat_n(series.width.max(1), rows))?,
     )?;
     Ok(())
 }

@@ -5,16 +5,15 @@
 use std::collections::{BTreeMap, BTreeSet};
 
 use rerun::blueprint::components::{
-    AutoLayout, AutoViews, ColumnShare, ContainerKind, Corner2D, Fps, GridColumns, IncludedContent,
-    PanelState, PlayState, PlaybackSpeed, QueryExpression, RootContainer, RowShare, TimelineName,
-    ViewClass, ViewFit,
+    AutoLayout, AutoViews, ColumnShare, ContainerKind, Corner2D, Fps, IncludedContent, PanelState,
+    PlayState, PlaybackSpeed, QueryExpression, RootContainer, RowShare, TimelineName, ViewClass,
 };
-use rerun::components::{Colormap, MagnificationFilter, Name};
+use rerun::components::Name;
 use rerun::datatypes::{TimeRange, VisibleTimeRange};
 use rerun::external::re_log_types::{LogMsg, RecordingId};
 use rerun::external::re_sdk_types::blueprint::archetypes::{
-    ContainerBlueprint, PanelBlueprint, PlotLegend, TensorScalarMapping, TensorViewFit, TimeAxis,
-    TimePanelBlueprint, ViewBlueprint, ViewContents, ViewportBlueprint, VisibleTimeRanges,
+    ContainerBlueprint, PanelBlueprint, PlotLegend, TimeAxis, TimePanelBlueprint, ViewBlueprint,
+    ViewContents, ViewportBlueprint, VisibleTimeRanges,
 };
 use rerun::external::re_sdk_types::external::uuid::Uuid;
 use rerun::{
@@ -48,17 +47,13 @@ pub(super) struct Run<'a> {
     pub(super) measured: &'a Measured,
     /// Applicator entities that received a pulse.
     pub(super) pulsed: &'a BTreeSet<EntityPath>,
-    /// `K`: rows of the mu history heatmaps (0: none).
+    /// `B`: trains per block of the mu history (0: none).
     pub(super) history_rows: usize,
-    pub(super) mu_color_range: [f64; 2],
     /// First and last log_time on `time`.
     pub(super) time_span_ns: Option<[u64; 2]>,
     /// Wheel passes of the whole run.
     pub(super) wheel_pass: u64,
 }
-
-/// Picks one of a track's entities.
-type TrackEntity = fn(&TrackEntities) -> &EntityPath;
 
 pub(super) fn blueprint(run: &Run<'_>) -> Result<Vec<LogMsg>, RecordingStreamError> {
     let layout = run.layout;
@@ -89,62 +84,44 @@ pub(super) fn blueprint(run: &Run<'_>) -> Result<Vec<LogMsg>, RecordingStreamErr
             )
         };
 
-    // Left: a column per track, a row per quantity along d, and the
-    // mu history below them (its columns are the same grid points).
-    let quantities: [(&str, TrackEntity); 4] = [
-        ("mu", |t| &t.mu),
-        ("adhesion T/N", |t| &t.adhesion),
-        ("rail product (mg)", |t| &t.rail_mass),
-        ("wheel product (mg)", |t| &t.wheel_mass),
-    ];
-    let mut grid = Vec::new();
-    for (quantity, pick) in quantities {
-        for track in &run.tracks {
-            let view = bp.view(
-                "BarChart",
-                &format!("{}: {quantity} along d [m]", track.label),
-                [format!("+ {}", pick(track))],
-            )?;
-            // The title names the track; the legend would only repeat
-            // the entity path.
-            bp.property(&view, &PlotLegend::update_fields().with_visible(false))?;
-            grid.push(view);
-        }
-    }
-    if run.history_rows > 0 {
-        // 0.36 draws no colour bar next to a tensor: the title says it.
-        let [low, high] = run.mu_color_range;
-        for track in &run.tracks {
-            let view = bp.view(
-                "Tensor",
-                &format!("{}: mu history, colour {low:.2} → {high:.2}", track.label),
-                [format!("+ {}", track.mu_history)],
-            )?;
-            // Stretched: a few trains by 600 points is a strip otherwise.
-            bp.property(
-                &view,
-                &TensorViewFit::update_fields().with_scaling(ViewFit::Fill),
-            )?;
-            bp.property(
-                &view,
-                &TensorScalarMapping::update_fields()
-                    .with_colormap(Colormap::Viridis)
-                    .with_mag_filter(MagnificationFilter::Nearest),
-            )?;
-            grid.push(view);
-        }
-    }
-    // The heatmap's row a little taller than a profile's.
-    let row_shares = [1.0, 1.0, 1.0, 1.0, 1.6].map(RowShare::from);
-    let rows = grid.len() / run.tracks.len().max(1);
+    // Left: the plan, coloured by mu or by product, above the profiles.
+    let curve_mu = bp.view(
+        "2D",
+        "Curve: mu after the train at the cursor (blue: too much product, green: target band, yellow-red: dry)",
+        ["+ /curve/mu/**"],
+    )?;
+    let curve_product = bp.view(
+        "2D",
+        "Curve: product on the rail (mg, grey: below 1e-4 mg)",
+        ["+ /curve/product/**"],
+    )?;
+    let curve = bp.container(
+        ContainerKind::Tabs,
+        "The section on its plan",
+        vec![curve_mu, curve_product],
+        |c| c,
+    )?;
+    let profile_mu = bp.view(
+        "2D",
+        "mu (rail colour) and adhesion T/N (paler) along d [m], target band shaded",
+        ["+ /profiles/mu/**"],
+    )?;
+    let profile_product = bp.view(
+        "2D",
+        "Product on the rail (rail colour) and on the last wheel (paler), mg on decades, along d [m]",
+        ["+ /profiles/product/**"],
+    )?;
     let profiles = bp.container(
-        ContainerKind::Grid,
-        "Along the section (a column per rail/band)",
-        grid,
-        |c| {
-            c.with_grid_columns(GridColumns::from(run.tracks.len().max(1) as u32))
-                .with_row_shares(row_shares.into_iter().take(rows))
-        },
+        ContainerKind::Tabs,
+        "Along the section",
+        vec![profile_mu, profile_product],
+        |c| c,
+    )?;
+    let left = bp.container(
+        ContainerKind::Vertical,
+        "Where on the section",
+        vec![curve, profiles],
+        |c| c.with_row_shares([0.55, 0.45].map(RowShare::from)),
     )?;
 
     // Right, top: a tab per site; in it a row per quantity measured
@@ -196,14 +173,22 @@ pub(super) fn blueprint(run: &Run<'_>) -> Result<Vec<LogMsg>, RecordingStreamErr
     )?;
     whole_run(&bp, &pulses)?;
     let section = bp.view("TextDocument", "Section", ["+ /section/description"])?;
-    let map = bp.view("2D", "Section map", ["+ /section/map/**"])?;
     let summary = bp.view("TextDocument", "Run summary", ["+ /run/summary"])?;
-    let context = bp.container(
-        ContainerKind::Tabs,
-        "Run",
-        vec![trains, pulses, section, map, summary],
-        |c| c,
-    )?;
+    let mut context = Vec::new();
+    if run.history_rows > 0 {
+        for track in &run.tracks {
+            context.push(bp.view(
+                "2D",
+                &format!(
+                    "{}: mu history, a row per train (newest at the bottom), d in m across",
+                    track.label
+                ),
+                [format!("+ {}/**", track.history)],
+            )?);
+        }
+    }
+    context.extend([trains, pulses, section, summary]);
+    let context = bp.container(ContainerKind::Tabs, "Run", context, |c| c)?;
 
     let mut right = Vec::new();
     let mut shares = Vec::new();
@@ -219,7 +204,7 @@ pub(super) fn blueprint(run: &Run<'_>) -> Result<Vec<LogMsg>, RecordingStreamErr
     let root = bp.container(
         ContainerKind::Horizontal,
         "tortwin",
-        vec![profiles, right],
+        vec![left, right],
         |c| c.with_col_shares([0.55, 0.45].map(ColumnShare::from)),
     )?;
 

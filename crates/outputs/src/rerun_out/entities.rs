@@ -12,30 +12,38 @@ pub(super) struct TrackEntities {
     /// "high rail (top band)".
     pub(super) label: String,
     pub(super) color: Color,
+    /// The track's grid points on the plan, coloured by mu class.
+    pub(super) curve_mu: EntityPath,
+    /// The same points coloured by the rail product's class.
+    pub(super) curve_product: EntityPath,
+    /// Profile lines along d: mu, adhesion, rail product, wheel product.
     pub(super) mu: EntityPath,
     pub(super) adhesion: EntityPath,
     pub(super) rail_mass: EntityPath,
     pub(super) wheel_mass: EntityPath,
-    pub(super) mu_history: EntityPath,
+    /// `history/<rail>/<band>`: one image per block of trains below it.
+    pub(super) history: EntityPath,
 }
 
 impl TrackEntities {
-    /// `field/<rail>/<band>/...` of `track`, one of the section's `tracks`.
+    /// The entities of `track`, one of the section's `tracks`.
     pub(super) fn new(track: &TrackInfo, tracks: &[TrackInfo]) -> Self {
-        let path = |leaf: &str| entity(&["field", &track.rail_name, &track.band, leaf]);
+        let (rail, band) = (track.rail_name.as_str(), track.band.as_str());
         TrackEntities {
             label: track_label(track),
             color: track_color(track, tracks),
-            mu: path("mu"),
-            adhesion: path("adhesion"),
-            rail_mass: path("rail_mass_mg"),
-            wheel_mass: path("wheel_mass_mg"),
-            mu_history: path("mu_history"),
+            curve_mu: entity(&["curve", "mu", "tracks", rail, band]),
+            curve_product: entity(&["curve", "product", "tracks", rail, band]),
+            mu: entity(&["profiles", "mu", rail, band, "mu"]),
+            adhesion: entity(&["profiles", "mu", rail, band, "adhesion"]),
+            rail_mass: entity(&["profiles", "product", rail, band, "rail"]),
+            wheel_mass: entity(&["profiles", "product", rail, band, "wheel"]),
+            history: entity(&["history", rail, band]),
         }
     }
 
-    /// The profiles' entities, in the order of
-    /// [`super::batch::PendingProfiles::values`].
+    /// The profile lines' entities, in the order of
+    /// [`super::batch::PendingRows::strips`].
     pub(super) fn profiles(&self) -> [&EntityPath; 4] {
         [&self.mu, &self.adhesion, &self.rail_mass, &self.wheel_mass]
     }

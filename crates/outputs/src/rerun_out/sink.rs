@@ -5,7 +5,7 @@ use std::collections::{BTreeMap, BTreeSet, HashSet};
 use std::path::Path;
 use std::time::Duration;
 
-use rerun::components::{MarkerShape, TextLogLevel, ValueRange};
+use rerun::components::{MarkerShape, TextLogLevel};
 use rerun::external::re_log_types::BlueprintActivationCommand;
 use rerun::log::ChunkBatcherConfig;
 use rerun::{
@@ -17,15 +17,16 @@ use tortwin_engine::sink::{
 };
 use tortwin_recording::Direction;
 
-use super::batch::{log_history, send_profiles, send_series, Series, TrackState, F16};
+use super::batch::{block_path, log_block, send_rows, send_series, Series, TrackState};
 use super::blueprint::{blueprint, Layout, Measured, Run};
+use super::curve::{self, Frames, DECADE_TOLERANCE, MU_TOLERANCE};
 use super::entities::{entity, lighten, rail_color, TrackEntities, QUANTITIES};
 use super::error::{sdk_error, RerunError};
-use super::section::log_section;
+use super::section::log_description;
 use super::summary::summarize;
 use super::{
     send_provenance, RerunOptions, BATCH_CHUNK_BYTES, G_PER_KG, MAX_BYTES_IN_FLIGHT, MG_PER_KG,
-    MU_COLOR_STEPS_PER_UNIT, SERIES_CHUNK_ROWS, TIMELINE_TIME, TIMELINE_WHEEL_PASS,
+    SERIES_CHUNK_ROWS, TIMELINE_TIME, TIMELINE_WHEEL_PASS,
 };
 use crate::files::PartialFile;
 
@@ -56,8 +57,14 @@ pub struct RerunSink {
     pulsed: BTreeSet<EntityPath>,
     /// Pulse and measurement values not sent yet, per entity.
     series: BTreeMap<EntityPath, Series>,
-    /// Smallest and largest mu put into a heatmap.
-    mu_seen: Option<[f64; 2]>,
+    /// Product of each applicator entity's pulses since the last snapshot (g).
+    pulse_totals: BTreeMap<EntityPath, f64>,
+    /// The views' coordinates, from [`Sink::begin`].
+    frames: Option<Frames>,
+    /// The grid, for the profile lines.
+    grid_d_m: Vec<f64>,
+    /// Reused: a snapshot's rail product in mg, and a line's values.
+    scratch: Vec<f64>,
     /// First and last log_time of anything logged on `time`.
     time_span_ns: Option<[u64; 2]>,
 }
@@ -115,7 +122,10 @@ impl RerunSink {
             measured: BTreeMap::new(),
             pulsed: BTreeSet::new(),
             series: BTreeMap::new(),
-            mu_seen: None,
+            pulse_totals: BTreeMap::new(),
+            frames: None,
+            grid_d_m: Vec::new(),
+            scratch: Vec::new(),
             time_span_ns: None,
         })
     }
@@ -181,16 +191,35 @@ impl RerunSink {
         &mut self,
         path: EntityPath,
         log_time_ns: u64,
-        value: f64,
+        values: &[f64],
         what: impl FnOnce() -> String,
     ) -> Result<(), RerunError> {
         let time_ns = self.note_time(log_time_ns)?;
-        let series = self.series.entry(path.clone()).or_default();
+        let series = self.series.entry(path.clone()).or_insert_with(|| Series {
+            width: values.len(),
+            ..Series::default()
+        });
         series.times_ns.push(time_ns);
-        series.values.push(value);
-        if series.values.len() >= SERIES_CHUNK_ROWS {
-            let series = std::mem::take(series);
+        series.values.extend_from_slice(values);
+        if series.times_ns.len() >= SERIES_CHUNK_ROWS {
+            // The entity keeps its width for the rows still to come.
+            let series = std::mem::replace(
+                series,
+                Series {
+                    width: values.len(),
+                    ..Series::default()
+                },
+            );
             send_series(self.rec()?, path, series).map_err(sdk_error(self.path(), what))?;
+        }
+        Ok(())
+    }
+
+    /// Adds the pulses since the last snapshot to the applicators' series,
+    /// at `log_time_ns`.
+    fn flush_pulses(&mut self, log_time_ns: u64) -> Result<(), RerunError> {
+        for (path, grams) in std::mem::take(&mut self.pulse_totals) {
+            self.push_series(path, log_time_ns, &[grams], || "pulses".to_owned())?;
         }
         Ok(())
     }
@@ -229,67 +258,45 @@ impl RerunSink {
         Ok(())
     }
 
-    /// The heatmaps' colour range: the option, or the run's mu rounded out.
-    fn mu_color_range(&self) -> [f64; 2] {
-        if let Some(range) = self.options.mu_color_range {
-            return range;
-        }
-        match self.mu_seen {
-            Some([low, high]) => {
-                let steps = MU_COLOR_STEPS_PER_UNIT;
-                let low = (low * steps).floor() / steps;
-                let high = (high * steps).ceil() / steps;
-                [low, high.max(low + 1.0 / steps)]
-            }
-            None => [0.0, 0.6],
-        }
-    }
-
     /// Sends what is still buffered, the last heatmaps, the summary and the
     /// blueprint; closes the stream and moves the file into place.
     fn finish_run(&mut self, summary: &RunSummary) -> Result<(), RerunError> {
+        if let Some([_, last]) = self.time_span_ns {
+            self.flush_pulses(last)?;
+        }
         self.flush_series()?;
+        let grid_len = self.grid_len;
         if let Some(rec) = self.rec.as_ref() {
             for track in &mut self.tracks {
-                send_profiles(rec, track)
+                send_rows(rec, track, grid_len)
                     .map_err(sdk_error(self.file.final_path(), || "profiles".to_owned()))?;
             }
         }
-        // The last train's heatmap, where its snapshot was, if not yet logged.
+        // The last block of each history, where its last train was, if not yet logged.
         for index in 0..self.tracks.len() {
             let track = &self.tracks[index];
             let Some((log_time_ns, wheel_pass)) = track.last_train else {
                 continue;
             };
-            if track.history_unlogged == 0 {
+            if track.block_unlogged == 0 {
                 continue;
             }
             self.set_time(log_time_ns, Some(wheel_pass))?;
             let rec = self.rec.as_ref().ok_or_else(|| RerunError::Finished {
                 path: self.file.final_path().to_path_buf(),
             })?;
-            log_history(rec, &mut self.tracks[index], self.grid_len)
+            log_block(rec, &mut self.tracks[index], grid_len)
                 .map_err(sdk_error(self.file.final_path(), || {
-                    "last heatmap".to_owned()
+                    "last history".to_owned()
                 }))?;
         }
-        let [low, high] = self.mu_color_range();
         let rec = self.rec()?;
         let history = (self.options.history_rows, self.options.history_every.max(1));
         rec.log_static(
             "run/summary",
-            &rerun::TextDocument::from_markdown(summarize(summary, [low, high], history)),
+            &rerun::TextDocument::from_markdown(summarize(summary, history)),
         )
         .map_err(sdk_error(self.path(), || "summary".to_owned()))?;
-        if self.options.mu_color_range.is_none() {
-            for track in &self.tracks {
-                rec.log_static(
-                    track.entities.mu_history.clone(),
-                    &rerun::Tensor::update_fields().with_value_range(ValueRange::new(low, high)),
-                )
-                .map_err(sdk_error(self.path(), || "heatmap colour range".to_owned()))?;
-            }
-        }
         if self.options.blueprint {
             let Some(layout) = &self.layout else {
                 return Err(RerunError::NotBegun {
@@ -303,7 +310,6 @@ impl RerunSink {
                 measured: &self.measured,
                 pulsed: &self.pulsed,
                 history_rows: self.options.history_rows,
-                mu_color_range: [low, high],
                 time_span_ns: self.time_span_ns,
                 wheel_pass: self.wheel_pass,
             })
@@ -341,8 +347,9 @@ impl RerunSink {
 impl Sink for RerunSink {
     fn begin(&mut self, info: &SectionInfo<'_>) -> SinkResult {
         self.grid_len = info.grid_d_m.len();
+        // Two class ids per grid point, and the lines.
         self.profile_chunk_rows = (BATCH_CHUNK_BYTES as usize
-            / (self.grid_len * std::mem::size_of::<f32>()).max(1))
+            / (self.grid_len * 2 * std::mem::size_of::<u16>()).max(1))
         .clamp(1, SERIES_CHUNK_ROWS);
         self.layout = Some(Layout {
             rails: info.section.rails.clone(),
@@ -356,10 +363,16 @@ impl Sink for RerunSink {
         self.tracks = info
             .tracks
             .iter()
-            .map(|t| TrackState::new(TrackEntities::new(t, info.tracks)))
+            .enumerate()
+            .map(|(i, t)| TrackState::new(i, TrackEntities::new(t, info.tracks)))
             .collect();
-        log_section(self.rec()?, info, &self.tracks, self.options.mu_color_range)
-            .map_err(sdk_error(self.path(), || "section".to_owned()))?;
+        let frames = Frames::new(info);
+        let rec = self.rec()?;
+        log_description(rec, info).map_err(sdk_error(self.path(), || "section".to_owned()))?;
+        curve::log_static(rec, info, &frames, &self.tracks)
+            .map_err(sdk_error(self.path(), || "the section's plan".to_owned()))?;
+        self.frames = Some(frames);
+        self.grid_d_m = info.grid_d_m.to_vec();
         Ok(())
     }
 
@@ -389,51 +402,40 @@ impl Sink for RerunSink {
 
     fn pulse(&mut self, pulse: &PulseEvent<'_>) -> SinkResult {
         let path = entity(&["applicator", pulse.applicator_id, pulse.rail_name]);
-        let name = format!("{} on {} rail (g)", pulse.applicator_id, pulse.rail_name);
-        self.style_once(
-            &path,
-            &[&rerun::SeriesPoints::new()
-                .with_names([name])
-                .with_colors([rail_color(pulse.rail)])
-                .with_markers([MarkerShape::Diamond])
-                .with_marker_sizes([3.0])],
-        )?;
-        self.pulsed.insert(path.clone());
-        self.push_series(path, pulse.log_time_ns, pulse.mass_kg * G_PER_KG, || {
-            format!("pulse of {}", pulse.applicator_id)
-        })?;
+        if !self.pulsed.contains(&path) {
+            let name = format!(
+                "{} on {} rail: g per train",
+                pulse.applicator_id, pulse.rail_name
+            );
+            self.style_once(
+                &path,
+                &[&rerun::SeriesPoints::new()
+                    .with_names([name])
+                    .with_colors([rail_color(pulse.rail)])
+                    .with_markers([MarkerShape::Diamond])
+                    .with_marker_sizes([3.0])],
+            )?;
+            self.pulsed.insert(path.clone());
+        }
+        self.note_time(pulse.log_time_ns)?;
+        *self.pulse_totals.entry(path).or_insert(0.0) += pulse.mass_kg * G_PER_KG;
         Ok(())
     }
 
     fn measurement(&mut self, m: &MeasurementOutput<'_>) -> SinkResult {
-        let quantity = m.quantity.as_str();
-        let base = ["sites", m.site_id, m.rail_name, quantity];
-        let measured = entity(&[&base[..], &["measured"]].concat());
-        let simulated = entity(&[&base[..], &["simulated"]].concat());
+        let path = entity(&["sites", m.site_id, m.rail_name, m.quantity.as_str()]);
         let color = rail_color(m.rail);
         let pale = lighten(color, 0.45);
+        // Measured and simulated share a row (and its time): the measured
+        // value as a dot in the rail's colour, the twin's as a smaller pale
+        // one beside it.
         self.style_once(
-            &measured,
+            &path,
             &[&rerun::SeriesPoints::new()
-                .with_names(["measured"])
-                .with_colors([color])
-                .with_markers([MarkerShape::Circle])
-                .with_marker_sizes([2.5])],
-        )?;
-        // Points and a line: a lone simulated value still shows.
-        self.style_once(
-            &simulated,
-            &[
-                &rerun::SeriesLines::new()
-                    .with_names(["simulated (twin)"])
-                    .with_colors([pale])
-                    .with_widths([1.5]),
-                &rerun::SeriesPoints::new()
-                    .with_names(["simulated (twin)"])
-                    .with_colors([pale])
-                    .with_markers([MarkerShape::Circle])
-                    .with_marker_sizes([1.5]),
-            ],
+                .with_names(["measured", "simulated (twin)"])
+                .with_colors([color, pale])
+                .with_markers([MarkerShape::Circle, MarkerShape::Circle])
+                .with_marker_sizes([2.5, 1.5])],
         )?;
         let rank = QUANTITIES
             .iter()
@@ -447,8 +449,7 @@ impl Sink for RerunSink {
             .1
             .insert(m.rail);
         let what = || format!("measurement {} at site {}", m.index_in_file, m.site_id);
-        self.push_series(measured, m.log_time_ns, m.measured, what)?;
-        self.push_series(simulated, m.log_time_ns, m.simulated, what)?;
+        self.push_series(path, m.log_time_ns, &[m.measured, m.simulated], what)?;
         Ok(())
     }
 
@@ -482,21 +483,13 @@ impl Sink for RerunSink {
             .into());
         }
 
+        self.flush_pulses(f.log_time_ns)?;
         self.wheel_pass = self.wheel_pass.max(f.wheel_pass);
         let wheel_pass = self.wheel_pass;
         let time_ns = self.set_time(f.log_time_ns, Some(wheel_pass))?;
         let wheel_pass_seq = self.sequence(wheel_pass)?;
-        let history_rows = self.options.history_rows;
-        if f.kind == SnapshotKind::Train && history_rows > 0 {
-            for &mu in f.mu.iter().filter(|mu| mu.is_finite()) {
-                self.mu_seen = Some(match self.mu_seen {
-                    Some([low, high]) => [low.min(mu), high.max(mu)],
-                    None => [mu, mu],
-                });
-            }
-        }
         let path = self.file.final_path();
-        let Some(rec) = self.rec.as_ref() else {
+        let (Some(rec), Some(frames)) = (self.rec.as_ref(), self.frames.as_ref()) else {
             return Err(RerunError::Finished {
                 path: path.to_path_buf(),
             }
@@ -516,30 +509,75 @@ impl Sink for RerunSink {
         let pending = &mut track.pending;
         pending.times_ns.push(time_ns);
         pending.wheel_passes.push(wheel_pass_seq);
-        let profiles = [
-            (f.mu, 1.0),
-            (f.adhesion, 1.0),
-            (f.rail_mass_kg, MG_PER_KG),
-            (f.wheel_mass_kg, MG_PER_KG),
-        ];
-        for (rows, (values, scale)) in pending.values.iter_mut().zip(profiles) {
-            rows.push(values.iter().map(|&v| (v * scale) as f32).collect());
-        }
-        if pending.times_ns.len() >= self.profile_chunk_rows {
-            send_profiles(rec, track).map_err(sdk_error(path, what))?;
+        let scratch = &mut self.scratch;
+        scratch.clear();
+        scratch.extend(f.rail_mass_kg.iter().map(|&m| m * MG_PER_KG));
+        curve::classes(
+            f.mu,
+            scratch.iter().copied(),
+            &mut pending.mu_ids,
+            &mut pending.mass_ids,
+        );
+        // The profile lines, through fewer points where they are straight.
+        let d = &self.grid_d_m;
+        let line = |values: &[f64], tolerance: f64, y: &dyn Fn(f64) -> f64| -> Vec<[f32; 2]> {
+            curve::simplify(d, values, tolerance)
+                .into_iter()
+                .map(|i| [d[i] as f32, y(values[i]) as f32])
+                .collect()
+        };
+        let mu_y = |v: f64| frames.mu_y(v);
+        let product_y = |v: f64| frames.product_y(v);
+        let decades = |masses_kg: &[f64]| -> Vec<f64> {
+            masses_kg
+                .iter()
+                .map(|&m| (m * MG_PER_KG).max(1e-4).log10())
+                .collect()
+        };
+        let from_decades = |v: f64| product_y(10f64.powf(v));
+        pending.strips[0].push(line(f.mu, MU_TOLERANCE, &mu_y));
+        pending.strips[1].push(line(f.adhesion, MU_TOLERANCE, &mu_y));
+        pending.strips[2].push(line(
+            &decades(f.rail_mass_kg),
+            DECADE_TOLERANCE,
+            &from_decades,
+        ));
+        pending.strips[3].push(line(
+            &decades(f.wheel_mass_kg),
+            DECADE_TOLERANCE,
+            &from_decades,
+        ));
+        if pending.len() >= self.profile_chunk_rows {
+            send_rows(rec, track, grid_len).map_err(sdk_error(path, what))?;
         }
 
-        if f.kind == SnapshotKind::Train && history_rows > 0 {
-            while track.history.len() >= history_rows {
-                track.history.pop_front();
+        let block_rows = self.options.history_rows;
+        if f.kind == SnapshotKind::Train && block_rows > 0 {
+            if track.block.is_empty() {
+                // A new block: its place below the previous ones, d in m.
+                let spacing = frames.spacing_m as f32;
+                let top = (track.block_index * block_rows) as f32 * spacing;
+                rec.log_static(
+                    block_path(&track.entities.history, track.block_index),
+                    &rerun::Transform3D::from_translation_scale(
+                        [0.0, top, 0.0],
+                        rerun::components::Scale3D::from([spacing, spacing, 1.0]),
+                    ),
+                )
+                .map_err(sdk_error(path, what))?;
             }
             track
-                .history
-                .push_back(f.mu.iter().map(|&mu| F16::from_f64(mu)).collect());
-            track.history_unlogged += 1;
+                .block
+                .extend(f.mu.iter().map(|&mu| crate::scale::mu_class(mu) as u8));
+            track.block_unlogged += 1;
             track.last_train = Some((f.log_time_ns, wheel_pass));
-            if track.history_unlogged >= self.options.history_every.max(1) {
-                log_history(rec, track, grid_len).map_err(sdk_error(path, what))?;
+            let full = track.block.len() >= block_rows * grid_len;
+            if full || track.block_unlogged >= self.options.history_every.max(1) {
+                log_block(rec, track, grid_len).map_err(sdk_error(path, what))?;
+            }
+            if full {
+                track.block.clear();
+                track.block_index += 1;
             }
         }
         Ok(())

@@ -6,13 +6,10 @@ use std::fmt::Write as _;
 use tortwin_engine::sink::RunSummary;
 
 use super::G_PER_KG;
+use crate::scale::TARGET_BAND;
 
-/// The end-of-run figures as a markdown page; `history` is `(K, E)`.
-pub(super) fn summarize(
-    summary: &RunSummary,
-    mu_color_range: [f64; 2],
-    history: (usize, usize),
-) -> String {
+/// The end-of-run figures as a markdown page; `history` is `(B, E)`.
+pub(super) fn summarize(summary: &RunSummary, history: (usize, usize)) -> String {
     let mut md = String::new();
     // Writing to a String cannot fail.
     let _ = writeln!(md, "# Run summary\n");
@@ -54,15 +51,33 @@ pub(super) fn summarize(
         "\nrelative closing error: {:.2e}",
         balance.closing_error()
     );
-    let [low, high] = mu_color_range;
     let (rows, every) = history;
+    let [band_low, band_high] = TARGET_BAND;
     let _ = writeln!(md, "\n## Reading the views\n");
+    let _ = writeln!(
+        md,
+        "- colours of mu, the same in every tortwin file: classes 0.01 wide; blue below \
+         the target band {band_low:.2}-{band_high:.2} (too much product, braking risk), \
+         green inside it, yellow to dark red above it (dry); hover a point for its class. \
+         The product layer: grey below 1e-4 mg, then viridis by quarter decades up to 100 mg"
+    );
+    let _ = writeln!(
+        md,
+        "- the curve: each rail's grid points on the section's plan (the gauge drawn wide), \
+         as they were after the train at the time cursor"
+    );
+    let _ = writeln!(
+        md,
+        "- profiles: mu (rail colour) and adhesion T/N (paler) along d in m, the target band \
+         shaded; the product on the rail (rail colour) and on the last wheel (paler) on \
+         decades of mg"
+    );
     if rows > 0 {
         let _ = writeln!(
             md,
-            "- mu history heatmaps: one row per train (the last {rows}), newest at the bottom, \
-             one column per grid point, updated every {every} trains and after the last one; \
-             colour Viridis from mu = {low:.2} (dark purple) to {high:.2} (yellow)"
+            "- mu history: one row per train, newest at the bottom, d in m across, in blocks \
+             of {rows} trains, updated every {every} trains and after the last one, \
+             coloured by the mu scale"
         );
     }
     let _ = writeln!(

@@ -154,7 +154,6 @@ pub(crate) fn write(
                 &rec_path,
                 RerunOptions {
                     recording_name: Some(format!("recommended: {}", r.strategy.describe(section))),
-                    mu_color_range: Some([target.band.lower_mu - 0.1, target.band.upper_mu + 0.1]),
                     provenance: Some(provenance.clone()),
                     ..RerunOptions::default()
                 },
