@@ -149,6 +149,15 @@ fn check_outputs(rec: &Path, dir: &Path, report: &serde_json::Value) {
         let meta = std::fs::metadata(dir.join(file)).unwrap_or_else(|e| panic!("{file}: {e}"));
         assert!(meta.len() > 0, "{file} is empty");
     }
+    // residuals.rrd opens on the finding and holds the residuals the
+    // report's RMSE comes from.
+    let o = common::python("check_residuals_rrd.py", &[dir]);
+    assert!(
+        o.status.success(),
+        "check_residuals_rrd.py: {}{}",
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr)
+    );
     let md = std::fs::read_to_string(dir.join("report.md")).unwrap();
     for svg in md
         .split("](")

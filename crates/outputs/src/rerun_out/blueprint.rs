@@ -13,7 +13,7 @@ use rerun::datatypes::{TimeRange, VisibleTimeRange};
 use rerun::external::re_log_types::{LogMsg, RecordingId};
 use rerun::external::re_sdk_types::blueprint::archetypes::{
     ContainerBlueprint, PanelBlueprint, PlotLegend, TimeAxis, TimePanelBlueprint, ViewBlueprint,
-    ViewContents, ViewportBlueprint, VisibleTimeRanges,
+    ViewContents, ViewportBlueprint, VisibleTimeRanges, VisualBounds2D,
 };
 use rerun::external::re_sdk_types::external::uuid::Uuid;
 use rerun::{
@@ -22,6 +22,7 @@ use rerun::{
 };
 use tortwin_recording::Quantity;
 
+use super::curve::Bounds;
 use super::entities::{entity, quantity_label, TrackEntities};
 use super::{TIMELINE_TIME, TIMELINE_WHEEL_PASS};
 
@@ -31,6 +32,9 @@ const PLAYBACK_S: f64 = 60.0;
 /// The section as the blueprint needs it, copied at the sink's `begin`.
 pub(super) struct Layout {
     pub(super) rails: Vec<String>,
+    /// What the curve views and the profile views show.
+    pub(super) plan_bounds: Bounds,
+    pub(super) profile_bounds: Bounds,
     /// `(id, position_m)`, in section order.
     pub(super) sites: Vec<(String, f64)>,
 }
@@ -57,32 +61,11 @@ pub(super) struct Run<'a> {
 
 pub(super) fn blueprint(run: &Run<'_>) -> Result<Vec<LogMsg>, RecordingStreamError> {
     let layout = run.layout;
-    let (rec, storage) = RecordingStreamBuilder::new(run.application_id.clone())
-        .recording_id(RecordingId::random())
-        .blueprint()
-        .memory()?;
-    // The viewer identifies blueprint data by this timeline.
-    rec.set_time_sequence("blueprint", 0);
-    let bp = BlueprintWriter { rec: &rec };
-    let everything = [TIMELINE_TIME, TIMELINE_WHEEL_PASS].map(|timeline| VisibleTimeRange {
-        timeline: timeline.into(),
-        range: TimeRange::EVERYTHING,
-    });
-    // A time series over the whole run, whatever the time cursor: the
-    // default x range of 0.36 is a window of +-30 s (or +-1000 passes)
-    // around the cursor once the data spans more.
-    let whole_run =
-        |bp: &BlueprintWriter<'_>, view: &BlueprintItem| -> Result<(), RecordingStreamError> {
-            bp.property(view, &VisibleTimeRanges::new(everything.clone()))?;
-            bp.property(
-                view,
-                &TimeAxis::update_fields().with_view_range(TimeRange::EVERYTHING),
-            )?;
-            bp.property(
-                view,
-                &PlotLegend::update_fields().with_corner(Corner2D::LeftTop),
-            )
-        };
+    let (rec, storage) = blueprint_store(run.application_id)?;
+    let bp = BlueprintWriter::new(&rec);
+    let whole_run = |bp: &BlueprintWriter<'_>, view: &BlueprintItem| {
+        bp.whole_run(view, &[TIMELINE_TIME, TIMELINE_WHEEL_PASS])
+    };
 
     // Left: the plan, coloured by mu or by product, above the profiles.
     let curve_mu = bp.view(
@@ -95,22 +78,37 @@ pub(super) fn blueprint(run: &Run<'_>) -> Result<Vec<LogMsg>, RecordingStreamErr
         "Curve: product on the rail (mg, grey: below 1e-4 mg)",
         ["+ /curve/product/**"],
     )?;
+    for view in [&curve_mu, &curve_product] {
+        bp.property(view, &bounds(layout.plan_bounds))?;
+    }
     let curve = bp.container(
         ContainerKind::Tabs,
         "The section on its plan",
         vec![curve_mu, curve_product],
         |c| c,
     )?;
+    // Which colour is which rail, for the views' titles.
+    let rails = run
+        .tracks
+        .iter()
+        .map(|t| format!("{}: {}", t.label, t.color_name))
+        .collect::<Vec<_>>()
+        .join(", ");
     let profile_mu = bp.view(
         "2D",
-        "mu (rail colour) and adhesion T/N (paler) along d [m], target band shaded",
+        &format!("mu ({rails}) and adhesion T/N (paler) along d [m], target band shaded"),
         ["+ /profiles/mu/**"],
     )?;
     let profile_product = bp.view(
         "2D",
-        "Product on the rail (rail colour) and on the last wheel (paler), mg on decades, along d [m]",
+        &format!(
+            "Product on the rail ({rails}) and on the last wheel (paler), mg on decades, along d [m]"
+        ),
         ["+ /profiles/product/**"],
     )?;
+    for view in [&profile_mu, &profile_product] {
+        bp.property(view, &bounds(layout.profile_bounds))?;
+    }
     let profiles = bp.container(
         ContainerKind::Tabs,
         "Along the section",
@@ -180,7 +178,7 @@ pub(super) fn blueprint(run: &Run<'_>) -> Result<Vec<LogMsg>, RecordingStreamErr
             context.push(bp.view(
                 "2D",
                 &format!(
-                    "{}: mu history, a row per train (newest at the bottom), d in m across",
+                    "{}: mu history, a row per train (newest at the bottom), d in m across, colours as the curve's",
                     track.label
                 ),
                 [format!("+ {}/**", track.history)],
@@ -208,26 +206,13 @@ pub(super) fn blueprint(run: &Run<'_>) -> Result<Vec<LogMsg>, RecordingStreamErr
         |c| c.with_col_shares([0.55, 0.45].map(ColumnShare::from)),
     )?;
 
-    rec.log(
-        "viewport",
-        &ViewportBlueprint::new()
-            .with_root_container(RootContainer::from(root.id))
-            .with_auto_layout(AutoLayout::from(false))
-            .with_auto_views(AutoViews::from(false)),
-    )?;
-    for panel in ["blueprint_panel", "selection_panel"] {
-        rec.log(
-            panel,
-            &PanelBlueprint::new().with_state(PanelState::Collapsed),
-        )?;
-    }
+    bp.viewport(&root)?;
     // Follow the data: the viewer opens at the end of the run (0.36 has
     // no blueprint field for the time cursor itself).
     let span_s = run
         .time_span_ns
         .map_or(0.0, |[first, last]| (last - first) as f64 * 1e-9);
-    rec.log(
-        "time_panel",
+    bp.time_panel(
         &TimePanelBlueprint::new()
             .with_state(PanelState::Collapsed)
             .with_timeline(TimelineName::from(TIMELINE_TIME))
@@ -238,20 +223,113 @@ pub(super) fn blueprint(run: &Run<'_>) -> Result<Vec<LogMsg>, RecordingStreamErr
     Ok(storage.take())
 }
 
+/// A 2D view's visible range.
+fn bounds([x, y]: Bounds) -> VisualBounds2D {
+    VisualBounds2D::new(rerun::blueprint::components::VisualBounds2D(
+        rerun::datatypes::Range2D {
+            x_range: rerun::datatypes::Range1D(x),
+            y_range: rerun::datatypes::Range1D(y),
+        },
+    ))
+}
+
+/// A blueprint store in memory for `application_id`, and the stream that
+/// writes to it (on the `blueprint` timeline the viewer expects).
+pub fn blueprint_store(
+    application_id: &ApplicationId,
+) -> Result<(RecordingStream, rerun::sink::MemorySinkStorage), RecordingStreamError> {
+    let (rec, storage) = RecordingStreamBuilder::new(application_id.clone())
+        .recording_id(RecordingId::random())
+        .blueprint()
+        .memory()?;
+    rec.set_time_sequence("blueprint", 0);
+    Ok((rec, storage))
+}
+
+/// Sends a finished blueprint store into `rec` (the same `.rrd`) and makes
+/// it the active and default layout. `false` if the store is empty.
+pub fn send_blueprint(rec: &RecordingStream, blueprint: Vec<LogMsg>) -> bool {
+    let Some(blueprint_id) = blueprint.first().map(|msg| msg.store_id().clone()) else {
+        return false;
+    };
+    rec.send_blueprint(
+        blueprint,
+        rerun::external::re_log_types::BlueprintActivationCommand {
+            blueprint_id,
+            make_active: true,
+            make_default: true,
+        },
+    );
+    true
+}
+
 /// A view or container logged to a blueprint store.
-struct BlueprintItem {
+pub struct BlueprintItem {
     id: Uuid,
     path: String,
 }
 
 /// Logs containers, views and view properties as the viewer reads them.
-struct BlueprintWriter<'r> {
+pub struct BlueprintWriter<'r> {
     rec: &'r RecordingStream,
 }
 
-impl BlueprintWriter<'_> {
+impl<'r> BlueprintWriter<'r> {
+    /// Writes to a store from [`blueprint_store`].
+    pub fn new(rec: &'r RecordingStream) -> Self {
+        BlueprintWriter { rec }
+    }
+
+    /// A time series over the whole run on `timelines`, whatever the time
+    /// cursor (the default x range of 0.36 is a window of +-30 s around the
+    /// cursor once the data spans more), its legend top left.
+    pub fn whole_run(
+        &self,
+        view: &BlueprintItem,
+        timelines: &[&str],
+    ) -> Result<(), RecordingStreamError> {
+        let everything = timelines.iter().map(|&timeline| VisibleTimeRange {
+            timeline: timeline.into(),
+            range: TimeRange::EVERYTHING,
+        });
+        self.property(view, &VisibleTimeRanges::new(everything))?;
+        self.property(
+            view,
+            &TimeAxis::update_fields().with_view_range(TimeRange::EVERYTHING),
+        )?;
+        self.property(
+            view,
+            &PlotLegend::update_fields().with_corner(Corner2D::LeftTop),
+        )
+    }
+
+    /// The viewport's root and its panels: `root` the layout, no views
+    /// added by the viewer, the blueprint and selection panels collapsed.
+    pub fn viewport(&self, root: &BlueprintItem) -> Result<(), RecordingStreamError> {
+        self.rec.log(
+            "viewport",
+            &ViewportBlueprint::new()
+                .with_root_container(RootContainer::from(root.id))
+                .with_auto_layout(AutoLayout::from(false))
+                .with_auto_views(AutoViews::from(false)),
+        )?;
+        for panel in ["blueprint_panel", "selection_panel"] {
+            self.rec.log(
+                panel,
+                &PanelBlueprint::new().with_state(PanelState::Collapsed),
+            )?;
+        }
+        Ok(())
+    }
+
+    /// The time panel's own blueprint.
+    pub fn time_panel(&self, panel: &TimePanelBlueprint) -> Result<(), RecordingStreamError> {
+        self.rec.log("time_panel", panel)?;
+        Ok(())
+    }
+
     /// A view of `class` showing what the `+ /path` queries include.
-    fn view(
+    pub fn view(
         &self,
         class: &str,
         name: &str,
@@ -273,7 +351,7 @@ impl BlueprintWriter<'_> {
     }
 
     /// A view property: `view/<id>/<Archetype>`, where the viewer looks.
-    fn property<A: Archetype + AsComponents>(
+    pub fn property<A: Archetype + AsComponents>(
         &self,
         view: &BlueprintItem,
         property: &A,
@@ -285,7 +363,7 @@ impl BlueprintWriter<'_> {
         Ok(())
     }
 
-    fn container(
+    pub fn container(
         &self,
         kind: ContainerKind,
         name: &str,

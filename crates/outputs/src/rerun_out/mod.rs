@@ -55,6 +55,7 @@
 //! | `profiles/product/<rail>/<band>/rail`, `…/wheel` | `LineStrips2D` (decades of mg) | every snapshot |
 //! | `profiles/<view>/frame/**`                     | grid lines, labels, target band, applicators | static |
 //! | `history/<rail>/<band>/block_NNNN`             | `SegmentationImage` (u8 mu classes), `Transform3D` (static: d in m across) | every `E` trains |
+//! | `history/<rail>/<band>/distance`               | `Points2D` labelled every 100 m | static |
 //! | `sites/<site>/<rail>/<quantity>`               | `Scalars` [measured, simulated] + `SeriesPoints` | measurement (`time`) |
 //! | `applicator/<id>/<rail>`                       | `Scalars`: g since the previous train + `SeriesPoints` | train snapshot (`time`) |
 //! | `trains`                                       | `TextLog`              | train         |
@@ -109,6 +110,7 @@ mod section;
 mod sink;
 mod summary;
 
+pub use blueprint::{blueprint_store, send_blueprint, BlueprintItem, BlueprintWriter};
 pub use error::RerunError;
 pub use sink::RerunSink;
 

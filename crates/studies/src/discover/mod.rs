@@ -40,6 +40,7 @@ mod describe;
 mod diagnose;
 mod fit;
 pub(crate) mod report;
+mod residuals_rrd;
 mod screen;
 mod space;
 

@@ -8,22 +8,19 @@
 //! | `rmse_by_step.svg/.csv` | RMSE of the model after each step, and the noise estimate |
 //! | `residual_vs_<covariate>.svg/.csv` | the residual against the covariate it followed most closely at the start, before and after |
 //! | `mu_vs_distance.svg/.csv` | measured and simulated mu against the distance from the applicator, before and after, per rail |
-//! | `residuals.rrd` | the residuals before and after per site, rail and quantity on the `time` timeline (rerun) |
+//! | `residuals.rrd` | the finding, the residual against its strongest covariate per site and rail, and the residuals over time, before and after, in a layout that opens on them (rerun; see `residuals_rrd.rs`) |
 //!
 //! Every file is written under a temporary name and renamed when complete.
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
-use rerun::{EntityPath, EntityPathPart, RecordingStreamBuilder, RecordingStreamError, TimeCell};
-
 use super::data::{Dataset, Values};
 use super::diagnose::{self, CovariateScore};
 use super::fit::CrossValidation;
 use super::{fmt_param, Discovery, EffectParams};
 use crate::{Error, Result};
-use tortwin_outputs::files::{write_atomically, PartialFile};
-use tortwin_outputs::rerun_out::RerunError;
+use tortwin_outputs::files::write_atomically;
 use tortwin_plot::{Colour, LinePlot, Panel, ReferenceLine, Series};
 use tortwin_recording::Quantity;
 
@@ -87,7 +84,7 @@ pub(crate) fn write(dir: &Path, data: &Dataset, d: &Discovery) -> Result<Vec<Pat
     let md = markdown(data, d, residual_file.as_deref(), distance_file);
     put("report.md", md.as_bytes())?;
     let rrd = dir.join("residuals.rrd");
-    write_rrd(&rrd, data, d, &md)?;
+    super::residuals_rrd::write_rrd(&rrd, data, d, &md)?;
     written.push(rrd);
     Ok(written)
 }
@@ -601,80 +598,4 @@ fn markdown(data: &Dataset, d: &Discovery, residual_file: Option<&str>, distance
          (`rerun residuals.rrd`)."
     );
     md
-}
-
-fn entity(parts: &[&str]) -> EntityPath {
-    EntityPath::new(parts.iter().map(|p| EntityPathPart::new(*p)).collect())
-}
-
-/// The residuals before and after as a rerun recording: one time series per
-/// site, rail, quantity and model, on the `time` timeline. Written under a
-/// temporary name beside `path`, renamed when complete (as every output).
-fn write_rrd(path: &Path, data: &Dataset, d: &Discovery, md: &str) -> Result<()> {
-    let sdk = |what: &str, source: RecordingStreamError| RerunError::Sdk {
-        path: path.to_path_buf(),
-        what: what.to_owned(),
-        source: Box::new(source),
-    };
-    let mut file = PartialFile::beside(path)?;
-    let application_id =
-        rerun::ApplicationId::try_new("tortwin").map_err(|source| RerunError::ApplicationId {
-            path: path.to_path_buf(),
-            id: "tortwin".to_owned(),
-            source,
-        })?;
-    // Declared after `file`: dropped first on an error, the stream closes
-    // the temporary file before `file` deletes it.
-    let rec = RecordingStreamBuilder::new(application_id)
-        .recording_name("discover residuals")
-        .enabled(true)
-        .save(file.temp_path())
-        .map_err(|e| sdk("starting the recording", e))?;
-    rec.set_log_time_enabled(false);
-    if let Some(provenance) = &d.provenance {
-        tortwin_outputs::rerun_out::send_provenance(&rec, provenance)
-            .map_err(|e| sdk("writing the provenance", e))?;
-    }
-    rec.set_log_tick_enabled(false);
-    rec.log_static("report", &rerun::TextDocument::from_markdown(md))
-        .map_err(|e| sdk("the report", e))?;
-    let mut styled = std::collections::HashSet::new();
-    for (i, row) in data.rows.iter().enumerate() {
-        let site = data.site_name(row.site);
-        let rail = data.rail_name(row.rail);
-        let quantity = row.quantity.as_str();
-        let time_ns = i64::try_from(row.log_time_ns).map_err(|_| RerunError::OutOfRange {
-            path: path.to_path_buf(),
-            what: "log_time",
-            value: row.log_time_ns,
-        })?;
-        rec.set_time("time", TimeCell::from_timestamp_nanos_since_epoch(time_ns));
-        for (which, residual, colour) in [
-            ("before", &d.residual_before, [255, 127, 14]),
-            ("after", &d.residual_after, [31, 119, 180]),
-        ] {
-            let entity = entity(&["residuals", site, rail, quantity, which]);
-            if styled.insert(entity.clone()) {
-                rec.log_static(
-                    entity.clone(),
-                    &rerun::SeriesPoints::new()
-                        .with_names([format!("{site} {rail} {quantity} residual {which}")])
-                        .with_colors([rerun::Color::from_rgb(colour[0], colour[1], colour[2])])
-                        .with_marker_sizes([2.0]),
-                )
-                .map_err(|e| sdk(&format!("the style of {entity}"), e))?;
-            }
-            rec.log(entity, &rerun::Scalars::single(residual[i]))
-                .map_err(|e| sdk(&format!("{site} {rail} {quantity} residual {which}"), e))?;
-        }
-    }
-    rec.flush_blocking().map_err(|source| RerunError::Flush {
-        path: path.to_path_buf(),
-        source,
-    })?;
-    // Dropping the only handle joins the SDK's threads: the file is closed
-    // before it is renamed.
-    drop(rec);
-    file.commit()?;
-    Ok(())
 }
