@@ -584,9 +584,15 @@ fn the_command_writes_a_result_that_reads_back() {
     strategy::drive(&mut engine, &traffic, &Plan::Strategy(s), &mut last).unwrap();
     engine.finish(&mut last, 0).unwrap();
     let (wheel_pass, mu, d_m) = last.0.unwrap();
+    let section = &traffic.section;
     let expect = serde_json::json!({
         "rail": "high", "band": "top", "wheel_pass": wheel_pass,
         "mu": mu, "d_m": d_m, "blueprint": true,
+        "section": {
+            "length_m": section.length_m,
+            "curve_radius_m": section.curve_radius_m,
+            "rails": section.rails,
+        },
     });
     let expect_path = dir.path().join("expected.json");
     std::fs::write(&expect_path, expect.to_string()).unwrap();

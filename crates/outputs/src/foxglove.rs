@@ -134,13 +134,13 @@ struct KeyValuePair {
 
 /// `foxglove.LinePrimitive`.
 #[derive(Serialize)]
-struct LinePrimitive<'a> {
+struct LinePrimitive {
     #[serde(rename = "type")]
     kind: u8,
     pose: Pose,
     thickness: f64,
     scale_invariant: bool,
-    points: &'a RawValue,
+    points: Box<RawValue>,
     color: Color,
     colors: Box<RawValue>,
     indices: [u32; 0],
@@ -159,7 +159,7 @@ struct TextPrimitive {
 
 /// `foxglove.SceneEntity`.
 #[derive(Serialize)]
-struct SceneEntity<'a> {
+struct SceneEntity {
     timestamp: Time,
     frame_id: &'static str,
     id: String,
@@ -170,7 +170,7 @@ struct SceneEntity<'a> {
     cubes: [u8; 0],
     spheres: [u8; 0],
     cylinders: [u8; 0],
-    lines: Vec<LinePrimitive<'a>>,
+    lines: Vec<LinePrimitive>,
     triangles: [u8; 0],
     texts: Vec<TextPrimitive>,
     models: [u8; 0],
@@ -178,9 +178,9 @@ struct SceneEntity<'a> {
 
 /// `foxglove.SceneUpdate`.
 #[derive(Serialize)]
-pub(crate) struct SceneUpdate<'a> {
+pub(crate) struct SceneUpdate {
     deletions: [u8; 0],
-    entities: Vec<SceneEntity<'a>>,
+    entities: Vec<SceneEntity>,
 }
 
 /// Metres rounded to the millimetre (the plan is drawn, not surveyed).
@@ -190,9 +190,13 @@ fn mm(x: f64) -> f64 {
 
 /// What the scene needs of the section, computed once at `begin`.
 pub(crate) struct TrackScene {
-    /// Per track, the plan position of each grid point, as JSON: the same
-    /// text in every update, serialized once.
-    points: Vec<Box<RawValue>>,
+    /// Per track, the plan position of each grid point as JSON text,
+    /// serialized once.
+    points: Vec<Vec<String>>,
+    /// The longest step between two points of a line: where the class does
+    /// not change, a line of this step strays from the arc by at most a
+    /// fortieth of the drawn gauge.
+    max_step: usize,
     /// Per mu class, its colour as JSON.
     palette: Vec<String>,
     /// Reused text of an update's colours.
@@ -234,9 +238,22 @@ impl TrackScene {
                         }
                     })
                     .collect();
-                raw(&points)
+                points
+                    .iter()
+                    .map(|p| serde_json::to_string(p).unwrap_or_else(|_| "{}".to_owned()))
+                    .collect()
             })
             .collect();
+        // A chord of length s strays s²/(8R) from its arc.
+        let spacing = match grid_d_m {
+            [a, b, ..] => (b - a).max(1e-9),
+            _ => 1.0,
+        };
+        let max_step = match plan.curve_radius_m {
+            Some(radius) => ((8.0 * radius.abs() * plan.gauge_m / 40.0).sqrt() / spacing).floor(),
+            None => f64::INFINITY,
+        }
+        .clamp(1.0, 1e9) as usize;
         let palette = (0..=MU_CLASSES)
             .map(|class| {
                 serde_json::to_string(&Color::rgb(mu_class_color(class)))
@@ -275,6 +292,7 @@ impl TrackScene {
         ));
         TrackScene {
             points,
+            max_step,
             palette,
             colors: std::cell::RefCell::new(String::new()),
             ids,
@@ -297,7 +315,7 @@ impl TrackScene {
 
     /// The scene as it stands: every track that has had a snapshot, and the
     /// labels.
-    pub(crate) fn update(&self, log_time_ns: u64) -> SceneUpdate<'_> {
+    pub(crate) fn update(&self, log_time_ns: u64) -> SceneUpdate {
         let mut entities = Vec::with_capacity(self.ids.len() + 1);
         for (track, id) in self.ids.iter().enumerate() {
             let Some((train_id, wheel_pass)) = &self.last[track] else {
@@ -319,9 +337,9 @@ impl TrackScene {
                     pose: IDENTITY,
                     thickness: self.thickness_m,
                     scale_invariant: false,
-                    points: &self.points[track],
+                    points: self.points_json(track),
                     color: Color::rgb([128, 128, 128]),
-                    colors: self.colors_json(&self.classes[track]),
+                    colors: self.colors_json(track),
                     indices: [],
                 }],
                 texts: Vec::new(),
@@ -354,25 +372,54 @@ impl TrackScene {
 }
 
 impl TrackScene {
-    /// The colours of `classes` as a JSON array, from the palette's texts.
-    fn colors_json(&self, classes: &[u16]) -> Box<RawValue> {
+    /// The points a track's line is drawn through: both ends, both sides of
+    /// every change of class, and at least every `max_step` grid points.
+    /// Between two of them the class does not change (or changes once, over
+    /// one grid step): the line is coloured as per grid point with a
+    /// fraction of the points.
+    fn kept(&self, track: usize) -> impl Iterator<Item = usize> + '_ {
+        let classes = &self.classes[track];
+        let n = classes.len();
+        let mut last = 0;
+        (0..n).filter(move |&i| {
+            let keep = i == 0
+                || i + 1 == n
+                || classes[i] != classes[i - 1]
+                || classes[i] != classes[i + 1]
+                || i - last >= self.max_step;
+            if keep {
+                last = i;
+            }
+            keep
+        })
+    }
+
+    /// `items` of the kept points as a JSON array.
+    fn array<'s>(&self, track: usize, item: impl Fn(usize) -> &'s str) -> Box<RawValue> {
         let mut text = self.colors.borrow_mut();
         text.clear();
         text.push('[');
-        for (i, &class) in classes.iter().enumerate() {
-            if i > 0 {
+        for (k, i) in self.kept(track).enumerate() {
+            if k > 0 {
                 text.push(',');
             }
-            text.push_str(&self.palette[usize::from(class.min(MU_CLASSES))]);
+            text.push_str(item(i));
         }
         text.push(']');
         RawValue::from_string(text.clone()).unwrap_or_else(|_| empty_array())
     }
-}
 
-/// `value` as JSON text, once.
-fn raw<T: Serialize>(value: &T) -> Box<RawValue> {
-    serde_json::value::to_raw_value(value).unwrap_or_else(|_| empty_array())
+    fn points_json(&self, track: usize) -> Box<RawValue> {
+        let points = &self.points[track];
+        self.array(track, |i| points[i].as_str())
+    }
+
+    fn colors_json(&self, track: usize) -> Box<RawValue> {
+        let classes = &self.classes[track];
+        self.array(track, |i| {
+            self.palette[usize::from(classes[i].min(MU_CLASSES))].as_str()
+        })
+    }
 }
 
 fn empty_array() -> Box<RawValue> {
@@ -380,7 +427,7 @@ fn empty_array() -> Box<RawValue> {
 }
 
 /// An empty entity in the section frame that stays until replaced.
-fn entity<'a>(log_time_ns: u64, id: String) -> SceneEntity<'a> {
+fn entity(log_time_ns: u64, id: String) -> SceneEntity {
     SceneEntity {
         timestamp: Time::from_ns(log_time_ns),
         frame_id: FRAME_ID,

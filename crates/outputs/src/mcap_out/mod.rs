@@ -729,9 +729,11 @@ fn finite_all(
 pub const MU_DECIMALS: i32 = 4;
 /// Significant digits of the product masses in `/twin/field`.
 pub const MASS_DIGITS: i32 = 3;
-/// Product masses below this (mg) are written as 0 in `/twin/field`: a
-/// millionth of a milligram, ten orders of magnitude below a pulse.
-pub const MASS_FLOOR_MG: f64 = 1e-6;
+/// Product masses below this (mg) are written as 0 in `/twin/field`: by
+/// eq. 4 (km = 163 mg) such a mass moves mu by less than 3e-7, far below
+/// the 1e-4 mu is written to; it is also the lowest class of the product
+/// colour scale.
+pub const MASS_FLOOR_MG: f64 = 1e-4;
 
 /// How a number of `/twin/field` is rounded.
 #[derive(Debug, Clone, Copy)]
@@ -1064,7 +1066,7 @@ const MEASUREMENT_SCHEMA: &str = r##"{
 const FIELD_SCHEMA: &str = r##"{
   "$schema": "https://json-schema.org/draft/2020-12/schema",
   "title": "tortwin.Field",
-  "description": "The friction field of one rail band after a train. mu, adhesion and wheel_mass_mg are those seen by the train's last wheel on that rail; every array runs over the grid points grid_d_m of /twin/section. mu and adhesion are rounded to 1e-4, the masses to 4 significant digits, masses below 1e-6 mg written as 0.",
+  "description": "The friction field of one rail band after a train. mu, adhesion and wheel_mass_mg are those seen by the train's last wheel on that rail; every array runs over the grid points grid_d_m of /twin/section. mu and adhesion are rounded to 1e-4, the masses to 3 significant digits, masses below 1e-4 mg (which move mu by less than 3e-7) written as 0.",
   "type": "object",
   "required": ["train_id", "rail", "band", "wheel_pass", "mu", "adhesion",
                "rail_mass_mg", "wheel_mass_mg"],
@@ -1080,3 +1082,25 @@ const FIELD_SCHEMA: &str = r##"{
     "wheel_mass_mg": {"type": "array", "items": {"type": "number"}}
   }
 }"##;
+
+#[cfg(test)]
+mod tests {
+    use super::Precision;
+
+    #[test]
+    fn field_numbers_are_written_at_the_precision_the_data_has() {
+        let text = |p: Precision, x: f64| serde_json::to_string(&p.round(x)).unwrap();
+        let mu = Precision::Decimals(super::MU_DECIMALS);
+        assert_eq!(text(mu, 0.338_649_999_9), "0.3386");
+        assert_eq!(text(mu, 0.1 + 0.2), "0.3");
+        assert_eq!(text(mu, 0.580_000_000_1), "0.58");
+        let mass = Precision::MASS_MG;
+        // kg in, mg out, 3 significant digits.
+        assert_eq!(text(mass, 3.105_157e-6), "3.11");
+        assert_eq!(text(mass, 0.123_456), "123000.0");
+        assert_eq!(text(mass, 4.567_89e-9), "0.00457");
+        // Below 1e-4 mg: 0.
+        assert_eq!(text(mass, 0.99e-10), "0.0");
+        assert_eq!(text(mass, 1.0e-10), "0.0001");
+    }
+}

@@ -118,27 +118,36 @@ pub(super) fn send_rows(
     Ok(())
 }
 
-/// Logs the block being filled as a segmentation image (a row per train,
-/// a column per grid point), at the thread's time.
+/// Sends the block being filled as a segmentation image (a row per train,
+/// a column per grid point) at `time_ns` and `wheel_pass`: as a chunk of
+/// its own, not through the batcher, which would hold every block of a
+/// long run until the end (a block's few logs never reach its size limit).
 pub(super) fn log_block(
     rec: &RecordingStream,
     track: &mut TrackState,
     grid_len: usize,
+    time_ns: i64,
+    wheel_pass: i64,
 ) -> Result<(), RecordingStreamError> {
     let rows = track.block.len() / grid_len.max(1);
     if rows == 0 {
         return Ok(());
     }
     let path = block_path(&track.entities.history, track.block_index);
-    rec.log(
+    rec.send_columns(
         path,
-        &rerun::SegmentationImage::new(
+        [
+            TimeColumn::new_timestamp_nanos_since_epoch(TIMELINE_TIME, [time_ns]),
+            TimeColumn::new_sequence(TIMELINE_WHEEL_PASS, [wheel_pass]),
+        ],
+        rerun::SegmentationImage::new(
             track.block.clone(),
             rerun::components::ImageFormat::segmentation(
                 [grid_len as u32, rows as u32],
                 ChannelDatatype::U8,
             ),
-        ),
+        )
+        .columns_of_unit_batches()?,
     )?;
     track.block_unlogged = 0;
     Ok(())

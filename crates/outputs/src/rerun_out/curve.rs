@@ -71,6 +71,44 @@ impl Frames {
     }
 }
 
+/// What a 2D view shows: `[[x_min, x_max], [y_min, y_max]]`.
+pub(super) type Bounds = [[f64; 2]; 2];
+
+impl Frames {
+    /// The plan with its labels and colour bar, a margin around.
+    pub(super) fn plan_bounds(&self) -> Bounds {
+        let plan = &self.plan;
+        let (mut x, mut y) = (
+            [f64::INFINITY, f64::NEG_INFINITY],
+            [f64::INFINITY, f64::NEG_INFINITY],
+        );
+        for k in 0..=100 {
+            let d = self.length_m * f64::from(k) / 100.0;
+            for &o in &plan.rail_offsets_m {
+                let [px, py] = plan.xy(d, o);
+                x = [x[0].min(px), x[1].max(px)];
+                y = [y[0].min(py), y[1].max(py)];
+            }
+        }
+        let g = plan.gauge_m;
+        // The labels outside the rails, the colour bar and its labels below.
+        [
+            [x[0] - 3.0 * g, x[1] + 3.0 * g],
+            [y[0] - 3.0 * g, y[1] + 6.0 * g],
+        ]
+    }
+
+    /// A profile view: d from before 0 (the level labels) to past the end,
+    /// mu 0.85 to below 0 (the distance labels).
+    pub(super) fn profile_bounds(&self) -> Bounds {
+        let l = self.length_m;
+        [
+            [-0.08 * l, 1.03 * l],
+            [self.mu_y(PROFILE_MU_TOP + 0.05), self.mu_y(0.0) + 0.08 * l],
+        ]
+    }
+}
+
 fn rgba([r, g, b]: [u8; 3]) -> Rgba32 {
     Rgba32::from_rgb(r, g, b)
 }
@@ -162,8 +200,7 @@ pub(super) fn log_static(
                 path.clone(),
                 &rerun::LineStrips2D::update_fields()
                     .with_colors([color])
-                    .with_radii([Radius::new_ui_points(width)])
-                    .with_labels([state.entities.label.clone()]),
+                    .with_radii([Radius::new_ui_points(width)]),
             )?;
         }
     }
@@ -209,85 +246,107 @@ pub(super) fn log_static(
     }
     log_legends(rec, frames)?;
     log_profile_frames(rec, info, frames)?;
+    // The history's distance scale, above its first row: d in m.
+    let step = if frames.length_m >= 500.0 {
+        100.0
+    } else {
+        (frames.length_m / 10.0).max(1.0)
+    };
+    let (positions, labels): (Vec<[f32; 2]>, Vec<String>) = (0..)
+        .map(|k| f64::from(k) * step)
+        .take_while(|&d| d <= frames.length_m + 1e-9)
+        .map(|d| {
+            (
+                [d as f32, (-3.0 * frames.spacing_m) as f32],
+                format!("{d:.0} m"),
+            )
+        })
+        .unzip();
+    for state in tracks {
+        rec.log_static(
+            state
+                .entities
+                .history
+                .join(&rerun::EntityPath::from_single_string("distance")),
+            &rerun::Points2D::new(positions.clone())
+                .with_labels(labels.clone())
+                .with_show_labels(true)
+                .with_colors([Color::from_rgb(160, 160, 160)])
+                .with_radii([Radius::new_ui_points(1.0)]),
+        )?;
+    }
     Ok(())
 }
 
-/// A colour bar per layer, a row of boxes below the plan with a label at
-/// every tenth of mu (or every decade of mg).
+/// A colour bar per layer below the plan (rerun's 2D y points down): a
+/// short thick line per class, coloured by the class, with a label at every
+/// tenth of mu (or every decade of mg).
 fn log_legends(rec: &RecordingStream, frames: &Frames) -> Result<(), RecordingStreamError> {
     let plan = &frames.plan;
-    // Below everything the plan draws.
-    let mut low_y = f64::INFINITY;
+    let mut high_y = f64::NEG_INFINITY;
     let mut low_x = f64::INFINITY;
     let mut high_x = f64::NEG_INFINITY;
     for k in 0..=100 {
         let d = frames.length_m * f64::from(k) / 100.0;
         for &o in &plan.rail_offsets_m {
             let [x, y] = plan.xy(d, o);
-            low_y = low_y.min(y);
+            high_y = high_y.max(y);
             low_x = low_x.min(x);
             high_x = high_x.max(x);
         }
     }
-    let width = (high_x - low_x).max(plan.gauge_m);
-    let top = low_y - 3.0 * plan.gauge_m;
+    let width = (high_x - low_x).max(plan.gauge_m * 10.0);
     let height = plan.gauge_m;
-    let bar = |classes: u16, tick: &dyn Fn(u16) -> Option<String>| {
-        let step = width / f64::from(classes);
-        let mins: Vec<[f32; 2]> = (0..classes)
-            .map(|k| [(low_x + f64::from(k) * step) as f32, (top - height) as f32])
-            .collect();
-        let sizes = vec![[step as f32, height as f32]; usize::from(classes)];
-        let (ticks, labels): (Vec<[f32; 2]>, Vec<String>) = (1..=classes)
-            .filter_map(|c| {
-                tick(c).map(|label| {
-                    let x = low_x + f64::from(c - 1) * step;
-                    ([x as f32, (top - 2.0 * height) as f32], label)
-                })
-            })
-            .unzip();
-        (mins, sizes, ticks, labels)
-    };
+    let middle = high_y + 3.0 * height;
     let mu_tick = |c: u16| {
-        let low = f64::from(c - 1) / 100.0;
-        (c - 1).is_multiple_of(10).then(|| {
-            let [band_low, band_high] = TARGET_BAND;
-            let note = if (low - band_low).abs() < 1e-9 {
-                " (band from here)"
-            } else if (low - band_high).abs() < 1e-9 {
-                " (band to here)"
-            } else {
-                ""
-            };
-            format!("mu {low:.1}{note}")
-        })
+        (c - 1)
+            .is_multiple_of(10)
+            .then(|| format!("{:.1}", f64::from(c - 1) / 100.0))
     };
     let mass_tick = |c: u16| {
         (c >= 2 && (c - 2).is_multiple_of(4))
-            .then(|| format!("{:.0e} mg", 1e-4 * 10f64.powi(i32::from((c - 2) / 4))))
+            .then(|| format!("{:.0e}", 1e-4 * 10f64.powi(i32::from((c - 2) / 4))))
     };
-    for (classes, path, tick) in [
+    for (classes, path, title, tick) in [
         (
             MU_CLASSES,
             "curve/mu/legend",
+            format!(
+                "mu (target band {:.2}-{:.2})",
+                TARGET_BAND[0], TARGET_BAND[1]
+            ),
             &mu_tick as &dyn Fn(u16) -> Option<String>,
         ),
-        (MASS_CLASSES, "curve/product/legend", &mass_tick),
+        (
+            MASS_CLASSES,
+            "curve/product/legend",
+            "product on the rail, mg".to_owned(),
+            &mass_tick,
+        ),
     ] {
-        let (mins, sizes, ticks, labels) = bar(classes, tick);
+        let step = width / f64::from(classes);
+        let at = |c: u16| (low_x + f64::from(c - 1) * step) as f32;
+        let strips: Vec<Vec<[f32; 2]>> = (1..=classes)
+            .map(|c| vec![[at(c), middle as f32], [at(c) + step as f32, middle as f32]])
+            .collect();
         rec.log_static(
             format!("{path}/bar"),
-            &rerun::Boxes2D::from_mins_and_sizes(mins, sizes)
+            &rerun::LineStrips2D::new(strips)
                 .with_class_ids(1..=classes)
-                .with_radii([Radius::new_scene_units(0.0)]),
+                .with_radii([Radius::new_scene_units((height / 2.0) as f32)]),
         )?;
+        let (mut ticks, mut labels): (Vec<[f32; 2]>, Vec<String>) = (1..=classes)
+            .filter_map(|c| tick(c).map(|label| ([at(c), (middle + 1.5 * height) as f32], label)))
+            .unzip();
+        ticks.push([low_x as f32, (middle - 1.5 * height) as f32]);
+        labels.push(title);
         rec.log_static(
             format!("{path}/ticks"),
             &rerun::Points2D::new(ticks)
                 .with_labels(labels)
                 .with_show_labels(true)
                 .with_colors([Color::from_rgb(200, 200, 200)])
-                .with_radii([Radius::new_ui_points(1.5)]),
+                .with_radii([Radius::new_ui_points(1.0)]),
         )?;
     }
     Ok(())
@@ -384,27 +443,41 @@ fn log_profile_frames(
                 ]
             })
             .collect();
-        let labels: Vec<String> = info
-            .section
-            .applicators
-            .iter()
-            .map(|a| format!("{} ({:.0} m)", a.id, a.position_m))
-            .collect();
+        let orange = Color::from_rgb(230, 160, 30);
         rec.log_static(
             format!("{view}/frame/applicators"),
             &rerun::LineStrips2D::new(strips)
+                .with_colors([orange])
+                .with_radii([Radius::new_ui_points(1.0)]),
+        )?;
+        let (positions, labels): (Vec<[f32; 2]>, Vec<String>) = info
+            .section
+            .applicators
+            .iter()
+            .map(|a| {
+                (
+                    [a.position_m as f32, (top - 0.03 * length) as f32],
+                    format!("{} ({:.0} m)", a.id, a.position_m),
+                )
+            })
+            .unzip();
+        rec.log_static(
+            format!("{view}/frame/applicator_labels"),
+            &rerun::Points2D::new(positions)
                 .with_labels(labels)
                 .with_show_labels(true)
-                .with_colors([Color::from_rgb(230, 160, 30)])
+                .with_colors([orange])
                 .with_radii([Radius::new_ui_points(1.0)]),
         )?;
     }
     // The target band, shaded: a line as thick as the band along its middle.
     let [low, high] = TARGET_BAND;
     let middle = frames.mu_y((low + high) / 2.0) as f32;
+    // The line's round caps reach half its thickness beyond its ends.
+    let cap = ((high - low) / 2.0 * frames.profile_height) as f32;
     rec.log_static(
         "profiles/mu/frame/target_band",
-        &rerun::LineStrips2D::new([vec![[0.0, middle], [length as f32, middle]]])
+        &rerun::LineStrips2D::new([vec![[cap, middle], [length as f32 - cap, middle]]])
             .with_labels([format!("target band {low:.2}-{high:.2}")])
             .with_show_labels(true)
             .with_colors([Color::from_unmultiplied_rgba(60, 180, 90, 60)])

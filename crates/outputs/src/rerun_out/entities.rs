@@ -12,6 +12,8 @@ pub(super) struct TrackEntities {
     /// "high rail (top band)".
     pub(super) label: String,
     pub(super) color: Color,
+    /// "blue", for the views' titles.
+    pub(super) color_name: &'static str,
     /// The track's grid points on the plan, coloured by mu class.
     pub(super) curve_mu: EntityPath,
     /// The same points coloured by the rail product's class.
@@ -31,7 +33,8 @@ impl TrackEntities {
         let (rail, band) = (track.rail_name.as_str(), track.band.as_str());
         TrackEntities {
             label: track_label(track),
-            color: track_color(track, tracks),
+            color: track_color(track, tracks).0,
+            color_name: track_color(track, tracks).1,
             curve_mu: entity(&["curve", "mu", "tracks", rail, band]),
             curve_product: entity(&["curve", "product", "tracks", rail, band]),
             mu: entity(&["profiles", "mu", rail, band, "mu"]),
@@ -74,35 +77,35 @@ pub(super) fn quantity_label(quantity: Quantity) -> &'static str {
     }
 }
 
-const RAIL_COLORS: [(u8, u8, u8); 4] = [
-    (66, 135, 245),
-    (235, 87, 70),
-    (160, 100, 220),
-    (240, 200, 60),
+const RAIL_COLORS: [((u8, u8, u8), &str); 4] = [
+    ((66, 135, 245), "blue"),
+    ((235, 87, 70), "red"),
+    ((160, 100, 220), "purple"),
+    ((240, 200, 60), "yellow"),
 ];
 /// A second shade per rail, for its bands other than `top`.
-const BAND_COLORS: [(u8, u8, u8); 4] = [
-    (60, 200, 200),
-    (245, 160, 50),
-    (220, 120, 200),
-    (150, 200, 70),
+const BAND_COLORS: [((u8, u8, u8), &str); 4] = [
+    ((60, 200, 200), "cyan"),
+    ((245, 160, 50), "orange"),
+    ((220, 120, 200), "pink"),
+    ((150, 200, 70), "green"),
 ];
 
 pub(super) fn rail_color(rail: usize) -> Color {
-    let (r, g, b) = RAIL_COLORS[rail % RAIL_COLORS.len()];
+    let ((r, g, b), _) = RAIL_COLORS[rail % RAIL_COLORS.len()];
     Color::from_rgb(r, g, b)
 }
 
 /// The rail's colour for its `top` band (or its only one), a second shade
-/// for another band: the same rail reads alike in every plot.
-pub(super) fn track_color(track: &TrackInfo, tracks: &[TrackInfo]) -> Color {
+/// for another band: the same rail reads alike in every plot. With its name.
+pub(super) fn track_color(track: &TrackInfo, tracks: &[TrackInfo]) -> (Color, &'static str) {
     let single_band = tracks.iter().filter(|t| t.rail == track.rail).count() == 1;
-    if track.band == "top" || single_band {
-        rail_color(track.rail)
+    let ((r, g, b), name) = if track.band == "top" || single_band {
+        RAIL_COLORS[track.rail % RAIL_COLORS.len()]
     } else {
-        let (r, g, b) = BAND_COLORS[track.rail % BAND_COLORS.len()];
-        Color::from_rgb(r, g, b)
-    }
+        BAND_COLORS[track.rail % BAND_COLORS.len()]
+    };
+    (Color::from_rgb(r, g, b), name)
 }
 
 /// `color` blended towards white by `amount` (0 to 1).

@@ -6,7 +6,6 @@ use std::path::Path;
 use std::time::Duration;
 
 use rerun::components::{MarkerShape, TextLogLevel};
-use rerun::external::re_log_types::BlueprintActivationCommand;
 use rerun::log::ChunkBatcherConfig;
 use rerun::{
     ApplicationId, AsComponents, EntityPath, RecordingStream, RecordingStreamBuilder, TimeCell,
@@ -18,7 +17,7 @@ use tortwin_engine::sink::{
 use tortwin_recording::Direction;
 
 use super::batch::{block_path, log_block, send_rows, send_series, Series, TrackState};
-use super::blueprint::{blueprint, Layout, Measured, Run};
+use super::blueprint::{blueprint, send_blueprint, Layout, Measured, Run};
 use super::curve::{self, Frames, DECADE_TOLERANCE, MU_TOLERANCE};
 use super::entities::{entity, lighten, rail_color, TrackEntities, QUANTITIES};
 use super::error::{sdk_error, RerunError};
@@ -281,14 +280,14 @@ impl RerunSink {
             if track.block_unlogged == 0 {
                 continue;
             }
-            self.set_time(log_time_ns, Some(wheel_pass))?;
+            let time_ns = self.note_time(log_time_ns)?;
+            let wheel_pass = self.sequence(wheel_pass)?;
             let rec = self.rec.as_ref().ok_or_else(|| RerunError::Finished {
                 path: self.file.final_path().to_path_buf(),
             })?;
-            log_block(rec, &mut self.tracks[index], grid_len)
-                .map_err(sdk_error(self.file.final_path(), || {
-                    "last history".to_owned()
-                }))?;
+            log_block(rec, &mut self.tracks[index], grid_len, time_ns, wheel_pass).map_err(
+                sdk_error(self.file.final_path(), || "last history".to_owned()),
+            )?;
         }
         let rec = self.rec()?;
         let history = (self.options.history_rows, self.options.history_every.max(1));
@@ -314,19 +313,11 @@ impl RerunSink {
                 wheel_pass: self.wheel_pass,
             })
             .map_err(sdk_error(self.path(), || "blueprint".to_owned()))?;
-            let Some(blueprint_id) = blueprint.first().map(|msg| msg.store_id().clone()) else {
+            if !send_blueprint(rec, blueprint) {
                 return Err(RerunError::EmptyBlueprint {
                     path: self.path().to_path_buf(),
                 });
-            };
-            rec.send_blueprint(
-                blueprint,
-                BlueprintActivationCommand {
-                    blueprint_id,
-                    make_active: true,
-                    make_default: true,
-                },
-            );
+            }
         }
 
         let rec = self.rec.take().ok_or_else(|| RerunError::Finished {
@@ -351,8 +342,11 @@ impl Sink for RerunSink {
         self.profile_chunk_rows = (BATCH_CHUNK_BYTES as usize
             / (self.grid_len * 2 * std::mem::size_of::<u16>()).max(1))
         .clamp(1, SERIES_CHUNK_ROWS);
+        let frames = Frames::new(info);
         self.layout = Some(Layout {
             rails: info.section.rails.clone(),
+            plan_bounds: frames.plan_bounds(),
+            profile_bounds: frames.profile_bounds(),
             sites: info
                 .section
                 .sites
@@ -366,7 +360,6 @@ impl Sink for RerunSink {
             .enumerate()
             .map(|(i, t)| TrackState::new(i, TrackEntities::new(t, info.tracks)))
             .collect();
-        let frames = Frames::new(info);
         let rec = self.rec()?;
         log_description(rec, info).map_err(sdk_error(self.path(), || "section".to_owned()))?;
         curve::log_static(rec, info, &frames, &self.tracks)
@@ -573,7 +566,8 @@ impl Sink for RerunSink {
             track.last_train = Some((f.log_time_ns, wheel_pass));
             let full = track.block.len() >= block_rows * grid_len;
             if full || track.block_unlogged >= self.options.history_every.max(1) {
-                log_block(rec, track, grid_len).map_err(sdk_error(path, what))?;
+                log_block(rec, track, grid_len, time_ns, wheel_pass_seq)
+                    .map_err(sdk_error(path, what))?;
             }
             if full {
                 track.block.clear();
