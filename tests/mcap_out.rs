@@ -381,9 +381,23 @@ fn writes_every_topic_and_reads_back() {
     let entities = scene["entities"].as_array().unwrap();
     let ids: Vec<&str> = entities.iter().map(|e| e["id"].as_str().unwrap()).collect();
     assert_eq!(ids, ["track/high/top", "track/low/top", "labels"]);
+    // The low rail: a colour per point, the points where mu's class
+    // changes (its mu rises from 0.31 by 0.001 a point) and the ends.
     let line = &entities[1]["lines"][0];
-    assert_eq!(line["points"].as_array().unwrap().len(), 11);
-    assert_eq!(line["colors"].as_array().unwrap().len(), 11);
+    let points = line["points"].as_array().unwrap();
+    let colors = line["colors"].as_array().unwrap();
+    assert_eq!(points.len(), colors.len());
+    assert!((2..11).contains(&points.len()), "{}", points.len());
+    // d = 0 on the inner rail of a 30 m curve: offset -g/2, g = 2 m.
+    assert_eq!(points[0]["x"].as_f64(), Some(0.0));
+    assert_eq!(points[0]["y"].as_f64(), Some(-1.0));
+    // mu 0.31 is in the band: green.
+    let (r, g, b) = (
+        colors[0]["r"].as_f64().unwrap(),
+        colors[0]["g"].as_f64().unwrap(),
+        colors[0]["b"].as_f64().unwrap(),
+    );
+    assert!(g > r && g > b, "{r} {g} {b}");
     let texts: Vec<&str> = entities[2]["texts"]
         .as_array()
         .unwrap()

@@ -199,8 +199,6 @@ pub(crate) struct TrackScene {
     max_step: usize,
     /// Per mu class, its colour as JSON.
     palette: Vec<String>,
-    /// Reused text of an update's colours.
-    colors: std::cell::RefCell<String>,
     /// Per track, "track/<rail>/<band>".
     ids: Vec<String>,
     /// Per track, the mu class of each grid point at the last snapshot.
@@ -294,7 +292,6 @@ impl TrackScene {
             points,
             max_step,
             palette,
-            colors: std::cell::RefCell::new(String::new()),
             ids,
             classes: vec![Vec::new(); tracks.len()],
             last: vec![None; tracks.len()],
@@ -396,8 +393,7 @@ impl TrackScene {
 
     /// `items` of the kept points as a JSON array.
     fn array<'s>(&self, track: usize, item: impl Fn(usize) -> &'s str) -> Box<RawValue> {
-        let mut text = self.colors.borrow_mut();
-        text.clear();
+        let mut text = String::with_capacity(64 * self.classes[track].len());
         text.push('[');
         for (k, i) in self.kept(track).enumerate() {
             if k > 0 {
@@ -406,7 +402,7 @@ impl TrackScene {
             text.push_str(item(i));
         }
         text.push(']');
-        RawValue::from_string(text.clone()).unwrap_or_else(|_| empty_array())
+        RawValue::from_string(text).unwrap_or_else(|_| empty_array())
     }
 
     fn points_json(&self, track: usize) -> Box<RawValue> {
