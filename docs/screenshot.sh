@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
-# Regenerate docs/rerun_viewer.png: tortwin's demo recording in the rerun viewer,
+# Regenerate docs/rerun_viewer.png: tortwin's demo recording in the rerun viewer
+# (or, given another .rrd and PNG, e.g. out/clog/residuals.rrd docs/residuals_viewer.png),
 # rendered on a virtual X display with Mesa's software Vulkan (lavapipe/llvmpipe).
 #
 # Needs (Debian): apt-get update && apt-get install -y \
@@ -18,7 +19,7 @@
 # - `rerun --screenshot-to` also renders, but it shoots ~4 s after start, while
 #   the file is still loading; it then panics on exit ("Failed to take store
 #   hub"). Hence a real window, grabbed once the file has loaded.
-# - No clicks: the recording's blueprint (src/sink/rerun_out.rs) opens the
+# - No clicks: the recording's blueprint (crates/outputs/src/rerun_out/blueprint.rs) opens the
 #   time panel on `time` following the data, i.e. at the end of the run, and
 #   collapses the time, blueprint and selection panels. The only pointer move
 #   parks the pointer where it draws no tooltip or hover line.
