@@ -30,7 +30,7 @@ import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from check_rrd import CheckFailed, entities_in, verify_with_cli  # noqa: E402
+from check_rrd import CheckFailed, blueprint_cells, entities_in, verify_with_cli  # noqa: E402
 
 PLAY_PAUSED = 1
 
@@ -93,12 +93,7 @@ def check(report_dir: Path) -> list[str]:
     blueprints = reader.blueprints()
     if len(blueprints) != 1:
         raise CheckFailed(f"expected one blueprint store, found {blueprints}")
-    cells: dict[str, dict] = {}
-    for chunk in reader.stream(store=blueprints[0]):
-        for name, column in chunk.to_record_batch().to_pydict().items():
-            for cell in column:
-                if cell is not None:
-                    cells.setdefault(str(chunk.entity_path), {})[name] = cell
+    cells, _ = blueprint_cells(reader, blueprints[0])
     views = {
         path: (c["ViewBlueprint:class_identifier"][0], cells.get(f"{path}/ViewContents", {}).get("ViewContents:query", []))
         for path, c in cells.items()

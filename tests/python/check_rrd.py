@@ -412,6 +412,22 @@ def boundary_kinds(range_struct) -> list[tuple[str, str]]:
     return list(zip(*kinds))
 
 
+def blueprint_cells(reader, store) -> tuple[dict[str, dict], dict[str, list]]:
+    """A blueprint store as {entity path: {column: last non-null cell}}, and
+    its record batches per entity path."""
+    cells: dict[str, dict] = {}
+    batches: dict[str, list] = {}
+    for chunk in reader.stream(store=store):
+        path = str(chunk.entity_path)
+        batch = chunk.to_record_batch()
+        batches.setdefault(path, []).append(batch)
+        for name, column in batch.to_pydict().items():
+            for cell in column:
+                if cell is not None:
+                    cells.setdefault(path, {})[name] = cell
+    return cells, batches
+
+
 def blueprint_checks(reader, blueprints, store, expected: dict) -> list[str]:
     """The default layout: what the viewer opens, reached from the viewport.
 
@@ -428,16 +444,7 @@ def blueprint_checks(reader, blueprints, store, expected: dict) -> list[str]:
     if len(blueprints) != 1:
         raise CheckFailed(f"expected 1 blueprint store, found {blueprints}")
     # entity path -> {column: first cell}, and the raw record batches.
-    cells: dict[str, dict] = {}
-    batches: dict[str, list] = {}
-    for chunk in reader.stream(store=blueprints[0]):
-        path = str(chunk.entity_path)
-        batch = chunk.to_record_batch()
-        batches.setdefault(path, []).append(batch)
-        for name, column in batch.to_pydict().items():
-            for cell in column:
-                if cell is not None:
-                    cells.setdefault(path, {})[name] = cell
+    cells, batches = blueprint_cells(reader, blueprints[0])
 
     def component(path: str, name: str):
         value = cells.get(path, {}).get(name)

@@ -113,6 +113,34 @@ fn rgba([r, g, b]: [u8; 3]) -> Rgba32 {
     Rgba32::from_rgb(r, g, b)
 }
 
+/// Points with a label each, shown, in one colour.
+fn labelled(
+    positions: Vec<[f32; 2]>,
+    labels: Vec<String>,
+    color: Color,
+    radius: Radius,
+) -> rerun::Points2D {
+    rerun::Points2D::new(positions)
+        .with_labels(labels)
+        .with_show_labels(true)
+        .with_colors([color])
+        .with_radii([radius])
+}
+
+/// Distance labels every 100 m (or a tenth of a shorter section) at `y`.
+fn distance_ticks(length_m: f64, y: f64) -> (Vec<[f32; 2]>, Vec<String>) {
+    let step = if length_m >= 500.0 {
+        100.0
+    } else {
+        (length_m / 10.0).max(1.0)
+    };
+    (0..)
+        .map(|k| f64::from(k) * step)
+        .take_while(|&d| d <= length_m + 1e-9)
+        .map(|d| ([d as f32, y as f32], format!("{d:.0} m")))
+        .unzip()
+}
+
 /// The annotation context of the mu scale: class, label, colour.
 fn mu_context() -> rerun::AnnotationContext {
     rerun::AnnotationContext::new(
@@ -217,13 +245,10 @@ pub(super) fn log_static(
                 )
             })
             .unzip();
+        let marker = Radius::new_scene_units((gauge / 2.5) as f32);
         rec.log_static(
             entity(&["curve", layer, "applicators"]),
-            &rerun::Points2D::new(positions)
-                .with_labels(labels)
-                .with_show_labels(true)
-                .with_colors([Color::from_rgb(230, 160, 30)])
-                .with_radii([Radius::new_scene_units((gauge / 2.5) as f32)]),
+            &labelled(positions, labels, Color::from_rgb(230, 160, 30), marker),
         )?;
         let (positions, labels): (Vec<[f32; 2]>, Vec<String>) = section
             .sites
@@ -237,42 +262,25 @@ pub(super) fn log_static(
             .unzip();
         rec.log_static(
             entity(&["curve", layer, "sites"]),
-            &rerun::Points2D::new(positions)
-                .with_labels(labels)
-                .with_show_labels(true)
-                .with_colors([Color::from_rgb(90, 90, 90)])
-                .with_radii([Radius::new_scene_units((gauge / 2.5) as f32)]),
+            &labelled(positions, labels, Color::from_rgb(90, 90, 90), marker),
         )?;
     }
     log_legends(rec, frames)?;
     log_profile_frames(rec, info, frames)?;
     // The history's distance scale, above its first row: d in m.
-    let step = if frames.length_m >= 500.0 {
-        100.0
-    } else {
-        (frames.length_m / 10.0).max(1.0)
-    };
-    let (positions, labels): (Vec<[f32; 2]>, Vec<String>) = (0..)
-        .map(|k| f64::from(k) * step)
-        .take_while(|&d| d <= frames.length_m + 1e-9)
-        .map(|d| {
-            (
-                [d as f32, (-3.0 * frames.spacing_m) as f32],
-                format!("{d:.0} m"),
-            )
-        })
-        .unzip();
+    let (positions, labels) = distance_ticks(frames.length_m, -3.0 * frames.spacing_m);
     for state in tracks {
         rec.log_static(
             state
                 .entities
                 .history
                 .join(&rerun::EntityPath::from_single_string("distance")),
-            &rerun::Points2D::new(positions.clone())
-                .with_labels(labels.clone())
-                .with_show_labels(true)
-                .with_colors([Color::from_rgb(160, 160, 160)])
-                .with_radii([Radius::new_ui_points(1.0)]),
+            &labelled(
+                positions.clone(),
+                labels.clone(),
+                Color::from_rgb(160, 160, 160),
+                Radius::new_ui_points(1.0),
+            ),
         )?;
     }
     Ok(())
@@ -342,11 +350,12 @@ fn log_legends(rec: &RecordingStream, frames: &Frames) -> Result<(), RecordingSt
         labels.push(title);
         rec.log_static(
             format!("{path}/ticks"),
-            &rerun::Points2D::new(ticks)
-                .with_labels(labels)
-                .with_show_labels(true)
-                .with_colors([Color::from_rgb(200, 200, 200)])
-                .with_radii([Radius::new_ui_points(1.0)]),
+            &labelled(
+                ticks,
+                labels,
+                Color::from_rgb(200, 200, 200),
+                Radius::new_ui_points(1.0),
+            ),
         )?;
     }
     Ok(())
@@ -396,35 +405,17 @@ fn log_profile_frames(
             .unzip();
         rec.log_static(
             format!("{view}/frame/level_labels"),
-            &rerun::Points2D::new(positions)
-                .with_labels(labels)
-                .with_show_labels(true)
-                .with_colors([grid_color])
-                .with_radii([Radius::new_ui_points(0.5)]),
+            &labelled(positions, labels, grid_color, Radius::new_ui_points(0.5)),
         )?;
-        // Distance ticks every 100 m (or a tenth of the section if shorter).
-        let step = if length >= 500.0 {
-            100.0
-        } else {
-            (length / 10.0).max(1.0)
-        };
         let bottom = if view == "profiles/mu" {
             frames.mu_y(0.0)
         } else {
             frames.product_y(0.0)
         } + 0.04 * length;
-        let (positions, labels): (Vec<[f32; 2]>, Vec<String>) = (0..)
-            .map(|k| f64::from(k) * step)
-            .take_while(|&d| d <= length + 1e-9)
-            .map(|d| ([d as f32, bottom as f32], format!("{d:.0} m")))
-            .unzip();
+        let (positions, labels) = distance_ticks(length, bottom);
         rec.log_static(
             format!("{view}/frame/distance"),
-            &rerun::Points2D::new(positions)
-                .with_labels(labels)
-                .with_show_labels(true)
-                .with_colors([grid_color])
-                .with_radii([Radius::new_ui_points(1.0)]),
+            &labelled(positions, labels, grid_color, Radius::new_ui_points(1.0)),
         )?;
         // The applicators as vertical lines.
         let top = if view == "profiles/mu" {
@@ -463,11 +454,7 @@ fn log_profile_frames(
             .unzip();
         rec.log_static(
             format!("{view}/frame/applicator_labels"),
-            &rerun::Points2D::new(positions)
-                .with_labels(labels)
-                .with_show_labels(true)
-                .with_colors([orange])
-                .with_radii([Radius::new_ui_points(1.0)]),
+            &labelled(positions, labels, orange, Radius::new_ui_points(1.0)),
         )?;
     }
     // The target band, shaded: a line as thick as the band along its middle.
