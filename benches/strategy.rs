@@ -41,7 +41,7 @@ fn strategies_per_second(c: &mut Criterion) {
     group.throughput(Throughput::Elements(space.size() as u64));
     group.bench_function("default_space_grid_all_cores", |b| {
         b.iter(|| {
-            let searcher = Searcher::new(&traffic, &cfg, &target, &space, &|_| {});
+            let searcher = Searcher::new(&traffic, &cfg, &target, &space, &|_| Ok(()));
             searcher.run(Method::Grid, 0).expect("searches");
             searcher.evaluations()
         })

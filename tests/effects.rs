@@ -668,7 +668,7 @@ fn generic_terms_with_g_one_change_nothing_bit_for_bit() {
     let collect = |config: Option<PathBuf>| {
         let mut c = Recorder::default();
         let mut args = ReplayArgs::new(rec.clone());
-        args.config = config;
+        args.config = config.map(Into::into);
         replay(&args, &mut [&mut c]).unwrap();
         c.measurements
             .iter()
@@ -692,7 +692,7 @@ fn replay_with(config: &str) -> Recorder {
     let cfg = dir.path().join("c.toml");
     std::fs::write(&cfg, config).unwrap();
     let args = ReplayArgs {
-        config: Some(cfg),
+        config: Some(cfg.into()),
         ..ReplayArgs::new(curve_2day())
     };
     let mut c = Recorder::default();

@@ -22,7 +22,7 @@ fn check(name: &str) {
 fn check_with(name: &str, config: Option<&str>) {
     let mut collect = Recorder::default();
     let mut a = ReplayArgs::new(reference_dir().join(format!("{name}.mcap")));
-    a.config = config.map(|c| reference_dir().join(c));
+    a.config = config.map(|c| reference_dir().join(c).into());
     let summary = replay(&a, &mut [&mut collect]).unwrap();
     let expected =
         std::fs::read_to_string(reference_dir().join(format!("{name}.expected.csv"))).unwrap();

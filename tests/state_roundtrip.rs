@@ -155,7 +155,7 @@ fn split_and_compare(config: Option<&str>) {
         p
     });
     let args = |path: &Path| ReplayArgs {
-        config: config_path.clone(),
+        config: config_path.clone().map(Into::into),
         ..args(path)
     };
     let mut a = args(&whole_path);

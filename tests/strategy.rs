@@ -350,8 +350,10 @@ fn a_small_space_returns_the_best_of_every_strategy() {
     let target = Target::default();
     let space = Space::new(&small_space(), &traffic).unwrap();
     assert_eq!(space.size(), 18);
-    let study =
-        strategy::study(&traffic, &cfg, &target, &space, Method::Auto, 400, &|_| {}).unwrap();
+    let study = strategy::study(&traffic, &cfg, &target, &space, Method::Auto, 400, &|_| {
+        Ok(())
+    })
+    .unwrap();
     assert_eq!(study.method, Method::Grid);
     assert_eq!(study.search_evaluations, 18);
 
@@ -420,7 +422,7 @@ fn a_small_space_returns_the_best_of_every_strategy() {
     }
 
     // The optimiser on the same small space finds the same.
-    let searcher = Searcher::new(&traffic, &cfg, &target, &space, &|_| {});
+    let searcher = Searcher::new(&traffic, &cfg, &target, &space, &|_| Ok(()));
     searcher.run(Method::Optimiser, 0).unwrap();
     let found = searcher.all();
     assert_eq!(
@@ -452,9 +454,9 @@ fn the_optimiser_comes_within_two_percent_of_the_grid() {
     )
     .unwrap();
     assert_eq!(space.size(), 540);
-    let grid = Searcher::new(&traffic, &cfg, &target, &space, &|_| {});
+    let grid = Searcher::new(&traffic, &cfg, &target, &space, &|_| Ok(()));
     assert_eq!(grid.run(Method::Auto, 1000).unwrap(), Method::Grid);
-    let optimiser = Searcher::new(&traffic, &cfg, &target, &space, &|_| {});
+    let optimiser = Searcher::new(&traffic, &cfg, &target, &space, &|_| Ok(()));
     assert_eq!(optimiser.run(Method::Auto, 100).unwrap(), Method::Optimiser);
     let (all_g, all_o): (Vec<Arc<Evaluated>>, Vec<Arc<Evaluated>>) = (grid.all(), optimiser.all());
     let g = search::recommend(&all_g, &target).unwrap();

@@ -46,7 +46,7 @@ type Row = MeasurementRow;
 /// that collects every measurement.
 fn replay(recording: &Path, config: Option<&Path>) -> (RunSummary, Vec<Row>) {
     let mut args = ReplayArgs::new(recording);
-    args.config = config.map(Path::to_path_buf);
+    args.config = config.map(|p| p.to_path_buf().into());
     let mut rows = Recorder::default();
     let summary = replay_job(&args, &mut [&mut rows]).unwrap();
     (summary, rows.measurements)

@@ -75,6 +75,9 @@ pub enum TableError {
 pub struct Formats {
     pub parquet: bool,
     pub csv: bool,
+    /// Keep the record batches in memory ([`TableSink::into_tables`]), for
+    /// the Python package.
+    pub memory: bool,
 }
 
 /// Options of the tables.
@@ -94,6 +97,7 @@ impl Default for TableOptions {
             formats: Formats {
                 parquet: true,
                 csv: true,
+                memory: false,
             },
             band: (0.30, 0.40),
             field: true,
@@ -128,6 +132,8 @@ struct Table {
     rows: usize,
     parquet: Option<(PartialFile, ArrowWriter<BufWriter<File>>)>,
     csv: Option<(PartialFile, csv::Writer<BufWriter<File>>)>,
+    /// The batches kept in memory (`Formats::memory`).
+    batches: Option<Vec<RecordBatch>>,
 }
 
 impl Table {
@@ -203,6 +209,7 @@ impl Table {
             rows: 0,
             parquet,
             csv,
+            batches: formats.memory.then(Vec::new),
         })
     }
 
@@ -258,22 +265,30 @@ impl Table {
             })
             .collect();
         self.rows = 0;
+        if self.parquet.is_none() && self.batches.is_none() {
+            return Ok(());
+        }
+        let batch = RecordBatch::try_new(self.schema.clone(), arrays).map_err(|source| {
+            TableError::Arrow {
+                table: self.name,
+                source,
+            }
+        })?;
         if let Some((partial, writer)) = &mut self.parquet {
-            let batch = RecordBatch::try_new(self.schema.clone(), arrays).map_err(|source| {
-                TableError::Arrow {
-                    table: self.name,
-                    source,
-                }
-            })?;
             writer.write(&batch).map_err(|source| TableError::Parquet {
                 path: partial.final_path().to_path_buf(),
                 source,
             })?;
         }
+        if let Some(batches) = &mut self.batches {
+            batches.push(batch);
+        }
         Ok(())
     }
 
-    fn finish(mut self) -> Result<(), TableError> {
+    /// Writes what is left and moves the files into place; the batches in
+    /// memory stay.
+    fn finish(&mut self) -> Result<(), TableError> {
         self.flush()?;
         if let Some((mut partial, writer)) = self.parquet.take() {
             writer.close().map_err(|source| TableError::Parquet {
@@ -507,19 +522,41 @@ impl Sink for TableSink {
 
     fn finish(&mut self, _summary: &RunSummary) -> SinkResult {
         // The tables move into place together, at the end of a good run.
-        let placeholder = || Table {
-            name: "",
-            schema: Arc::new(Schema::empty()),
-            columns: Vec::new(),
-            rows: 0,
-            parquet: None,
-            csv: None,
-        };
-        std::mem::replace(&mut self.measurements, placeholder()).finish()?;
-        if let Some(field) = self.field.take() {
+        self.measurements.finish()?;
+        if let Some(field) = &mut self.field {
             field.finish()?;
         }
-        std::mem::replace(&mut self.trains, placeholder()).finish()?;
+        self.trains.finish()?;
         Ok(())
+    }
+}
+
+/// A table kept in memory: its schema and record batches.
+pub struct MemoryTable {
+    pub schema: Arc<Schema>,
+    pub batches: Vec<RecordBatch>,
+}
+
+/// The tables of a run kept in memory (`Formats::memory`).
+pub struct MemoryTables {
+    pub measurements: MemoryTable,
+    /// `None` when the options left the field out.
+    pub field: Option<MemoryTable>,
+    pub trains: MemoryTable,
+}
+
+impl TableSink {
+    /// The tables kept in memory, after [`Sink::finish`] (a table whose
+    /// options did not keep it has no batches).
+    pub fn into_tables(self) -> MemoryTables {
+        let keep = |t: Table| MemoryTable {
+            schema: t.schema,
+            batches: t.batches.unwrap_or_default(),
+        };
+        MemoryTables {
+            measurements: keep(self.measurements),
+            field: self.field.map(keep),
+            trains: keep(self.trains),
+        }
     }
 }

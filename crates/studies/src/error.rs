@@ -127,6 +127,9 @@ pub enum Error {
     /// the input.
     #[error("{0}")]
     Inconsistent(String),
+    /// Whoever shows the progress asked the job to stop.
+    #[error("interrupted")]
+    Cancelled,
     /// `what` the study was doing when `source` stopped it.
     #[error("{what}")]
     Context {
@@ -161,7 +164,8 @@ impl Error {
             | Error::NoFitPoint
             | Error::NotSimulated { .. }
             | Error::NotFinite { .. }
-            | Error::Inconsistent(_) => false,
+            | Error::Inconsistent(_)
+            | Error::Cancelled => false,
         }
     }
 

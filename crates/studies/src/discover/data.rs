@@ -222,11 +222,12 @@ impl Dataset {
     }
 
     /// The section's name of a rail.
-    pub(crate) fn rail_name(&self, rail: usize) -> &str {
+    pub fn rail_name(&self, rail: usize) -> &str {
         self.section.rails.get(rail).map_or("?", String::as_str)
     }
 
-    pub(crate) fn site_name(&self, site: usize) -> &str {
+    /// The section's id of a measurement site.
+    pub fn site_name(&self, site: usize) -> &str {
         self.section.sites.get(site).map_or("?", |s| s.id.as_str())
     }
 

@@ -42,6 +42,7 @@ use serde::Serialize;
 use super::data::Dataset;
 use super::space::GenericSlot;
 use crate::error::optimiser;
+use crate::progress::Progress;
 use crate::{Error, Result};
 use tortwin_model::config::{Effects, ModelConfig};
 use tortwin_model::effects::Named;
@@ -261,11 +262,13 @@ pub(super) struct Evaluator<'a> {
     pub(super) active: Vec<bool>,
     cache: Mutex<HashMap<Vec<u64>, Arc<Evaluation>>>,
     runs: AtomicUsize,
+    /// Asked before every engine run whether to stop.
+    progress: &'a dyn Progress,
 }
 
 impl<'a> Evaluator<'a> {
     /// `active`: the rows that count (every row when empty).
-    pub(super) fn new(data: &'a Dataset, active: Vec<bool>) -> Self {
+    pub(super) fn new(data: &'a Dataset, active: Vec<bool>, progress: &'a dyn Progress) -> Self {
         let active = if active.len() == data.rows.len() {
             active
         } else {
@@ -292,6 +295,7 @@ impl<'a> Evaluator<'a> {
             active,
             cache: Mutex::new(HashMap::new()),
             runs: AtomicUsize::new(0),
+            progress,
         }
     }
 
@@ -319,6 +323,7 @@ impl<'a> Evaluator<'a> {
 
     /// The simulated value of every row with `cfg`: one engine run, counted.
     pub(super) fn simulate(&self, cfg: &ModelConfig) -> Result<Vec<f64>> {
+        crate::progress::check(self.progress)?;
         let simulated = self.data.simulate(cfg)?;
         self.runs.fetch_add(1, Ordering::Relaxed);
         Ok(simulated)

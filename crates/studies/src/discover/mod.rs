@@ -391,7 +391,7 @@ pub fn discover(
         .map(|(r, s)| r.measured - s)
         .collect();
     let outliers = screen::outliers(data, &raw_residual);
-    let ev = Evaluator::new(data, outliers.active.clone());
+    let ev = Evaluator::new(data, outliers.active.clone(), progress);
     let n = ev.n_active();
     let drivers = Drivers::of(data);
 

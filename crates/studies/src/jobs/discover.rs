@@ -6,7 +6,7 @@ use std::path::PathBuf;
 use tortwin_outputs::provenance::Provenance;
 
 use crate::discover::{self, data::Dataset, Discovery, Options, Progress, Silent};
-use crate::Result;
+use crate::{Error, Result};
 use tortwin_model::error::UsageError;
 
 #[derive(Debug, Clone)]
@@ -17,7 +17,7 @@ pub struct DiscoverArgs {
     /// The starting model, overlaid on the built-in defaults (TOML). Effects
     /// already in it stay on and are refitted.
     #[cfg_attr(feature = "cli", arg(long))]
-    pub config: Option<PathBuf>,
+    pub config: Option<super::ConfigSource>,
     /// The report directory: report.json, report.md with its plots,
     /// model.toml and residuals.rrd.
     #[cfg_attr(feature = "cli", arg(long))]
@@ -48,6 +48,12 @@ pub fn run(args: &DiscoverArgs) -> Result<Discovery> {
 
 /// [`run`], telling `progress` the stage and the engine runs done.
 pub fn run_with(args: &DiscoverArgs, progress: &dyn Progress) -> Result<Discovery> {
+    run_with_data(args, progress).map(|(discovery, _)| discovery)
+}
+
+/// [`run_with`], also returning the measurements read (the rows behind
+/// `Discovery::residual_before` and `residual_after`).
+pub fn run_with_data(args: &DiscoverArgs, progress: &dyn Progress) -> Result<(Discovery, Dataset)> {
     if !(args.bic_threshold.is_finite() && args.bic_threshold <= 0.0) {
         return Err(UsageError(format!(
             "--bic-threshold {}: must be a finite number <= 0",
@@ -76,7 +82,7 @@ pub fn run_with(args: &DiscoverArgs, progress: &dyn Progress) -> Result<Discover
         ))
         .into());
     }
-    let start = super::load_config(args.config.as_deref())?;
+    let start = super::load_config(args.config.as_ref())?;
     let options = Options {
         bic_threshold: args.bic_threshold,
         min_excess_share: args.min_excess_share,
@@ -87,14 +93,19 @@ pub fn run_with(args: &DiscoverArgs, progress: &dyn Progress) -> Result<Discover
     let data = Dataset::read(&args.recording)?;
 
     let work = || discover::discover(&data, &start, &options, progress);
-    let mut discovery = super::with_threads(args.threads, work)
-        .map_err(|e| e.context(format!("discover on {}", args.recording.display())))?;
+    let mut discovery = super::with_threads(args.threads, work).map_err(|e| {
+        if progress.cancelled() {
+            Error::Cancelled
+        } else {
+            e.context(format!("discover on {}", args.recording.display()))
+        }
+    })?;
     let mut inputs = vec![args.recording.as_path()];
-    inputs.extend(args.config.as_deref());
+    inputs.extend(args.config.as_ref().and_then(super::ConfigSource::path));
     discovery.provenance = Some(Provenance::of_run(&inputs, &start)?);
     progress.stage("writing the report");
     discover::report::write(&args.report, &data, &discovery)?;
-    Ok(discovery)
+    Ok((discovery, data))
 }
 
 /// The few lines printed at the end.

@@ -13,15 +13,69 @@ pub mod summary;
 pub mod synth;
 pub mod tables;
 
+use std::path::{Path, PathBuf};
+
 use tortwin_model::config::ModelConfig;
 use tortwin_model::error::ConfigError;
 
 use crate::{Error, Result};
 
-/// Loads the model configuration: the defaults, overlaid by `path`.
-pub(crate) fn load_config(path: Option<&std::path::Path>) -> Result<ModelConfig, ConfigError> {
-    Ok(match path {
-        Some(p) => ModelConfig::from_file(p)?,
+/// Where a job's model configuration comes from: the keys it changes are
+/// overlaid on the built-in defaults.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum ConfigSource {
+    /// A TOML file (`--config PATH`).
+    File(PathBuf),
+    /// TOML text held in memory (the Python package's dictionaries); `name`
+    /// stands for it in error messages.
+    Text { text: String, name: String },
+}
+
+impl ConfigSource {
+    /// The file, when the configuration is one (for provenance and the
+    /// commands a report suggests).
+    pub fn path(&self) -> Option<&Path> {
+        match self {
+            ConfigSource::File(p) => Some(p),
+            ConfigSource::Text { .. } => None,
+        }
+    }
+
+    /// What error messages call it.
+    pub fn name(&self) -> String {
+        match self {
+            ConfigSource::File(p) => p.display().to_string(),
+            ConfigSource::Text { name, .. } => name.clone(),
+        }
+    }
+
+    /// The defaults overlaid with this configuration.
+    pub fn load(&self) -> Result<ModelConfig, ConfigError> {
+        match self {
+            ConfigSource::File(p) => ModelConfig::from_file(p),
+            ConfigSource::Text { text, name } => ModelConfig::from_overlay_str(text, name),
+        }
+    }
+}
+
+impl From<PathBuf> for ConfigSource {
+    fn from(path: PathBuf) -> Self {
+        ConfigSource::File(path)
+    }
+}
+
+/// `--config PATH` on the command line.
+impl std::str::FromStr for ConfigSource {
+    type Err = std::convert::Infallible;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        Ok(ConfigSource::File(s.into()))
+    }
+}
+
+/// Loads the model configuration: the defaults, overlaid by `source`.
+pub(crate) fn load_config(source: Option<&ConfigSource>) -> Result<ModelConfig, ConfigError> {
+    Ok(match source {
+        Some(s) => s.load()?,
         None => ModelConfig::default(),
     })
 }

@@ -24,7 +24,7 @@ pub struct PaperArgs {
     pub out: PathBuf,
     /// Model configuration overlaid on the built-in defaults (TOML).
     #[cfg_attr(feature = "cli", arg(long))]
-    pub config: Option<PathBuf>,
+    pub config: Option<super::ConfigSource>,
 }
 
 /// One figure written by [`paper`].
@@ -63,7 +63,7 @@ const MU_RANGE: (f64, f64) = (0.1, 0.65);
 
 /// Computes and writes every figure into `args.out`.
 pub fn paper(args: &PaperArgs) -> Result<PaperReport> {
-    let cfg = super::load_config(args.config.as_deref())?;
+    let cfg = super::load_config(args.config.as_ref())?;
     let out = &args.out;
     std::fs::create_dir_all(out).map_err(|source| Error::Io {
         what: "cannot create",

@@ -25,7 +25,7 @@ pub struct ReplayArgs {
     /// Model configuration overlaid on the built-in defaults (TOML; only
     /// the keys it changes, e.g. a `tortwin discover` model.toml).
     #[cfg_attr(feature = "cli", arg(long))]
-    pub config: Option<PathBuf>,
+    pub config: Option<super::ConfigSource>,
     /// Write the MCAP output here (Foxglove-readable).
     #[cfg_attr(feature = "cli", arg(long))]
     pub out_mcap: Option<PathBuf>,
@@ -65,7 +65,7 @@ impl ReplayArgs {
 }
 
 /// Reads a state written by `--state-out`.
-fn read_state(path: &Path) -> Result<EngineState, InputError> {
+pub fn read_state(path: &Path) -> Result<EngineState, InputError> {
     let text = std::fs::read_to_string(path)
         .map_err(|e| InputError::file(path, format!("cannot read the state: {e}")))?;
     let state: EngineState = serde_json::from_str(&text)
@@ -85,25 +85,75 @@ pub fn replay_with(
     extra: &mut [&mut dyn Sink],
     progress: &dyn Progress,
 ) -> Result<RunSummary> {
-    let cfg = load_config(args.config.as_deref())?;
-    for (a, b) in [
-        (&args.out_mcap, &args.out_rrd),
-        (&args.state_out, &args.out_mcap),
-        (&args.state_out, &args.out_rrd),
-    ] {
-        if let (Some(a), Some(b)) = (a, b) {
-            if a == b {
-                return Err(
-                    UsageError(format!("two outputs would be written to {}", a.display())).into(),
-                );
+    if let Some(path) = &args.state_out {
+        for other in [&args.out_mcap, &args.out_rrd].into_iter().flatten() {
+            if other == path {
+                return Err(UsageError(format!(
+                    "two outputs would be written to {}",
+                    path.display()
+                ))
+                .into());
             }
         }
     }
     let saved = args.state_in.as_deref().map(read_state).transpose()?;
-    let ctx = match &saved {
+    let start = match (&saved, &args.state_in) {
+        (Some(state), Some(path)) => Some(SavedState {
+            state,
+            name: path.display().to_string(),
+            file: Some(path),
+        }),
+        _ => None,
+    };
+    let run = replay_from(args, start, extra, progress)?;
+    if let Some(path) = &args.state_out {
+        let text = serde_json::to_string(&run.state).map_err(|source| Error::Json {
+            what: "the state",
+            source,
+        })?;
+        tortwin_outputs::files::write_atomically(path, text.as_bytes())?;
+    }
+    Ok(run.summary)
+}
+
+/// A state to start a replay from.
+pub struct SavedState<'a> {
+    pub state: &'a EngineState,
+    /// What error messages call it (the file's path, "the state passed in").
+    pub name: String,
+    /// The file it was read from, for the provenance.
+    pub file: Option<&'a Path>,
+}
+
+/// What a replay leaves: its summary and the section's state at the end
+/// (what `--state-out` writes).
+pub struct Replayed {
+    pub summary: RunSummary,
+    pub state: EngineState,
+}
+
+/// Replays `args.recording` from `start` (or a fresh section), into the
+/// outputs the arguments ask for and `extra`; `args.state_in` and
+/// `args.state_out` are the caller's (see [`replay_with`]). Stops with
+/// [`Error::Cancelled`] when `progress` says so.
+pub fn replay_from(
+    args: &ReplayArgs,
+    start: Option<SavedState<'_>>,
+    extra: &mut [&mut dyn Sink],
+    progress: &dyn Progress,
+) -> Result<Replayed> {
+    let cfg = load_config(args.config.as_ref())?;
+    if let (Some(a), Some(b)) = (&args.out_mcap, &args.out_rrd) {
+        if a == b {
+            return Err(
+                UsageError(format!("two outputs would be written to {}", a.display())).into(),
+            );
+        }
+    }
+    let ctx = match &start {
         Some(s) => ReaderContext {
-            origin_ns: Some(s.origin_ns),
-            occupied_until_s: s.occupied_until_s.unwrap_or(f64::NEG_INFINITY),
+            origin_ns: Some(s.state.origin_ns),
+            occupied_until_s: s.state.occupied_until_s.unwrap_or(f64::NEG_INFINITY),
         },
         None => ReaderContext::default(),
     };
@@ -113,23 +163,23 @@ pub fn replay_with(
         ..EngineOptions::default()
     };
     let section = reader.section().clone();
-    let source = args.config.as_deref().map_or_else(
+    let source = args.config.as_ref().map_or_else(
         || "built-in defaults".to_string(),
-        |p| p.display().to_string(),
+        super::ConfigSource::name,
     );
     tortwin_engine::generic::check_terms_against(&cfg.effects.generic, &section, &source)?;
     let provenance = if args.out_mcap.is_some() || args.out_rrd.is_some() {
         let mut inputs = vec![args.recording.as_path()];
-        inputs.extend(args.config.as_deref());
-        inputs.extend(args.state_in.as_deref());
+        inputs.extend(args.config.as_ref().and_then(super::ConfigSource::path));
+        inputs.extend(start.as_ref().and_then(|s| s.file));
         Some(Provenance::of_run(&inputs, &cfg)?)
     } else {
         None
     };
-    let mut engine = match (&saved, &args.state_in) {
-        (Some(s), Some(path)) => Engine::from_state(section, cfg, opts, s)
-            .map_err(|e| InputError::file(path, e.to_string()))?,
-        _ => Engine::new(section, cfg, opts, reader.origin_ns()),
+    let mut engine = match &start {
+        Some(s) => Engine::from_state(section, cfg, opts, s.state)
+            .map_err(|e| InputError::file(Path::new(&s.name), e.to_string()))?,
+        None => Engine::new(section, cfg, opts, reader.origin_ns()),
     };
 
     let mut mcap = args
@@ -170,6 +220,7 @@ pub fn replay_with(
         messages += 1;
         if messages.is_multiple_of(1024) {
             progress.done(messages);
+            crate::progress::check(progress)?;
         }
         engine
             .push(event, &mut fanout)
@@ -180,15 +231,10 @@ pub fn replay_with(
     }
     let summary = engine.finish(&mut fanout, reader.unknown_topic_messages())?;
     progress.done(reader.message_count());
-
-    if let Some(path) = &args.state_out {
-        let text = serde_json::to_string(&engine.state()).map_err(|source| Error::Json {
-            what: "the state",
-            source,
-        })?;
-        tortwin_outputs::files::write_atomically(path, text.as_bytes())?;
-    }
-    Ok(summary)
+    Ok(Replayed {
+        summary,
+        state: engine.state(),
+    })
 }
 
 /// The lines that say where the outputs are and how to open them.

@@ -32,7 +32,7 @@ pub struct StrategyArgs {
     /// The model, overlaid on the built-in defaults (TOML), found effects
     /// included (e.g. a `tortwin discover` model.toml).
     #[cfg_attr(feature = "cli", arg(long))]
-    pub config: Option<PathBuf>,
+    pub config: Option<super::ConfigSource>,
     /// The target band, the recommendation's limits and the space of
     /// strategies (TOML: [target], [target.band], [space], [search]).
     /// Default: band 0.30-0.40, 0.05-0.8 g, every 1-8 axles, one or two
@@ -179,7 +179,7 @@ pub fn run_with(args: &StrategyArgs, progress: &dyn Progress) -> Result<(Traffic
     if args.synth && args.recording.is_some() {
         return Err(UsageError("give a recording or --synth, not both".into()).into());
     }
-    let cfg = super::load_config(args.config.as_deref())?;
+    let cfg = super::load_config(args.config.as_ref())?;
     let file = match &args.space {
         Some(path) => StrategyFile::read(path)?,
         None => StrategyFile::default(),
@@ -217,7 +217,10 @@ pub fn run_with(args: &StrategyArgs, progress: &dyn Progress) -> Result<(Traffic
         &format!("evaluating strategies ({} in the space)", space.size()),
         space.size() as u64,
     );
-    let done = |n: usize| progress.done(n as u64);
+    let done = |n: usize| {
+        progress.done(n as u64);
+        crate::progress::check(progress)
+    };
     let work = || {
         strategy::study(
             &traffic,
@@ -229,15 +232,20 @@ pub fn run_with(args: &StrategyArgs, progress: &dyn Progress) -> Result<(Traffic
             &done,
         )
     };
-    let study = super::with_threads(args.threads, work)
-        .map_err(|e| e.context(format!("strategy study on {}", traffic.source)))?;
+    let study = super::with_threads(args.threads, work).map_err(|e| {
+        if progress.cancelled() {
+            Error::Cancelled
+        } else {
+            e.context(format!("strategy study on {}", traffic.source))
+        }
+    })?;
     progress.stage("writing the report");
     let traffic_path = match &args.recording {
         Some(path) if !args.synth => path.clone(),
         _ => args.out.join("traffic.mcap"),
     };
     let mut inputs = vec![traffic_path.as_path()];
-    inputs.extend(args.config.as_deref());
+    inputs.extend(args.config.as_ref().and_then(super::ConfigSource::path));
     inputs.extend(args.space.as_deref());
     let provenance = Provenance::of_run(&inputs, &cfg)?;
     strategy::report::write(

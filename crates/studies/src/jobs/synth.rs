@@ -105,7 +105,7 @@ pub struct SynthArgs {
     pub seed: u64,
     /// Truth model configuration overlaid on the defaults (TOML).
     #[cfg_attr(feature = "cli", arg(long))]
-    pub truth_config: Option<PathBuf>,
+    pub truth_config: Option<super::ConfigSource>,
     /// A hidden effect in the truth model, after --truth-config; repeatable.
     /// E.g. `rail_ageing:tau_s=7200`, `wheel_edge_reservoir:alpha=0.2,r=0.05`,
     /// `bogie_bands`.
@@ -195,7 +195,7 @@ fn prepare(args: &SynthArgs) -> Result<(SynthParams, ModelConfig)> {
         .map(|spec| parse_local_friction(spec))
         .collect::<Result<_, _>>()?;
     p.validate()?;
-    let truth = synth::truth_config(args.truth_config.as_deref(), &args.hidden)?;
+    let truth = synth::truth_config(args.truth_config.as_ref(), &args.hidden)?;
     Ok((p, truth))
 }
 

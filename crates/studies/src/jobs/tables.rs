@@ -56,7 +56,7 @@ pub struct ExportArgs {
     /// Model configuration overlaid on the built-in defaults (TOML; only
     /// the keys it changes, e.g. a `tortwin discover` model.toml).
     #[cfg_attr(feature = "cli", arg(long))]
-    pub config: Option<PathBuf>,
+    pub config: Option<super::ConfigSource>,
     /// The files to write.
     #[cfg_attr(feature = "cli", arg(long, value_enum, default_value_t = TableFormat::Both))]
     pub format: TableFormat,
@@ -145,6 +145,7 @@ pub fn export(args: &ExportArgs, progress: &dyn Progress) -> Result<Exported> {
         formats: Formats {
             parquet: args.format != TableFormat::Csv,
             csv: args.format != TableFormat::Parquet,
+            memory: false,
         },
         band,
         field: !args.no_field,
@@ -158,8 +159,8 @@ pub fn export(args: &ExportArgs, progress: &dyn Progress) -> Result<Exported> {
     let run = replay_with(&replay, &mut [&mut sink as &mut dyn Sink], progress)?;
 
     let mut inputs = vec![args.recording.as_path()];
-    inputs.extend(args.config.as_deref());
-    let config = super::load_config(args.config.as_deref())?;
+    inputs.extend(args.config.as_ref().and_then(super::ConfigSource::path));
+    let config = super::load_config(args.config.as_ref())?;
     let provenance = Provenance::of_run(&inputs, &config)?;
     let json = serde_json::to_string_pretty(&provenance).map_err(|source| Error::Json {
         what: "the provenance",

@@ -451,7 +451,7 @@ pub fn study(
     space: &search::Space,
     method: search::Method,
     max_grid: usize,
-    on_evaluation: &(dyn Fn(usize) + Sync),
+    on_evaluation: &(dyn Fn(usize) -> Result<()> + Sync),
 ) -> Result<Study> {
     target.check(&traffic.section)?;
     let today = evaluate(traffic, cfg, target, &Plan::Today, false, None)?;

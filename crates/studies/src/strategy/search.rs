@@ -340,7 +340,7 @@ pub struct Searcher<'a> {
     space: &'a Space,
     cache: Mutex<HashMap<Key, Arc<Evaluated>>>,
     error: Mutex<Option<Error>>,
-    on_evaluation: &'a (dyn Fn(usize) + Sync),
+    on_evaluation: &'a (dyn Fn(usize) -> Result<()> + Sync),
 }
 
 /// Penalty weight of a broken constraint in the optimiser's objectives.
@@ -355,7 +355,7 @@ impl<'a> Searcher<'a> {
         cfg: &'a ModelConfig,
         target: &'a Target,
         space: &'a Space,
-        on_evaluation: &'a (dyn Fn(usize) + Sync),
+        on_evaluation: &'a (dyn Fn(usize) -> Result<()> + Sync),
     ) -> Self {
         Self {
             traffic,
@@ -401,7 +401,7 @@ impl<'a> Searcher<'a> {
             cache.entry(k).or_insert_with(|| e.clone());
             cache.len()
         };
-        (self.on_evaluation)(n);
+        (self.on_evaluation)(n)?;
         Ok(e)
     }
 

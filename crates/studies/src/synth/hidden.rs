@@ -1,7 +1,7 @@
 //! The truth configuration: the model a synthetic recording's measurements
 //! come from, with the effects hidden in it (`--hidden`).
 
-use std::path::Path;
+use crate::jobs::ConfigSource;
 
 use crate::Result;
 use tortwin_model::config::ModelConfig;
@@ -10,9 +10,12 @@ use tortwin_model::error::UsageError;
 /// Builds the truth configuration: the defaults, overlaid by `truth_config`
 /// (a TOML file) and then by every `--hidden` effect in turn, with the
 /// validation of [`ModelConfig`] (a bad effect names the key).
-pub(crate) fn truth_config(truth_config: Option<&Path>, hidden: &[String]) -> Result<ModelConfig> {
+pub(crate) fn truth_config(
+    truth_config: Option<&ConfigSource>,
+    hidden: &[String],
+) -> Result<ModelConfig> {
     let mut cfg = match truth_config {
-        Some(path) => ModelConfig::from_file(path)?,
+        Some(source) => source.load()?,
         None => ModelConfig::default(),
     };
     for spec in hidden {

@@ -76,6 +76,7 @@ pub(crate) fn generate(
     progress.stage_of("simulating the traffic, day by day", n_days);
     for (done, day) in days.into_iter().enumerate() {
         progress.done(done as u64);
+        crate::progress::check(progress)?;
         let mut plan = planner.plan_day(day);
         counts.dropped_trains += plan.dropped_trains;
         plan.items
