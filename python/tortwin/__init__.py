@@ -1,0 +1,399 @@
+"""tortwin in Python: the twin of a track section for top-of-rail friction.
+
+The same engine as the ``tortwin`` command line (one Rust library, called
+through the extension module ``tortwin._native``)::
+
+    import tortwin
+
+    run = tortwin.replay("recordings/demo_day.mcap")
+    run.measurements.to_pandas()     # measured, simulated, residual per measurement
+    run.field                        # mu, adhesion, masses per train, rail, band and d_m
+    run.summary["rmse"]              # the run's summary (as the command prints it)
+    nxt = tortwin.replay("day2.mcap", state_in=run.state)   # carry the state on
+
+    found = tortwin.discover("hidden.mcap")
+    found.effects                    # the effects the model was missing
+
+Configurations are a TOML file's path or a dict with the same keys (only
+the keys that change the built-in defaults; ``[[effects.generic]]`` is a
+list of dicts under ``{"effects": {"generic": [...]}}``). Units are those
+of docs/spec/interfaces.md: metres, seconds, kg for the model's masses
+(mg and g in the tables, as their column names say), mu and adhesion
+dimensionless, times in UTC.
+
+Errors raise :class:`InputError` (bad input: the recording, state,
+configuration or arguments; the message names the file and where in it, as
+the command line's exit status 2) or :class:`TortwinError` (anything else).
+Long runs release the GIL and stop on Ctrl-C (KeyboardInterrupt), leaving
+no output file under its final name.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass, field as dataclass_field
+from pathlib import Path
+from typing import Any, Union
+
+import pyarrow as pa
+import pyarrow.ipc
+import tomli_w
+
+from . import _native
+from ._native import InputError, TortwinError
+
+__all__ = [
+    "Discovery",
+    "InputError",
+    "Replay",
+    "State",
+    "TortwinError",
+    "discover",
+    "replay",
+    "strategy",
+    "synth",
+]
+
+__version__: str = _native.version()
+
+PathLike = Union[str, "os.PathLike[str]"]
+Config = Union[PathLike, Mapping[str, Any], None]
+
+
+def _config(config: Config) -> tuple[str, str] | None:
+    """A configuration as the extension takes it: ("file", path) or ("toml", text)."""
+    if config is None:
+        return None
+    if isinstance(config, Mapping):
+        try:
+            text = tomli_w.dumps(config)
+        except (TypeError, ValueError) as e:
+            raise InputError(f"configuration dict: {e}") from None
+        return ("toml", text)
+    if isinstance(config, (str, os.PathLike)):
+        return ("file", os.fspath(config))
+    raise TypeError(
+        f"config must be a path to a TOML file or a dict, not {type(config).__name__}"
+    )
+
+
+def _table(ipc: bytes) -> pa.Table:
+    return pa.ipc.open_stream(ipc).read_all()
+
+
+def _flag(name: str) -> str:
+    return "--" + name.replace("_", "-")
+
+
+def _options(options: Mapping[str, Any]) -> list[str]:
+    """Keyword arguments as the command's flags: ``pulse_g=2.5`` is
+    ``--pulse-g 2.5``, ``rail_mu_at_end=False`` is ``--rail-mu-at-end
+    false``, a list repeats the flag; ``None`` leaves the default."""
+    argv: list[str] = []
+    for name, value in options.items():
+        if value is None:
+            continue
+        if isinstance(value, (list, tuple)):
+            for v in value:
+                argv += [_flag(name), str(v)]
+        elif isinstance(value, bool):
+            argv += [_flag(name), "true" if value else "false"]
+        else:
+            argv += [_flag(name), os.fspath(value) if isinstance(value, os.PathLike) else str(value)]
+    return argv
+
+
+@dataclass(frozen=True)
+class State:
+    """The state of a section at the end of a replay (product on every grid
+    point of every rail and band, wheel product carried on, the clock): pass
+    it as ``state_in`` to replay the next recording of the same section.
+
+    ``json`` is the text ``tortwin replay --state-out`` writes; :meth:`save`
+    writes such a file and :meth:`load` reads one."""
+
+    json: str
+
+    def save(self, path: PathLike) -> None:
+        """Writes the state as a file the command line reads with ``--state-in``."""
+        Path(path).write_text(self.json)
+
+    @classmethod
+    def load(cls, path: PathLike) -> "State":
+        """Reads a state written by :meth:`save` or ``--state-out``."""
+        return cls(Path(path).read_text())
+
+
+@dataclass(frozen=True)
+class Replay:
+    """What a replay gives.
+
+    measurements
+        One row per measurement of the recording: ``time_utc`` (timestamp,
+        UTC), ``index_in_file`` (the message's index), ``site``, ``rail``,
+        ``quantity`` (``mu``, ``adhesion`` or ``rail_mu``), ``train_id`` and
+        ``axle_index`` (null for tribometer readings), ``measured``,
+        ``simulated`` (dimensionless; bit-equal to ``/twin/measurement`` of
+        the MCAP output) and ``residual`` (measured - simulated).
+    field
+        One row per train, rail/band and grid point after the train:
+        ``train_id``, ``time_utc`` (the train's last axle leaves),
+        ``rail``, ``band``, ``wheel_pass``, ``d_m`` (m along the section),
+        ``mu`` and ``adhesion`` (what the train's last wheel saw),
+        ``rail_mass_mg`` (product on the rail at the point, mg) and
+        ``wheel_mass_mg`` (on the last wheel, mg). ``None`` with
+        ``field=False``.
+    trains
+        One row per train and rail/band: times, direction, speed (m/s),
+        axles, mu min/mean/max, the share of the section in and below the
+        target band 0.30-0.40, product on the rail (g) and carried out (mg).
+    summary
+        The run's summary, as ``tortwin replay`` prints it: counts
+        (``trains``, ``wheels``, ``contacts``, ``pulses``, ``measurements``,
+        ``weather_messages``, ``unknown_topic_messages``), ``rmse`` by
+        quantity (``{"mu": {"n": 5136, "rmse": 0.0099}, ...}``, measured vs
+        simulated) and ``mass_balance`` in kg (``applied_kg``,
+        ``on_rail_end_kg``, ``carried_out_kg``, ``consumed_kg``,
+        ``capped_kg``, ...).
+    state
+        The section's state at the end, for the next recording.
+    """
+
+    measurements: pa.Table
+    field: pa.Table | None
+    trains: pa.Table
+    summary: dict[str, Any]
+    state: State
+
+
+def replay(
+    recording: PathLike,
+    config: Config = None,
+    state_in: State | PathLike | None = None,
+    *,
+    out_mcap: PathLike | None = None,
+    out_rrd: PathLike | None = None,
+    state_out: PathLike | None = None,
+    every_wheel: bool = False,
+    field: bool = True,
+) -> Replay:
+    """Replays a recording (MCAP, docs/spec/recording-format.md) through the
+    engine, as ``tortwin replay`` does.
+
+    recording
+        The recording's path.
+    config
+        The model: a TOML file's path or a dict of the keys that change the
+        built-in defaults (e.g. ``{"product": {"k_m_mg": 150.0}}``, a
+        discover ``model.toml``).
+    state_in
+        Start from a :class:`State` (``Replay.state`` of the previous day) or
+        a state file written by ``--state-out``; default: a clean section.
+    out_mcap, out_rrd
+        Also write the MCAP output (Foxglove) and the rerun recording, as
+        the command line's ``--out-mcap`` and ``--out-rrd``.
+    state_out
+        Also write the final state to this file.
+    every_wheel
+        Snapshot the field after every wheel pass in the .rrd (default:
+        after every train).
+    field
+        Keep the field table (the largest: grid points x trains x rails);
+        ``False`` leaves ``Replay.field`` as ``None``.
+    """
+    argv = ["replay", os.fspath(recording), "--quiet"]
+    state_json = None
+    if isinstance(state_in, State):
+        state_json = state_in.json
+    elif state_in is not None:
+        argv += ["--state-in", os.fspath(state_in)]
+    for flag, value in (
+        ("--out-mcap", out_mcap),
+        ("--out-rrd", out_rrd),
+        ("--state-out", state_out),
+    ):
+        if value is not None:
+            argv += [flag, os.fspath(value)]
+    if every_wheel:
+        argv.append("--every-wheel")
+    summary, state, measurements, field_ipc, trains = _native.replay(
+        argv, _config(config), state_json, field
+    )
+    summary = json.loads(summary)
+    summary["rmse"] = {q: {"n": n, "rmse": rmse} for q, n, rmse in summary["rmse"]}
+    return Replay(
+        measurements=_table(measurements),
+        field=_table(field_ipc) if field_ipc is not None else None,
+        trains=_table(trains),
+        summary=summary,
+        state=State(state),
+    )
+
+
+def synth(
+    out: PathLike,
+    *,
+    preset: str = "curve",
+    days: int = 1,
+    seed: int = 1,
+    hidden: Iterable[str] = (),
+    truth_config: Config = None,
+    key: PathLike | None = None,
+    **options: Any,
+) -> dict[str, Any]:
+    """Writes a synthetic recording, as ``tortwin synth`` does, and returns
+    its key (what was hidden, counts, the RMSE of the baseline model against
+    the truth) with the key file's path under ``"key_path"``.
+
+    out
+        The recording to write (MCAP).
+    preset
+        ``"curve"`` (rails high/low, radius 400 m) or ``"tangent"``.
+    days
+        Days of traffic.
+    seed
+        Seed of every random draw: the same arguments give the same bytes.
+    hidden
+        Effects in the truth model the default model lacks, as the command's
+        ``--hidden`` (``"rail_ageing:tau_s=7200"``,
+        ``"generic:acts_on=pulse_mass,driver=time,form=step,..."``).
+    truth_config
+        The truth model: a TOML file's path or a dict.
+    key
+        Where to write the key (default: ``out`` with ``.key.json``).
+    options
+        Any other flag of ``tortwin synth --help`` by its name with
+        underscores: ``length_m`` (m), ``pulse_g`` (g), ``trains_per_day``,
+        ``noise_sigma``, ``outlier_share``, ...
+    """
+    argv = ["synth", "--out", os.fspath(out), "--quiet"]
+    argv += _options({"preset": preset, "days": days, "seed": seed, "key": key})
+    argv += _options({"hidden": list(hidden)})
+    argv += _options(options)
+    report, key_path = _native.synth(argv, _config(truth_config))
+    result = json.loads(report)
+    result["key_path"] = key_path
+    return result
+
+
+@dataclass(frozen=True)
+class Discovery:
+    """What ``discover`` found.
+
+    report
+        report.json's content: ``effects_found`` (each with ``name``,
+        parameters and a sentence), ``rmse_before``/``rmse_after``, the
+        ``verdict``, every step's candidates with their BIC, covariates.
+    residuals
+        One row per measurement: ``time_utc``, ``index_in_file``, ``site``,
+        ``rail``, ``quantity``, ``train_id``, ``axle_index``, ``measured``,
+        ``residual_before`` (with the starting model), ``residual_after``
+        (with the model found) and ``outlier`` (left out of the fits as a
+        gross error).
+    model_toml
+        The model found, as TOML (pass it to :func:`replay` through a file,
+        or ``report_dir / "model.toml"``).
+    report_dir
+        The report's folder (report.md with plots, residuals.rrd), or
+        ``None`` when none was asked for.
+    """
+
+    report: dict[str, Any]
+    residuals: pa.Table
+    model_toml: str
+    report_dir: Path | None = None
+    effects: list[str] = dataclass_field(default_factory=list)
+
+    @property
+    def verdict(self) -> str:
+        """One paragraph: what was found, or that nothing is missing."""
+        return self.report["verdict"]
+
+
+def discover(
+    recording: PathLike,
+    config: Config = None,
+    *,
+    report: PathLike | None = None,
+    threads: int | None = None,
+    **options: Any,
+) -> Discovery:
+    """Finds the effects the model misses in a recording with friction
+    measurements, as ``tortwin discover`` does (residuals, covariates,
+    candidate named effects and generic terms fitted by re-running the
+    engine, forward selection by BIC and cross-validation).
+
+    recording
+        The recording (MCAP).
+    config
+        The starting model (a path or a dict); its effects are refitted.
+    report
+        Write the report folder here (report.md, report.json, model.toml,
+        residuals.rrd); default: a temporary folder, removed afterwards.
+    threads
+        Worker threads for the fits (default: one per core).
+    options
+        ``bic_threshold``, ``min_excess_share``, ``unexplained_ratio`` (see
+        ``tortwin discover --help``).
+    """
+    with tempfile.TemporaryDirectory(prefix="tortwin-discover-") as tmp:
+        folder = Path(report) if report is not None else Path(tmp)
+        argv = ["discover", os.fspath(recording), "--report", os.fspath(folder), "--quiet"]
+        argv += _options({"threads": threads})
+        argv += _options(options)
+        text, residuals = _native.discover(argv, _config(config))
+        model_toml = (folder / "model.toml").read_text()
+    found = json.loads(text)
+    return Discovery(
+        report=found,
+        residuals=_table(residuals),
+        model_toml=model_toml,
+        report_dir=Path(report) if report is not None else None,
+        effects=[e["name"] for e in found["effects_found"]],
+    )
+
+
+def strategy(
+    recording: PathLike | None = None,
+    *,
+    out: PathLike,
+    config: Config = None,
+    space: PathLike | None = None,
+    method: str | None = None,
+    synth: bool = False,
+    threads: int | None = None,
+    **options: Any,
+) -> dict[str, Any]:
+    """Evaluates application strategies (pulse mass, interval, applicator
+    positions, rails) over a section's traffic, as ``tortwin strategy``
+    does, and returns strategy.json's content (every strategy evaluated with
+    its share of the section in the target band, carry-on distance in m,
+    product per day in g; the Pareto front; the recommendation).
+
+    recording
+        The traffic (its own pulses are replaced by each strategy's);
+        required unless ``synth=True``.
+    out
+        The result folder: strategy.json, report.md, recommended.rrd.
+    config
+        The model (a path or a dict), found effects included.
+    space
+        The search space and target (TOML file, ``tortwin strategy --help``).
+    method
+        ``"grid"``, ``"optimiser"`` or ``"auto"``.
+    synth
+        Generate the traffic instead (``synth_days``, ``synth_seed``, ...
+        as options).
+    """
+    argv = ["strategy", "--out", os.fspath(out), "--quiet"]
+    if recording is not None:
+        argv.append(os.fspath(recording))
+    if synth:
+        argv.append("--synth")
+    argv += _options({"space": space, "method": method, "threads": threads})
+    argv += _options(options)
+    path = _native.strategy(argv, _config(config))
+    return json.loads(Path(path).read_text())

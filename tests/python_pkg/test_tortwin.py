@@ -1,0 +1,216 @@
+"""The Python package against the command line: the same engine, the same
+numbers, the same errors (issue 13). Run by .ci/run after `pip install
+./python`."""
+
+from __future__ import annotations
+
+import json
+import signal
+import subprocess
+import sys
+import time
+import tomllib
+from pathlib import Path
+
+import pyarrow as pa
+import pyarrow.compute as pc
+import pytest
+
+import tortwin
+from conftest import RECORDINGS, REFERENCE, REPO, rewrite, run_cli, twin_measurements
+
+REFERENCE_CASES = [
+    ("curve_2day.mcap", None),
+    ("tangent_day.mcap", None),
+    ("generic_day.mcap", "generic_day.config.toml"),
+]
+
+
+def bits(column: pa.ChunkedArray) -> list[int]:
+    """Doubles as their bit patterns (equal means bit for bit, NaN included)."""
+    return column.combine_chunks().view(pa.int64()).to_pylist()
+
+
+@pytest.mark.parametrize("name,config", REFERENCE_CASES)
+def test_replay_equals_the_command_line_bit_for_bit(tmp_path, tortwin_bin, name, config):
+    recording = REFERENCE / name
+    args = ["replay", recording, "--out-mcap", tmp_path / "cli.mcap", "-q"]
+    if config:
+        args += ["--config", REFERENCE / config]
+    cli = run_cli(tortwin_bin, *args)
+    assert cli.returncode == 0, cli.stderr
+    expected = twin_measurements(tmp_path / "cli.mcap")
+
+    configs = [None]
+    if config:
+        # The configuration as a path and as the dict a notebook would write.
+        with open(REFERENCE / config, "rb") as f:
+            configs = [REFERENCE / config, tomllib.load(f)]
+    for cfg in configs:
+        run = tortwin.replay(recording, config=cfg)
+        table = run.measurements
+        assert table.num_rows == len(expected) > 1000
+        indices = table["index_in_file"].to_pylist()
+        simulated = table["simulated"].to_pylist()
+        measured = table["measured"].to_pylist()
+        for i, s, m in zip(indices, simulated, measured):
+            e = expected[i]
+            # JSON in the MCAP keeps every digit: float(repr) is the same double.
+            assert s.hex() == float(e["simulated"]).hex(), (name, i, s, e["simulated"])
+            assert m == e["measured"]
+        residual = pc.subtract(table["measured"], table["simulated"])
+        assert bits(residual) == bits(table["residual"])
+        assert run.summary["measurements"] == len(expected)
+
+
+def test_outputs_through_python_equal_the_command_lines(tmp_path, tortwin_bin):
+    recording = RECORDINGS / "demo_day.mcap"
+    cli = run_cli(
+        tortwin_bin, "replay", recording, "--out-mcap", tmp_path / "cli.mcap",
+        "--state-out", tmp_path / "cli.state.json", "-q",
+    )
+    assert cli.returncode == 0, cli.stderr
+    run = tortwin.replay(
+        recording, out_mcap=tmp_path / "py.mcap", state_out=tmp_path / "py.state.json"
+    )
+    assert twin_measurements(tmp_path / "py.mcap") == twin_measurements(tmp_path / "cli.mcap")
+    assert (tmp_path / "py.state.json").read_text() == (tmp_path / "cli.state.json").read_text()
+    assert run.state.json == (tmp_path / "cli.state.json").read_text()
+    # The field: one row per train, rail and grid point.
+    section = run.summary
+    assert run.field.num_rows == section["trains"] * 2 * (run.field.num_rows // (section["trains"] * 2))
+    assert set(run.field.column_names) >= {"train_id", "rail", "band", "d_m", "mu", "adhesion",
+                                           "rail_mass_mg", "wheel_mass_mg"}
+    assert run.trains.num_rows == section["trains"] * 2
+    df = run.measurements.to_pandas()
+    assert list(df.columns[:5]) == ["time_utc", "index_in_file", "site", "rail", "quantity"]
+    assert str(df["time_utc"].dt.tz) == "UTC"
+
+
+def split(recording: Path, cut_ns: int, first: Path, second: Path) -> None:
+    """The recording cut in two at `cut_ns`: the /section message opens both."""
+    rewrite(recording, first, lambda topic, t, i, d: d if topic == "/section" or t < cut_ns else None)
+    rewrite(recording, second, lambda topic, t, i, d: d if topic == "/section" or t >= cut_ns else None)
+
+
+def test_a_state_round_trip_equals_one_replay(tmp_path):
+    recording = REFERENCE / "curve_2day.mcap"
+    whole = tortwin.replay(recording)
+    trains = whole.trains.to_pandas().drop_duplicates("train_id")
+    starts = trains["time_utc"].astype("int64").to_numpy()
+    ends = trains["end_utc"].astype("int64").to_numpy()
+    gaps = starts[1:] - ends[:-1]
+    k = int(gaps.argmax())
+    cut = int(ends[k] + gaps[k] // 2)
+    split(recording, cut, tmp_path / "a.mcap", tmp_path / "b.mcap")
+
+    first = tortwin.replay(tmp_path / "a.mcap")
+    second = tortwin.replay(tmp_path / "b.mcap", state_in=first.state)
+    # The state through a file, as the command line passes it.
+    first.state.save(tmp_path / "a.state.json")
+    from_file = tortwin.replay(tmp_path / "b.mcap", state_in=tmp_path / "a.state.json")
+
+    assert first.measurements.num_rows > 0 and second.measurements.num_rows > 0
+    columns = ["time_utc", "site", "rail", "quantity", "train_id", "axle_index", "measured", "simulated"]
+    joined = pa.concat_tables([first.measurements.select(columns), second.measurements.select(columns)])
+    assert joined.equals(whole.measurements.select(columns))
+    assert bits(joined["simulated"]) == bits(whole.measurements["simulated"])
+    assert pa.concat_tables([first.field, second.field]).equals(whole.field)
+    assert second.state.json == whole.state.json
+    assert from_file.state.json == whole.state.json
+    assert from_file.measurements.equals(second.measurements)
+
+
+def test_a_bad_recording_raises_with_the_command_lines_message(tmp_path, tortwin_bin):
+    bad = tmp_path / "bad.mcap"
+
+    def break_the_fifth_passage(topic, t, index, data):
+        if topic == "/train/passage":
+            break_the_fifth_passage.seen += 1
+            if break_the_fifth_passage.seen == 5:
+                return data.replace(b'"speed_mps":', b'"speed_mps":"fast","x":', 1)
+        return data
+
+    break_the_fifth_passage.seen = 0
+    rewrite(RECORDINGS / "demo_day.mcap", bad, break_the_fifth_passage)
+    cli = run_cli(tortwin_bin, "replay", bad, "-q")
+    assert cli.returncode == 2
+    message = cli.stderr.strip().removeprefix("error: ")
+    with pytest.raises(tortwin.InputError) as caught:
+        tortwin.replay(bad)
+    assert str(caught.value) == message
+    assert "/train/passage" in message and "log_time" in message, message
+
+    with pytest.raises(tortwin.InputError, match="no_such_key"):
+        tortwin.replay(RECORDINGS / "demo_day.mcap", config={"product": {"no_such_key": 1.0}})
+    with pytest.raises(tortwin.InputError, match=r"effects\.generic\[0\]\.acts_on"):
+        tortwin.replay(
+            RECORDINGS / "demo_day.mcap",
+            config={"effects": {"generic": [{"acts_on": "nothing", "driver": "time", "form": "exp"}]}},
+        )
+    missing = tmp_path / "missing.mcap"
+    cli = run_cli(tortwin_bin, "replay", missing, "-q")
+    with pytest.raises(tortwin.InputError) as caught:
+        tortwin.replay(missing)
+    assert str(caught.value) == cli.stderr.strip().removeprefix("error: ")
+    # Nothing half-written under the output's name.
+    with pytest.raises(tortwin.InputError):
+        tortwin.replay(bad, out_mcap=tmp_path / "out.mcap")
+    assert not (tmp_path / "out.mcap").exists()
+
+
+def test_discover_names_the_same_effects_as_the_command_line(tmp_path, tortwin_bin):
+    recording = RECORDINGS / "tangent_day_ageing.mcap"
+    cli = run_cli(tortwin_bin, "discover", recording, "--report", tmp_path / "cli", "-q")
+    assert cli.returncode == 0, cli.stderr
+    expected = json.loads((tmp_path / "cli" / "report.json").read_text())
+    found = tortwin.discover(recording, report=tmp_path / "py")
+    assert found.effects == [e["name"] for e in expected["effects_found"]] == ["rail_ageing"]
+    assert found.report["effects_found"] == expected["effects_found"]
+    assert found.report["rmse_after"] == expected["rmse_after"]
+    assert found.verdict == expected["verdict"]
+    assert found.model_toml == (tmp_path / "cli" / "model.toml").read_text()
+    # The residual table reproduces the report's RMSE over every row.
+    after = found.residuals["residual_after"].to_numpy()
+    assert abs((after**2).mean() ** 0.5 - expected["rmse_after_all_rows"]) < 1e-12
+    # The model found replays through Python from its TOML as a dict.
+    model = tomllib.loads(found.model_toml)
+    rerun = tortwin.replay(recording, config=model)
+    assert rerun.summary["rmse"]["mu"]["rmse"] < 0.0105
+
+
+def test_synth_writes_what_the_command_line_writes(tmp_path, tortwin_bin):
+    args = dict(days=1, seed=7, trains_per_day=6, length_m=300.0)
+    key = tortwin.synth(tmp_path / "py.mcap", hidden=["rail_ageing:tau_s=7200"], **args)
+    cli = run_cli(
+        tortwin_bin, "synth", "--out", tmp_path / "cli.mcap", "--days", "1", "--seed", "7",
+        "--trains-per-day", "6", "--length-m", "300", "--hidden", "rail_ageing:tau_s=7200", "-q",
+    )
+    assert cli.returncode == 0, cli.stderr
+    assert (tmp_path / "py.mcap").read_bytes() == (tmp_path / "cli.mcap").read_bytes()
+    assert Path(key["key_path"]) == tmp_path / "py.key.json"
+    with pytest.raises(tortwin.InputError, match="--no-such-flag"):
+        tortwin.synth(tmp_path / "x.mcap", no_such_flag=1)
+
+
+def test_ctrl_c_stops_a_long_job(tmp_path):
+    """SIGINT during discover: KeyboardInterrupt within seconds, no report."""
+    script = (
+        "import sys, tortwin\n"
+        "print('started', flush=True)\n"
+        f"tortwin.discover({str(RECORDINGS / 'curve_day_all_effects.mcap')!r}, report={str(tmp_path / 'r')!r})\n"
+    )
+    child = subprocess.Popen(
+        [sys.executable, "-c", script], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+    )
+    assert child.stdout.readline().strip() == "started"
+    time.sleep(2.0)
+    assert child.poll() is None, "discover ended before the signal"
+    sent = time.monotonic()
+    child.send_signal(signal.SIGINT)
+    _, stderr = child.communicate(timeout=60)
+    waited = time.monotonic() - sent
+    assert child.returncode != 0
+    assert "KeyboardInterrupt" in stderr, stderr
+    assert waited < 10, waited
+    assert not (tmp_path / "r" / "report.json").exists()
