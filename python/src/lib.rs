@@ -39,6 +39,7 @@ use tortwin_studies::discover::data::Dataset;
 use tortwin_studies::discover::Discovery;
 use tortwin_studies::jobs::replay::{read_state, replay_from, SavedState};
 use tortwin_studies::jobs::{self, ConfigSource};
+use tortwin_studies::strategy::TrainRail;
 use tortwin_studies::{Error, Progress};
 
 create_exception!(
@@ -93,17 +94,15 @@ fn to_py(err: Error) -> PyErr {
     }
 }
 
-/// The configuration given to a Python function: `("file", path)` or
-/// `("toml", text)` (a dict, written as TOML by the package).
-fn config_source(config: Option<(String, String)>) -> PyResult<Option<ConfigSource>> {
+/// The configuration given to a Python function: `("file", path, _)` or
+/// `("toml", text, name)` (a dict written as TOML by the package, or TOML
+/// text; `name` stands for it in messages).
+fn config_source(config: Option<(String, String, String)>) -> PyResult<Option<ConfigSource>> {
     match config {
         None => Ok(None),
-        Some((kind, value)) => match kind.as_str() {
+        Some((kind, value, name)) => match kind.as_str() {
             "file" => Ok(Some(ConfigSource::File(value.into()))),
-            "toml" => Ok(Some(ConfigSource::Text {
-                text: value,
-                name: "dict".into(),
-            })),
+            "toml" => Ok(Some(ConfigSource::Text { text: value, name })),
             other => Err(PyRuntimeError::new_err(format!(
                 "unknown kind of configuration {other:?}"
             ))),
@@ -184,8 +183,15 @@ fn ipc_error(e: arrow::error::ArrowError) -> Error {
 }
 
 /// What a replay job gives: summary and state (JSON), the measurements,
-/// field and trains tables (Arrow IPC).
-type ReplayResult = (String, String, Vec<u8>, Option<Vec<u8>>, Vec<u8>);
+/// field, trains and per-train metrics tables (Arrow IPC).
+type ReplayResult = (
+    String,
+    String,
+    Vec<u8>,
+    Option<Vec<u8>>,
+    Vec<u8>,
+    Option<Vec<u8>>,
+);
 
 /// [`ReplayResult`] as Python objects.
 type ReplayOut = (
@@ -194,20 +200,23 @@ type ReplayOut = (
     Py<PyBytes>,
     Option<Py<PyBytes>>,
     Py<PyBytes>,
+    Option<Py<PyBytes>>,
 );
 
 /// `tortwin replay ARGV`, starting from `state_json` (a state's JSON text)
 /// when given. Returns the summary (JSON), the state at the end (JSON) and
 /// the measurements, field (unless `field` is false) and trains tables as
-/// Arrow IPC streams.
+/// Arrow IPC streams; with `per_train`, also every train's contacts in the
+/// target band, carry-on and product per rail.
 #[pyfunction]
-#[pyo3(signature = (argv, config=None, state_json=None, field=true))]
+#[pyo3(signature = (argv, config=None, state_json=None, field=true, per_train=false))]
 fn replay(
     py: Python<'_>,
     argv: Vec<String>,
-    config: Option<(String, String)>,
+    config: Option<(String, String, String)>,
     state_json: Option<String>,
     field: bool,
+    per_train: bool,
 ) -> PyResult<ReplayOut> {
     let Command::Replay(mut args) = parse(argv)? else {
         return Err(PyRuntimeError::new_err("not a replay command"));
@@ -215,6 +224,7 @@ fn replay(
     if let Some(source) = config_source(config)? {
         args.config = Some(source);
     }
+    args.per_train = per_train;
     let state: Option<EngineState> = state_json
         .map(|text| {
             serde_json::from_str(&text).map_err(|e| {
@@ -267,22 +277,78 @@ fn replay(
             source,
         })?;
         let t = tables.into_tables();
+        let per_train = done
+            .per_train
+            .as_deref()
+            .map(|rows| per_train_table(rows).and_then(|t| ipc(&t)))
+            .transpose()
+            .map_err(ipc_error)?;
         Ok((
             summary,
             state,
             ipc(&t.measurements).map_err(ipc_error)?,
             t.field.as_ref().map(ipc).transpose().map_err(ipc_error)?,
             ipc(&t.trains).map_err(ipc_error)?,
+            per_train,
         ))
     };
-    let (summary, state, measurements, field, trains) = run_job(py, run)?;
+    let (summary, state, measurements, field, trains, per_train) = run_job(py, run)?;
+    let bytes = |b: &[u8]| PyBytes::new(py, b).unbind();
     Ok((
         summary,
         state,
-        PyBytes::new(py, &measurements).unbind(),
-        field.map(|f| PyBytes::new(py, &f).unbind()),
-        PyBytes::new(py, &trains).unbind(),
+        bytes(&measurements),
+        field.as_deref().map(bytes),
+        bytes(&trains),
+        per_train.as_deref().map(bytes),
     ))
+}
+
+/// The per-train metrics as a table: a row per train and rail.
+fn per_train_table(rows: &[TrainRail]) -> Result<MemoryTable, arrow::error::ArrowError> {
+    let time = DataType::Timestamp(TimeUnit::Nanosecond, Some("UTC".into()));
+    let schema = Arc::new(Schema::new(vec![
+        Field::new("train_id", DataType::Utf8, false),
+        Field::new("time_utc", time, false),
+        Field::new("rail", DataType::Utf8, false),
+        Field::new("wheel_passes", DataType::UInt64, false),
+        Field::new("in_band_share", DataType::Float64, false),
+        Field::new("below_band_share", DataType::Float64, false),
+        Field::new("carry_on_m", DataType::Float64, false),
+        Field::new("pulses", DataType::UInt64, false),
+        Field::new("product_g", DataType::Float64, false),
+    ]));
+    let f = |get: fn(&TrainRail) -> f64| -> ArrayRef {
+        Arc::new(Float64Array::from_iter_values(rows.iter().map(get)))
+    };
+    let columns: Vec<ArrayRef> = vec![
+        Arc::new(StringArray::from_iter_values(
+            rows.iter().map(|r| r.train_id.as_str()),
+        )),
+        Arc::new(
+            TimestampNanosecondArray::from_iter_values(
+                rows.iter()
+                    .map(|r| i64::try_from(r.log_time_ns).unwrap_or(i64::MAX)),
+            )
+            .with_timezone("UTC"),
+        ),
+        Arc::new(StringArray::from_iter_values(
+            rows.iter().map(|r| r.rail.as_str()),
+        )),
+        Arc::new(UInt64Array::from_iter_values(
+            rows.iter().map(|r| r.wheel_passes),
+        )),
+        f(|r| r.in_band_share),
+        f(|r| r.below_band_share),
+        f(|r| r.carry_on_m),
+        Arc::new(UInt64Array::from_iter_values(rows.iter().map(|r| r.pulses))),
+        f(|r| r.product_g),
+    ];
+    let batch = RecordBatch::try_new(schema.clone(), columns)?;
+    Ok(MemoryTable {
+        schema,
+        batches: vec![batch],
+    })
 }
 
 /// `tortwin synth ARGV` (the truth configuration from `truth_config`).
@@ -292,7 +358,7 @@ fn replay(
 fn synth(
     py: Python<'_>,
     argv: Vec<String>,
-    truth_config: Option<(String, String)>,
+    truth_config: Option<(String, String, String)>,
 ) -> PyResult<(String, String)> {
     let Command::Synth(mut args) = parse(argv)? else {
         return Err(PyRuntimeError::new_err("not a synth command"));
@@ -317,7 +383,7 @@ fn synth(
 fn discover(
     py: Python<'_>,
     argv: Vec<String>,
-    config: Option<(String, String)>,
+    config: Option<(String, String, String)>,
 ) -> PyResult<(String, Py<PyBytes>)> {
     let Command::Discover(mut args) = parse(argv)? else {
         return Err(PyRuntimeError::new_err("not a discover command"));
@@ -415,7 +481,7 @@ fn residual_table(
 fn strategy(
     py: Python<'_>,
     argv: Vec<String>,
-    config: Option<(String, String)>,
+    config: Option<(String, String, String)>,
 ) -> PyResult<String> {
     let Command::Strategy(mut args) = parse(argv)? else {
         return Err(PyRuntimeError::new_err("not a strategy command"));

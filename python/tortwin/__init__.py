@@ -46,6 +46,7 @@ from . import _native
 from ._native import InputError, TortwinError
 
 __all__ = [
+    "ConfigText",
     "Discovery",
     "InputError",
     "Replay",
@@ -60,21 +61,33 @@ __all__ = [
 __version__: str = _native.version()
 
 PathLike = Union[str, "os.PathLike[str]"]
-Config = Union[PathLike, Mapping[str, Any], None]
+Config = Union[PathLike, Mapping[str, Any], "ConfigText", None]
 
 
-def _config(config: Config) -> tuple[str, str] | None:
-    """A configuration as the extension takes it: ("file", path) or ("toml", text)."""
+@dataclass(frozen=True)
+class ConfigText:
+    """A configuration's TOML text held in memory (read from a URI, say);
+    ``name`` stands for it in error messages."""
+
+    text: str
+    name: str
+
+
+def _config(config: Config) -> tuple[str, str, str] | None:
+    """A configuration as the extension takes it: ("file", path, path) or
+    ("toml", text, name)."""
     if config is None:
         return None
+    if isinstance(config, ConfigText):
+        return ("toml", config.text, config.name)
     if isinstance(config, Mapping):
         try:
             text = tomli_w.dumps(config)
         except (TypeError, ValueError) as e:
             raise InputError(f"configuration dict: {e}") from None
-        return ("toml", text)
+        return ("toml", text, "dict")
     if isinstance(config, (str, os.PathLike)):
-        return ("file", os.fspath(config))
+        return ("file", os.fspath(config), os.fspath(config))
     raise TypeError(
         f"config must be a path to a TOML file or a dict, not {type(config).__name__}"
     )
@@ -160,6 +173,15 @@ class Replay:
         ``capped_kg``, ...).
     state
         The section's state at the end, for the next recording.
+    per_train
+        With ``per_train=True``, one row per train and rail counted over
+        every contact of the train's wheels: ``wheel_passes``,
+        ``in_band_share`` and ``below_band_share`` (share of the contacts,
+        every wheel at every grid point, with mu inside / below the target
+        band 0.30-0.40), ``carry_on_m`` (m downstream of the applicators
+        where at least half of the wheels saw mu in the band), ``pulses`` and
+        ``product_g`` (the pulses from the train's entry to the next
+        train's, g). The figures of ``tortwin strategy``, per train.
     """
 
     measurements: pa.Table
@@ -167,6 +189,7 @@ class Replay:
     trains: pa.Table
     summary: dict[str, Any]
     state: State
+    per_train: pa.Table | None = None
 
 
 def replay(
@@ -179,6 +202,7 @@ def replay(
     state_out: PathLike | None = None,
     every_wheel: bool = False,
     field: bool = True,
+    per_train: bool = False,
 ) -> Replay:
     """Replays a recording (MCAP, docs/spec/recording-format.md) through the
     engine, as ``tortwin replay`` does.
@@ -203,6 +227,8 @@ def replay(
     field
         Keep the field table (the largest: grid points x trains x rails);
         ``False`` leaves ``Replay.field`` as ``None``.
+    per_train
+        Count every train's contacts (``Replay.per_train``).
     """
     argv = ["replay", os.fspath(recording), "--quiet"]
     state_json = None
@@ -219,8 +245,8 @@ def replay(
             argv += [flag, os.fspath(value)]
     if every_wheel:
         argv.append("--every-wheel")
-    summary, state, measurements, field_ipc, trains = _native.replay(
-        argv, _config(config), state_json, field
+    summary, state, measurements, field_ipc, trains, per_train_ipc = _native.replay(
+        argv, _config(config), state_json, field, per_train
     )
     summary = json.loads(summary)
     summary["rmse"] = {q: {"n": n, "rmse": rmse} for q, n, rmse in summary["rmse"]}
@@ -230,6 +256,7 @@ def replay(
         trains=_table(trains),
         summary=summary,
         state=State(state),
+        per_train=_table(per_train_ipc) if per_train_ipc is not None else None,
     )
 
 

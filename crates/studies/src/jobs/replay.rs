@@ -14,6 +14,7 @@ use tortwin_recording::RecordingReader;
 
 use super::load_config;
 use crate::progress::{Progress, Silent};
+use crate::strategy::{PerTrain, Target, TrainRail};
 use crate::{Error, Result};
 
 #[derive(Debug, Clone)]
@@ -45,6 +46,11 @@ pub struct ReplayArgs {
     /// Do not print the summary.
     #[cfg_attr(feature = "cli", arg(long, short))]
     pub quiet: bool,
+    /// Count every train's contacts in the default target band, its
+    /// carry-on and its product ([`Replayed::per_train`]; the fleet's
+    /// metrics). Not a command-line flag.
+    #[cfg_attr(feature = "cli", arg(skip))]
+    pub per_train: bool,
 }
 
 impl ReplayArgs {
@@ -60,6 +66,7 @@ impl ReplayArgs {
             state_out: None,
             every_wheel: false,
             quiet: true,
+            per_train: false,
         }
     }
 }
@@ -130,6 +137,8 @@ pub struct SavedState<'a> {
 pub struct Replayed {
     pub summary: RunSummary,
     pub state: EngineState,
+    /// Per train and rail, with `ReplayArgs::per_train`.
+    pub per_train: Option<Vec<TrainRail>>,
 }
 
 /// Replays `args.recording` from `start` (or a fresh section), into the
@@ -160,6 +169,7 @@ pub fn replay_from(
     let mut reader = RecordingReader::open(&args.recording, ctx)?;
     let opts = EngineOptions {
         snapshot_every_wheel: args.every_wheel,
+        every_wheel_contacts: args.per_train,
         ..EngineOptions::default()
     };
     let section = reader.section().clone();
@@ -168,6 +178,10 @@ pub fn replay_from(
         super::ConfigSource::name,
     );
     tortwin_engine::generic::check_terms_against(&cfg.effects.generic, &section, &source)?;
+    let mut per_train = args
+        .per_train
+        .then(|| PerTrain::new(&section, &cfg, &Target::default()))
+        .transpose()?;
     let provenance = if args.out_mcap.is_some() || args.out_rrd.is_some() {
         let mut inputs = vec![args.recording.as_path()];
         inputs.extend(args.config.as_ref().and_then(super::ConfigSource::path));
@@ -199,6 +213,9 @@ pub fn replay_from(
         })
         .transpose()?;
     let mut fanout = Fanout::default();
+    if let Some(s) = per_train.as_mut() {
+        fanout.sinks.push(s);
+    }
     if let Some(s) = mcap.as_mut() {
         fanout.sinks.push(s);
     }
@@ -231,9 +248,11 @@ pub fn replay_from(
     }
     let summary = engine.finish(&mut fanout, reader.unknown_topic_messages())?;
     progress.done(reader.message_count());
+    drop(fanout);
     Ok(Replayed {
         summary,
         state: engine.state(),
+        per_train: per_train.map(|p| p.rows().to_vec()),
     })
 }
 

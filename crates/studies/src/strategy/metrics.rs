@@ -11,7 +11,7 @@
 use serde::{Deserialize, Serialize};
 
 use super::Traffic;
-use tortwin_engine::sink::{PulseEvent, Sink, WheelContacts};
+use tortwin_engine::sink::{PulseEvent, RunSummary, Sink, TrainEvent, WheelContacts};
 use tortwin_engine::Grid;
 use tortwin_model::config::ModelConfig;
 use tortwin_model::error::UsageError;
@@ -357,6 +357,113 @@ impl Stats {
             .filter(|&i| f64::from(c.in_band[i]) / w >= self.target.carry_on_pass_share)
             .map(|i| (self.d_m[i] - self.d_m[start]).abs())
             .fold(0.0, f64::max)
+    }
+}
+
+impl Stats {
+    /// Back to no wheel pass and no pulse (a new train of [`PerTrain`]).
+    fn reset(&mut self) {
+        for pair in &mut self.counts {
+            for c in pair {
+                c.wheels = 0;
+                c.in_band.fill(0);
+                c.below.fill(0);
+            }
+        }
+        if let Some(sum) = &mut self.mu_sum {
+            sum.iter_mut().for_each(|s| s.fill(0.0));
+        }
+        self.applied_kg.fill(0.0);
+        self.pulses.fill(0);
+    }
+}
+
+/// The strategy's figures of one train on one rail: its wheel passes'
+/// contacts (every wheel at every grid point of the rail) in and below the
+/// target band, how far downstream of the applicators mu stayed in the band
+/// for at least `carry_on_pass_share` of its wheels, and the product of the
+/// pulses from its entry to the next train's.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct TrainRail {
+    pub train_id: String,
+    /// The train's front enters the section.
+    pub log_time_ns: u64,
+    pub rail: String,
+    pub wheel_passes: u64,
+    /// Share of the contacts with mu inside the band.
+    pub in_band_share: f64,
+    /// Share of the contacts with mu below the band (braking risk).
+    pub below_band_share: f64,
+    pub carry_on_m: f64,
+    pub pulses: u64,
+    pub product_g: f64,
+}
+
+/// A sink giving [`TrainRail`] rows: the strategy statistics of every train
+/// (the fleet's per-train metrics). Needs the engine's
+/// `every_wheel_contacts`.
+pub struct PerTrain {
+    stats: Stats,
+    /// The train being counted: id, entry time.
+    current: Option<(String, u64)>,
+    rows: Vec<TrainRail>,
+}
+
+impl PerTrain {
+    pub fn new(section: &Section, cfg: &ModelConfig, target: &Target) -> Result<Self, UsageError> {
+        let grid = Grid::new(section.length_m, section.nominal_wheel_diameter_m);
+        Ok(Self {
+            stats: Stats::new(section, &grid, cfg, target, false)?,
+            current: None,
+            rows: Vec::new(),
+        })
+    }
+
+    /// The rows so far, a train's once the next train entered (all of them
+    /// after [`Sink::finish`]).
+    pub fn rows(&self) -> &[TrainRail] {
+        &self.rows
+    }
+
+    fn close(&mut self) {
+        if let Some((train_id, log_time_ns)) = self.current.take() {
+            for r in 0..self.stats.counts.len() {
+                let f = self.stats.rail_figures(r, 1.0, 0);
+                self.rows.push(TrainRail {
+                    train_id: train_id.clone(),
+                    log_time_ns,
+                    rail: f.rail,
+                    wheel_passes: f.wheel_passes,
+                    in_band_share: f.coverage,
+                    below_band_share: f.below_share,
+                    carry_on_m: f.carry_on_m,
+                    pulses: f.pulses,
+                    product_g: f.product_g,
+                });
+            }
+        }
+        self.stats.reset();
+    }
+}
+
+impl Sink for PerTrain {
+    fn train(&mut self, t: &TrainEvent<'_>) -> tortwin_engine::sink::SinkResult {
+        self.close();
+        self.current = Some((t.train_id.to_string(), t.log_time_ns));
+        Ok(())
+    }
+
+    fn pulse(&mut self, p: &PulseEvent<'_>) -> tortwin_engine::sink::SinkResult {
+        self.stats.pulse(p)
+    }
+
+    fn wheel_contacts(&mut self, w: &WheelContacts<'_>) -> tortwin_engine::sink::SinkResult {
+        self.stats.wheel_contacts(w)
+    }
+
+    fn finish(&mut self, _summary: &RunSummary) -> tortwin_engine::sink::SinkResult {
+        self.close();
+        Ok(())
     }
 }
 

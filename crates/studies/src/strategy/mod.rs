@@ -30,7 +30,9 @@ use tortwin_model::error::UsageError;
 use tortwin_recording::error::InputError;
 use tortwin_recording::{Applicator, Direction, Event, EventKind, Pulse, Recording, Section};
 
-pub use metrics::{Band, CarryOn, Figures, Profile, RailFigures, Target, WorstPoint};
+pub use metrics::{
+    Band, CarryOn, Figures, PerTrain, Profile, RailFigures, Target, TrainRail, WorstPoint,
+};
 
 use crate::{Error, Result};
 
