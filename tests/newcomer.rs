@@ -132,6 +132,7 @@ fn the_readme_commands_work_in_a_fresh_clone() {
         "out/discover/model.toml",
         "out/clog/report.md",
         "out/strategy/strategy.json",
+        "out/fleet/summary.md",
     ] {
         assert!(clone.join(output).is_file(), "{output} missing");
     }

@@ -1,0 +1,195 @@
+"""tortwin-fleet on a local Ray (issue 14): a fleet of synthetic sections
+over three days gives, per section, what replaying its days one after
+another with the command line gives; a worker killed mid-task is retried;
+a corrupt day stops only its section; a re-run skips what is done."""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pyarrow.dataset as ds
+import pytest
+from mcap.reader import make_reader
+
+import tortwin
+from tortwin import fleet
+from conftest import run_cli
+
+ray = pytest.importorskip("ray")
+
+SECTIONS = [f"S{k}" for k in range(6)]
+CLOGGED = "S3"
+DATES = ["2024-04-08", "2024-04-09", "2024-04-10"]
+CLOG = "generic:acts_on=pulse_mass,applicator=A1,driver=time,form=step,t0_utc=2024-04-09T12:00:00Z,f=0.6"
+
+
+@pytest.fixture(scope="module")
+def local_ray():
+    ray.init(num_cpus=2, log_to_driver=False, include_dashboard=False)
+    yield
+    ray.shutdown()
+
+
+@pytest.fixture(scope="module")
+def recordings(tmp_path_factory) -> dict[str, dict[str, Path]]:
+    """Six sections, three days each, one file a day; S3's nozzle clogs."""
+    root = tmp_path_factory.mktemp("fleet-recordings")
+    days = {}
+    for k, sid in enumerate(SECTIONS):
+        whole = root / f"{sid}.mcap"
+        tortwin.synth(
+            whole, days=3, seed=40 + k, trains_per_day=16, length_m=300.0,
+            hidden=[CLOG] if sid == CLOGGED else [],
+        )
+        days[sid] = fleet.split_by_day(whole, root / sid)
+        assert sorted(days[sid]) == DATES
+    return days
+
+
+def manifest(path: Path, output: Path, recordings, sections, **extra) -> Path:
+    lines = [f'output = "{output}"', "[defaults]", "out_mcap = true"]
+    for sid in sections:
+        days = ", ".join(f'{d} = "{p}"' for d, p in recordings[sid].items())
+        lines += ["[[section]]", f'id = "{sid}"', f"days = {{ {days} }}"]
+        for key, value in extra.get(sid, {}).items():
+            lines.append(f"{key} = {json.dumps(value)}")
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def messages(path: Path, topics=("/twin/measurement", "/twin/field", "/twin/pulse")) -> list[tuple]:
+    with open(path, "rb") as f:
+        return [(c.topic, m.log_time, m.data) for _, c, m in make_reader(f).iter_messages(topics=list(topics))]
+
+
+def test_a_fleet_equals_the_command_line_day_by_day(tmp_path, recordings, local_ray, tortwin_bin):
+    out = tmp_path / "out"
+    m = manifest(tmp_path / "fleet.toml", out, recordings, SECTIONS, **{CLOGGED: {"run": ["replay", "discover"]}})
+    run = fleet.run(m)
+    assert [d.status for d in run.days] == ["done"] * 18, run.days
+    assert [(w, r.section, r.status) for w, r in run.studies] == [("discover", CLOGGED, "done")]
+
+    # Per section: the command line, day after day with the state carried.
+    for sid in SECTIONS:
+        state = None
+        for date in DATES:
+            cli_out = tmp_path / "cli" / sid / f"{date}.mcap"
+            cli_out.parent.mkdir(parents=True, exist_ok=True)
+            args = ["replay", recordings[sid][date], "--out-mcap", cli_out, "-q",
+                    "--state-out", cli_out.with_suffix(".state.json")]
+            if state:
+                args += ["--state-in", state]
+            done = run_cli(tortwin_bin, *args)
+            assert done.returncode == 0, done.stderr
+            state = cli_out.with_suffix(".state.json")
+            ours = out / "mcap" / sid / f"{date}.mcap"
+            expected = messages(cli_out)
+            assert len(expected) > 100
+            assert messages(ours) == expected, (sid, date)
+            assert (out / "_state" / sid / f"{date}.state.json").read_text() == state.read_text()
+
+    # The dataset: per-train metrics, RMSE and days, partitioned by section and date.
+    trains = ds.dataset(out / "trains", format="parquet", partitioning="hive").to_table()
+    assert set(trains["section"].to_pylist()) == set(SECTIONS)
+    assert trains.num_rows == sum(
+        ds.dataset(out / "days", format="parquet", partitioning="hive").to_table()["trains"].to_pylist()
+    ) * 2  # two rails
+    rmse = ds.dataset(out / "rmse", format="parquet", partitioning="hive").to_table().to_pandas()
+    cli_residuals = [
+        json.loads(data)["measured"] - json.loads(data)["simulated"]
+        for _, _, data in messages(tmp_path / "cli" / "S0" / "2024-04-09.mcap", ("/twin/measurement",))
+    ]
+    day = rmse[(rmse.section == "S0") & (rmse.date.astype(str) == "2024-04-09")]
+    assert day.n.sum() == len(cli_residuals)
+
+    # The clogged nozzle is found, and its section heads the summary.
+    findings = ds.dataset(out / "findings", format="parquet", partitioning="hive").to_table().to_pylist()
+    assert [(f["section"], f["acts_on"], f["applicator"]) for f in findings] == [(CLOGGED, "pulse_mass", "A1")]
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["sections"][0]["section"] == CLOGGED
+    assert "applicator A1" in summary["sections"][0]["reasons"][0]
+    assert all(not s["reasons"] for s in summary["sections"][1:]), summary["sections"]
+    assert "| 1 | S3 |" in (out / "summary.md").read_text()
+    assert (out / "summary.png").read_bytes()[:4] == b"\x89PNG"
+
+    # A re-run skips every day and the study, and rewrites no table.
+    tables = sorted((out / "trains").rglob("*.parquet"))
+    stamps = [p.stat().st_mtime_ns for p in tables]
+    again = fleet.run(m)
+    assert [d.status for d in again.days] == ["skipped"] * 18
+    assert [r.status for _, r in again.studies] == ["skipped"]
+    assert [p.stat().st_mtime_ns for p in tables] == stamps
+
+    # The README's DuckDB query.
+    duckdb = pytest.importorskip("duckdb")
+    rows = duckdb.sql(
+        f"select section, sum(product_g) as product_g, avg(in_band_share) as in_band "
+        f"from read_parquet('{out}/trains/**/*.parquet', hive_partitioning = true) "
+        f"group by section order by section"
+    ).fetchall()
+    assert [r[0] for r in rows] == SECTIONS
+
+
+def test_a_worker_killed_mid_task_is_retried_with_the_same_results(tmp_path, recordings, local_ray):
+    sections = ["S1", "S2"]
+    plain = fleet.run(manifest(tmp_path / "a.toml", tmp_path / "a", recordings, sections), summary=False)
+    marker = tmp_path / "killed"
+    crashed = fleet.run(
+        manifest(tmp_path / "b.toml", tmp_path / "b", recordings, sections),
+        runtime_env={"env_vars": {"TORTWIN_FLEET_CRASH_ONCE": f"S2/2024-04-09:{marker}"}},
+        summary=False,
+    )
+    assert marker.exists(), "the worker was not killed"
+    assert [d.status for d in crashed.days] == ["done"] * 6
+    retried = next(d for d in crashed.days if (d.section, d.date) == ("S2", "2024-04-09"))
+    assert retried.attempt_pid != int(marker.read_text()), "not run again on a new worker"
+    compared = 0
+    for a in sorted((tmp_path / "a").rglob("*")):
+        relative = a.relative_to(tmp_path / "a")
+        # The markers and the days table hold times of day and seconds.
+        if not a.is_file() or relative.parts[0] in ("_done", "days"):
+            continue
+        b = tmp_path / "b" / relative
+        if a.suffix == ".mcap":
+            assert messages(a) == messages(b), relative
+        else:
+            assert a.read_bytes() == b.read_bytes(), relative
+        compared += 1
+    assert compared == 2 * 3 * 4  # per day: its MCAP, state, trains and rmse tables
+
+
+def test_a_corrupt_day_stops_only_its_section(tmp_path, recordings, local_ray):
+    broken = dict(recordings["S2"])
+    data = broken["2024-04-09"].read_bytes()
+    bad = tmp_path / "S2-2024-04-09.mcap"
+    bad.write_bytes(data[: len(data) // 2])
+    broken["2024-04-09"] = bad
+    m = manifest(tmp_path / "fleet.toml", tmp_path / "out", {"S2": broken, "S4": recordings["S4"]}, ["S2", "S4"])
+    done = subprocess.run(
+        [sys.executable, "-m", "tortwin.fleet", str(m), "--num-cpus", "2"],
+        capture_output=True, text=True, timeout=600,
+    )
+    assert done.returncode == 1, done.stdout + done.stderr
+    assert f"S2 2024-04-09: {bad}" in done.stdout, done.stdout
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    s2 = next(s for s in summary["sections"] if s["section"] == "S2")
+    s4 = next(s for s in summary["sections"] if s["section"] == "S4")
+    assert summary["sections"][0]["section"] == "S2"
+    assert s2["days_done"] == 1 and s2["failed"][0]["date"] == "2024-04-09"
+    assert str(bad) in s2["failed"][0]["error"]
+    assert s4["days_done"] == 3 and not s4["failed"]
+    assert summary["days"] == {"done": 4, "skipped": 0, "failed": 1, "not run": 1}
+    assert not (tmp_path / "out" / "_state" / "S2" / "2024-04-10.state.json").exists()
+
+
+def test_a_bad_manifest_is_exit_2_naming_the_key(tmp_path):
+    m = tmp_path / "fleet.toml"
+    m.write_text('output = "out"\n[[section]]\nid = "A"\ndays = { 2024-04-08 = "a.mcap" }\nrun = ["replay", "guess"]\n')
+    done = subprocess.run([sys.executable, "-m", "tortwin.fleet", str(m)], capture_output=True, text=True)
+    assert done.returncode == 2
+    assert f"{m}: section[0].run" in done.stderr, done.stderr
