@@ -384,7 +384,8 @@ def replay_day(job: DayJob, previous: DayResult | None) -> DayResult:
                 **outputs,
             )
         except tortwin.TortwinError as e:
-            result.status, result.error = "failed", str(e)
+            # A URI's local copy is named by the URI in the message.
+            result.status, result.error = "failed", str(e).replace(str(local), job.recording)
             return result
         part = f"section={job.section}/date={job.date}/part-0.parquet"
         _write_parquet(_join(job.output, "trains", part), run.per_train)

@@ -69,10 +69,25 @@ def messages(path: Path, topics=("/twin/measurement", "/twin/field", "/twin/puls
 
 def test_a_fleet_equals_the_command_line_day_by_day(tmp_path, recordings, local_ray, tortwin_bin):
     out = tmp_path / "out"
-    m = manifest(tmp_path / "fleet.toml", out, recordings, SECTIONS, **{CLOGGED: {"run": ["replay", "discover"]}})
+    space = tmp_path / "space.toml"
+    space.write_text(
+        "[space]\npulse_g = [0.1, 0.3]\nevery_axles = [2, 4]\npositions_m = [10.0]\n"
+        "applicators = [1]\n"
+    )
+    m = manifest(
+        tmp_path / "fleet.toml", out, recordings, SECTIONS,
+        **{CLOGGED: {"run": ["replay", "discover"]},
+           "S0": {"run": ["replay", "strategy"], "strategy_space": str(space)}},
+    )
     run = fleet.run(m)
     assert [d.status for d in run.days] == ["done"] * 18, run.days
-    assert [(w, r.section, r.status) for w, r in run.studies] == [("discover", CLOGGED, "done")]
+    assert sorted((w, r.section, r.status) for w, r in run.studies) == [
+        ("discover", CLOGGED, "done"), ("strategy", "S0", "done")
+    ], run.studies
+    strategy = ds.dataset(out / "strategy", format="parquet", partitioning="hive").to_table().to_pylist()
+    assert [(x["section"], x["first_date"], x["last_date"]) for x in strategy] == [("S0", DATES[0], DATES[-1])]
+    assert strategy[0]["recommended_pulse_g"] in (0.1, 0.3) or strategy[0]["recommended"] is None
+    assert 0.0 <= strategy[0]["today_coverage"] <= 1.0
 
     # Per section: the command line, day after day with the state carried.
     for sid in SECTIONS:
@@ -122,7 +137,7 @@ def test_a_fleet_equals_the_command_line_day_by_day(tmp_path, recordings, local_
     stamps = [p.stat().st_mtime_ns for p in tables]
     again = fleet.run(m)
     assert [d.status for d in again.days] == ["skipped"] * 18
-    assert [r.status for _, r in again.studies] == ["skipped"]
+    assert [r.status for _, r in again.studies] == ["skipped", "skipped"]
     assert [p.stat().st_mtime_ns for p in tables] == stamps
 
     # The README's DuckDB query.
@@ -139,8 +154,11 @@ def test_a_worker_killed_mid_task_is_retried_with_the_same_results(tmp_path, rec
     sections = ["S1", "S2"]
     plain = fleet.run(manifest(tmp_path / "a.toml", tmp_path / "a", recordings, sections), summary=False)
     marker = tmp_path / "killed"
+    # The second run reads and writes through URIs (pyarrow's filesystems),
+    # as a cluster reads s3://.
+    as_uris = {sid: {d: f"file://{p}" for d, p in recordings[sid].items()} for sid in sections}
     crashed = fleet.run(
-        manifest(tmp_path / "b.toml", tmp_path / "b", recordings, sections),
+        manifest(tmp_path / "b.toml", f"file://{tmp_path / 'b'}", as_uris, sections),
         runtime_env={"env_vars": {"TORTWIN_FLEET_CRASH_ONCE": f"S2/2024-04-09:{marker}"}},
         summary=False,
     )
