@@ -37,7 +37,7 @@ use tortwin_engine::EngineState;
 use tortwin_outputs::tables::{Formats, MemoryTable, TableOptions, TableSink};
 use tortwin_studies::discover::data::Dataset;
 use tortwin_studies::discover::Discovery;
-use tortwin_studies::jobs::replay::{read_state, replay_from, SavedState};
+use tortwin_studies::jobs::replay::{replay_run, SavedState};
 use tortwin_studies::jobs::{self, ConfigSource};
 use tortwin_studies::strategy::TrainRail;
 use tortwin_studies::{Error, Progress};
@@ -243,31 +243,12 @@ fn replay(
             ..TableOptions::default()
         };
         let mut tables = TableSink::create(Path::new("."), options)?;
-        let from_file = match (&state, &args.state_in) {
-            (None, Some(path)) => Some(read_state(path)?),
-            _ => None,
-        };
-        let start = match (&state, &from_file, &args.state_in) {
-            (Some(s), _, _) => Some(SavedState {
-                state: s,
-                name: "the state passed in".into(),
-                file: None,
-            }),
-            (None, Some(s), Some(path)) => Some(SavedState {
-                state: s,
-                name: path.display().to_string(),
-                file: Some(path),
-            }),
-            _ => None,
-        };
-        let done = replay_from(&args, start, &mut [&mut tables as &mut dyn Sink], progress)?;
-        if let Some(path) = &args.state_out {
-            let text = serde_json::to_string(&done.state).map_err(|source| Error::Json {
-                what: "the state",
-                source,
-            })?;
-            tortwin_outputs::files::write_atomically(path, text.as_bytes())?;
-        }
+        let start = state.as_ref().map(|s| SavedState {
+            state: s,
+            name: "the state passed in".into(),
+            file: None,
+        });
+        let done = replay_run(&args, start, &mut [&mut tables as &mut dyn Sink], progress)?;
         let summary = serde_json::to_string(&done.summary).map_err(|source| Error::Json {
             what: "the summary",
             source,

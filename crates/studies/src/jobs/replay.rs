@@ -92,6 +92,18 @@ pub fn replay_with(
     extra: &mut [&mut dyn Sink],
     progress: &dyn Progress,
 ) -> Result<RunSummary> {
+    replay_run(args, None, extra, progress).map(|run| run.summary)
+}
+
+/// The whole command: starts from `start` (a state held in memory) or
+/// else from `args.state_in`, replays through [`replay_from`], writes
+/// `args.state_out`, and returns what the replay left.
+pub fn replay_run(
+    args: &ReplayArgs,
+    start: Option<SavedState<'_>>,
+    extra: &mut [&mut dyn Sink],
+    progress: &dyn Progress,
+) -> Result<Replayed> {
     if let Some(path) = &args.state_out {
         for other in [&args.out_mcap, &args.out_rrd].into_iter().flatten() {
             if other == path {
@@ -103,9 +115,13 @@ pub fn replay_with(
             }
         }
     }
-    let saved = args.state_in.as_deref().map(read_state).transpose()?;
-    let start = match (&saved, &args.state_in) {
-        (Some(state), Some(path)) => Some(SavedState {
+    let saved = match (&start, &args.state_in) {
+        (None, Some(path)) => Some(read_state(path)?),
+        _ => None,
+    };
+    let start = match (start, &saved, &args.state_in) {
+        (Some(start), _, _) => Some(start),
+        (None, Some(state), Some(path)) => Some(SavedState {
             state,
             name: path.display().to_string(),
             file: Some(path),
@@ -120,7 +136,7 @@ pub fn replay_with(
         })?;
         tortwin_outputs::files::write_atomically(path, text.as_bytes())?;
     }
-    Ok(run.summary)
+    Ok(run)
 }
 
 /// A state to start a replay from.
@@ -143,7 +159,7 @@ pub struct Replayed {
 
 /// Replays `args.recording` from `start` (or a fresh section), into the
 /// outputs the arguments ask for and `extra`; `args.state_in` and
-/// `args.state_out` are the caller's (see [`replay_with`]). Stops with
+/// `args.state_out` are the caller's (see [`replay_run`]). Stops with
 /// [`Error::Cancelled`] when `progress` says so.
 pub fn replay_from(
     args: &ReplayArgs,
