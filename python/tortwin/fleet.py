@@ -56,7 +56,7 @@ import tempfile
 import time
 import tomllib
 import uuid
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Iterable
 

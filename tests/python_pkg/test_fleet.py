@@ -6,8 +6,6 @@ a corrupt day stops only its section; a re-run skips what is done."""
 from __future__ import annotations
 
 import json
-import os
-import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -163,6 +161,7 @@ def test_a_fleet_equals_the_command_line_day_by_day(tmp_path, recordings, local_
 def test_a_worker_killed_mid_task_is_retried_with_the_same_results(tmp_path, recordings, local_ray):
     sections = ["S1", "S2"]
     plain = fleet.run(manifest(tmp_path / "a.toml", tmp_path / "a", recordings, sections), summary=False)
+    assert [d.status for d in plain.days] == ["done"] * 6
     marker = tmp_path / "killed"
     # The second run reads and writes through URIs (pyarrow's filesystems),
     # as a cluster reads s3://.

@@ -17,7 +17,7 @@ import pyarrow.compute as pc
 import pytest
 
 import tortwin
-from conftest import RECORDINGS, REFERENCE, REPO, rewrite, run_cli, twin_measurements
+from conftest import RECORDINGS, REFERENCE, rewrite, run_cli, twin_measurements
 
 REFERENCE_CASES = [
     ("curve_2day.mcap", None),
