@@ -727,3 +727,52 @@ fn carry_on_distance_of_figure_13() {
     // One applicator at d = 0 and up traffic: nothing is in band upstream.
     assert_eq!(rail.carry_on.len(), 1);
 }
+
+/// The fleet's per-train figures (`ReplayArgs::per_train`) add up to the
+/// strategy's figures of the whole day, computed over the same contacts in
+/// one count: wheel passes, contacts in and below the band, pulses and
+/// product per rail; the product is the day's applied mass.
+#[test]
+fn per_train_figures_add_up_to_the_days() {
+    use tortwin_studies::jobs::replay::{replay_run, ReplayArgs};
+
+    let args = ReplayArgs {
+        per_train: true,
+        ..ReplayArgs::new(common::demo_day())
+    };
+    let run = replay_run(&args, None, &mut [], &tortwin_studies::Silent).unwrap();
+    let rows = run.per_train.expect("per-train rows");
+    let traffic = demo();
+    let day = evaluate(
+        &traffic,
+        &ModelConfig::default(),
+        &Target::default(),
+        &Plan::Today,
+        false,
+        None,
+    )
+    .unwrap();
+    assert_eq!(rows.len(), 40 * 2, "a row per train and rail");
+    for rail in &day.rails {
+        let mine: Vec<_> = rows.iter().filter(|r| r.rail == rail.rail).collect();
+        let passes: u64 = mine.iter().map(|r| r.wheel_passes).sum();
+        assert_eq!(passes, rail.wheel_passes, "{}", rail.rail);
+        let share = |f: fn(&tortwin_studies::strategy::TrainRail) -> f64| {
+            mine.iter()
+                .map(|r| f(r) * r.wheel_passes as f64)
+                .sum::<f64>()
+                / passes as f64
+        };
+        assert!((share(|r| r.in_band_share) - rail.coverage).abs() < 1e-12);
+        assert!((share(|r| r.below_band_share) - rail.below_share).abs() < 1e-12);
+        assert_eq!(mine.iter().map(|r| r.pulses).sum::<u64>(), rail.pulses);
+        let product: f64 = mine.iter().map(|r| r.product_g).sum();
+        assert!((product - rail.product_g).abs() < 1e-9 * rail.product_g);
+        assert!(mine
+            .iter()
+            .all(|r| r.carry_on_m >= 0.0 && r.carry_on_m <= 600.0));
+    }
+    let applied_g = run.summary.mass_balance.applied_kg * 1e3;
+    let product: f64 = rows.iter().map(|r| r.product_g).sum();
+    assert!((product - applied_g).abs() < 1e-9 * applied_g);
+}
