@@ -224,6 +224,33 @@ fn bad_input_exits_2_and_leaves_no_output() {
         .output()
         .unwrap();
     assert_eq!(out.status.code(), Some(2));
+
+    // Two outputs on one path, whichever two.
+    let same = work.join("same");
+    for pair in [
+        ["--out-mcap", "--out-rrd"],
+        ["--out-mcap", "--state-out"],
+        ["--out-rrd", "--state-out"],
+    ] {
+        let out = tortwin()
+            .arg("replay")
+            .arg(reference("tangent_day.mcap"))
+            .args([
+                pair[0].as_ref(),
+                same.as_os_str(),
+                pair[1].as_ref(),
+                same.as_os_str(),
+            ])
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{pair:?}: {stderr}");
+        assert!(
+            stderr.contains("two outputs would be written to"),
+            "{stderr}"
+        );
+        assert!(!same.exists(), "{pair:?}");
+    }
 }
 
 #[test]

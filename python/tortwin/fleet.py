@@ -566,8 +566,11 @@ def _mark_section(job: SectionJob, what: str, key: str) -> None:
     _write_bytes(_join(job.output, "_done", job.section, f"{what}.json"), json.dumps({"key": key}).encode())
 
 
-def discover_section(job: SectionJob, *days: DayResult) -> DayResult:
-    """discover over all the section's days, once they replayed (a Ray task)."""
+def _section_study(job: SectionJob, days: tuple[DayResult, ...], what: str, extra_key: str, study) -> DayResult:
+    """The frame of a study over a section's days (a Ray task's body): not
+    run after a failed day; skipped when done with the same inputs; else the
+    days merged into one recording for `study(merged, tmp)`, which runs it
+    and writes its tables (a TortwinError is the study's failure)."""
     result = DayResult(job.section, f"{job.days[0].date}..{job.days[-1].date}", "done")
     if any(d.status in ("failed", "not run") for d in days):
         result.status, result.error = "not run", "a day did not finish"
@@ -576,16 +579,31 @@ def discover_section(job: SectionJob, *days: DayResult) -> DayResult:
     with tempfile.TemporaryDirectory(prefix="tortwin-fleet-") as tmp:
         tmp = Path(tmp)
         merged, key = _section_inputs(job, tmp)
-        key += ":discover"
-        if _skip_section(job, "discover", key):
+        key += f":{what}:{extra_key}"
+        if _skip_section(job, what, key):
             result.status = "skipped"
             return result
         try:
-            found = tortwin.discover(merged, config=_config_arg(job), threads=job.threads)
+            study(merged, tmp)
         except tortwin.TortwinError as e:
             result.status, result.error = "failed", str(e)
             return result
-    report = found.report
+    _mark_section(job, what, key)
+    result.seconds = time.monotonic() - t0
+    return result
+
+
+def discover_section(job: SectionJob, *days: DayResult) -> DayResult:
+    """discover over all the section's days, once they replayed (a Ray task)."""
+
+    def study(merged: Path, tmp: Path) -> None:
+        found = tortwin.discover(merged, config=_config_arg(job), threads=job.threads)
+        _write_discovery(job, found.report)
+
+    return _section_study(job, days, "discover", "", study)
+
+
+def _write_discovery(job: SectionJob, report: dict[str, Any]) -> None:
     part = f"section={job.section}/part-0.parquet"
     _write_parquet(
         _join(job.output, "discover", part),
@@ -627,9 +645,6 @@ def discover_section(job: SectionJob, *days: DayResult) -> DayResult:
                                     "site", "rail", "quantity", "params", "description")]
     )
     _write_parquet(_join(job.output, "findings", part), pa.Table.from_pylist(rows, schema=schema))
-    _mark_section(job, "discover", key)
-    result.seconds = time.monotonic() - t0
-    return result
 
 
 def tortwin_effect_text(effect: dict[str, Any]) -> str:
@@ -642,32 +657,27 @@ def tortwin_effect_text(effect: dict[str, Any]) -> str:
 
 def strategy_section(job: SectionJob, *days: DayResult) -> DayResult:
     """strategy over all the section's days' traffic (a Ray task)."""
-    result = DayResult(job.section, f"{job.days[0].date}..{job.days[-1].date}", "done")
-    if any(d.status in ("failed", "not run") for d in days):
-        result.status, result.error = "not run", "a day did not finish"
-        return result
-    t0 = time.monotonic()
-    with tempfile.TemporaryDirectory(prefix="tortwin-fleet-") as tmp:
-        tmp = Path(tmp)
-        merged, key = _section_inputs(job, tmp)
+    try:
         space_text = _read_bytes(job.strategy_space).decode() if job.strategy_space else ""
-        key += ":strategy:" + _sha256(space_text.encode())
-        if _skip_section(job, "strategy", key):
-            result.status = "skipped"
-            return result
+    except OSError as e:
+        return DayResult(job.section, "", "failed", error=f"{job.strategy_space}: cannot read: {e}")
+
+    def study(merged: Path, tmp: Path) -> None:
         space = None
         if job.strategy_space:
             space = tmp / "space.toml"
             space.write_text(space_text)
-        try:
-            study = tortwin.strategy(
-                merged, out=tmp / "strategy", config=_config_arg(job), space=space, threads=job.threads
-            )
-        except tortwin.TortwinError as e:
-            result.status, result.error = "failed", str(e)
-            return result
-    today = study["today"]["figures"]
-    rec = study.get("recommended") or {}
+        result = tortwin.strategy(
+            merged, out=tmp / "strategy", config=_config_arg(job), space=space, threads=job.threads
+        )
+        _write_strategy(job, result)
+
+    return _section_study(job, days, "strategy", _sha256(space_text.encode()), study)
+
+
+def _write_strategy(job: SectionJob, result: dict[str, Any]) -> None:
+    today = result["today"]["figures"]
+    rec = result.get("recommended") or {}
     rec_strategy = rec.get("strategy") or {}
     rec_figures = rec.get("figures") or {}
     row = {
@@ -687,9 +697,6 @@ def strategy_section(job: SectionJob, *days: DayResult) -> DayResult:
         _join(job.output, "strategy", f"section={job.section}/part-0.parquet"),
         pa.Table.from_pylist([row]),
     )
-    _mark_section(job, "strategy", key)
-    result.seconds = time.monotonic() - t0
-    return result
 
 
 # --------------------------------------------------------------------------

@@ -104,17 +104,6 @@ pub fn replay_run(
     extra: &mut [&mut dyn Sink],
     progress: &dyn Progress,
 ) -> Result<Replayed> {
-    if let Some(path) = &args.state_out {
-        for other in [&args.out_mcap, &args.out_rrd].into_iter().flatten() {
-            if other == path {
-                return Err(UsageError(format!(
-                    "two outputs would be written to {}",
-                    path.display()
-                ))
-                .into());
-            }
-        }
-    }
     let saved = match (&start, &args.state_in) {
         (None, Some(path)) => Some(read_state(path)?),
         _ => None,
@@ -168,11 +157,14 @@ pub fn replay_from(
     progress: &dyn Progress,
 ) -> Result<Replayed> {
     let cfg = load_config(args.config.as_ref())?;
-    if let (Some(a), Some(b)) = (&args.out_mcap, &args.out_rrd) {
-        if a == b {
-            return Err(
-                UsageError(format!("two outputs would be written to {}", a.display())).into(),
-            );
+    let outputs = [&args.out_mcap, &args.out_rrd, &args.state_out];
+    for (k, a) in outputs.iter().enumerate() {
+        if let Some(a) = a {
+            if outputs[k + 1..].iter().any(|b| b.as_ref() == Some(a)) {
+                return Err(
+                    UsageError(format!("two outputs would be written to {}", a.display())).into(),
+                );
+            }
         }
     }
     let ctx = match &start {
