@@ -104,18 +104,18 @@ pub fn replay_run(
     extra: &mut [&mut dyn Sink],
     progress: &dyn Progress,
 ) -> Result<Replayed> {
-    let saved = match (&start, &args.state_in) {
-        (None, Some(path)) => Some(read_state(path)?),
-        _ => None,
-    };
-    let start = match (start, &saved, &args.state_in) {
-        (Some(start), _, _) => Some(start),
-        (None, Some(state), Some(path)) => Some(SavedState {
-            state,
-            name: path.display().to_string(),
-            file: Some(path),
-        }),
-        _ => None,
+    let saved;
+    let start = match (start, &args.state_in) {
+        (Some(start), _) => Some(start),
+        (None, Some(path)) => {
+            saved = read_state(path)?;
+            Some(SavedState {
+                state: &saved,
+                name: path.display().to_string(),
+                file: Some(path),
+            })
+        }
+        (None, None) => None,
     };
     let run = replay_from(args, start, extra, progress)?;
     if let Some(path) = &args.state_out {
