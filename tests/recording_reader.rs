@@ -408,6 +408,65 @@ proptest! {
         prop_assert_eq!(got, want);
         let unknown = picks.iter().filter(|(_, kind)| *kind == 3).count() as u64;
         prop_assert_eq!(reader.unknown_topic_messages(), unknown);
+        // Unchunked, the reader holds a run per stretch of the file already
+        // in replay order: a new run wherever (log_time, topic) goes back.
+        if layout == Layout::Unchunked {
+            let keys: Vec<(u64, u8)> = msgs.iter().map(|m| (m.log_time, rank(&m.topic))).collect();
+            let runs = 1 + keys.windows(2).filter(|w| w[1] < w[0]).count() as u64;
+            prop_assert_eq!(reader.layout().loose_runs, runs);
+            prop_assert_eq!(reader.layout().loose_messages, msgs.len() as u64);
+        }
+    }
+}
+
+/// The bundled recordings rewritten without chunks: in time order they are
+/// one run, read as a stream; with the tribometer readings at the end of
+/// the file (as written), two. The events are the originals'.
+#[test]
+fn an_unchunked_file_in_time_order_is_one_run() {
+    let dir = tempfile::tempdir().unwrap();
+    for (name, sort, runs) in [
+        ("demo_day.mcap", false, 2),
+        ("demo_day.mcap", true, 1),
+        ("curve_day_bands_rain.mcap", false, 2),
+    ] {
+        let original = Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("recordings")
+            .join(name);
+        let bytes = std::fs::read(&original).unwrap();
+        let mut messages: Vec<_> = mcap::MessageStream::new(&bytes)
+            .unwrap()
+            .map(|m| m.unwrap())
+            .collect();
+        if sort {
+            messages.sort_by_key(|m| m.log_time);
+        }
+        let path = dir.path().join("unchunked.mcap");
+        let file = std::io::BufWriter::new(std::fs::File::create(&path).unwrap());
+        let mut writer = mcap::WriteOptions::new()
+            .use_chunks(false)
+            .create(file)
+            .unwrap();
+        for m in &messages {
+            writer.write(m).unwrap();
+        }
+        writer.finish().unwrap();
+        drop(writer);
+        let (reader, events) = read_all(&path, ReaderContext::default()).unwrap();
+        let layout = reader.layout();
+        assert_eq!(
+            (layout.chunks, layout.loose_runs),
+            (0, runs),
+            "{name} sorted {sort}"
+        );
+        assert_eq!(layout.loose_messages, messages.len() as u64);
+        let (_, want) = read_all(&original, ReaderContext::default()).unwrap();
+        let strip = |e: &[Event]| -> Vec<(u64, String)> {
+            e.iter()
+                .map(|e| (e.log_time_ns, format!("{:?}", e.kind)))
+                .collect()
+        };
+        assert_eq!(strip(&events), strip(&want), "{name}");
     }
 }
 

@@ -39,7 +39,7 @@ pub enum Layout {
     OneChunk,
     /// A chunk per message, so chunk start times jump back and forth.
     ChunkPerMessage,
-    /// No chunks: the reader's in-memory fallback.
+    /// No chunks: runs of messages merged from the file.
     Unchunked,
     /// Everything in one lz4 chunk (the other layouts use zstd).
     OneLz4Chunk,

@@ -200,6 +200,17 @@ fn per_rail<T: Copy>(
         .collect()
 }
 
+/// Grid points a rail may have, `floor(length_m / (pi *
+/// nominal_wheel_diameter_m)) + 1`: 200 000 is a 578 km section of 0.92 m
+/// wheels; the engine's memory is about 100 bytes a point, rail and band.
+/// A bound so that a corrupt diameter or length cannot ask for gigabytes
+/// (docs/spec/recording-format.md "Limits").
+pub const MAX_GRID_POINTS: usize = 200_000;
+
+/// Axles a `/train/passage` may have: the longest freight trains run about
+/// 3 000.
+pub const MAX_AXLES: usize = 10_000;
+
 /// The `/section` message as the typed [`Section`].
 pub fn section(msg: &SectionMsg) -> Result<Section, DecodeError> {
     let length_m = positive(|| "length_m".into(), msg.length_m)?;
@@ -282,16 +293,29 @@ pub fn section(msg: &SectionMsg) -> Result<Section, DecodeError> {
         });
     }
 
+    let nominal_wheel_diameter_m = positive(
+        || "nominal_wheel_diameter_m".into(),
+        msg.nominal_wheel_diameter_m,
+    )?;
+    let points = (length_m / (std::f64::consts::PI * nominal_wheel_diameter_m)).floor() + 1.0;
+    if points > MAX_GRID_POINTS as f64 {
+        return Err(DecodeError::at(
+            "nominal_wheel_diameter_m",
+            format!(
+                "length_m = {length_m} and nominal_wheel_diameter_m = {nominal_wheel_diameter_m} \
+                 make a grid of {points:.0} points a rail (one per wheel circumference); \
+                 at most {MAX_GRID_POINTS} are accepted"
+            ),
+        ));
+    }
+
     Ok(Section {
         section_id: msg.section_id.clone(),
         length_m,
         rails,
         curve_radius_m,
         rail_head_radius_m: positive(|| "rail_head_radius_m".into(), msg.rail_head_radius_m)?,
-        nominal_wheel_diameter_m: positive(
-            || "nominal_wheel_diameter_m".into(),
-            msg.nominal_wheel_diameter_m,
-        )?,
+        nominal_wheel_diameter_m,
         applicators,
         sites,
     })
@@ -354,6 +378,15 @@ impl Decoder {
         let rails = &self.section.rails;
         let speed_mps = positive(|| "speed_mps".into(), msg.speed_mps)?;
         non_empty("axles", &msg.axles)?;
+        if msg.axles.len() > MAX_AXLES {
+            return Err(DecodeError::at(
+                "axles",
+                format!(
+                    "{} axles; a train may have at most {MAX_AXLES}",
+                    msg.axles.len()
+                ),
+            ));
+        }
         let mut axles: Vec<Axle> = Vec::with_capacity(msg.axles.len());
         for (i, a) in msg.axles.iter().enumerate() {
             let offset_m = non_negative(|| format!("axles[{i}].offset_m"), a.offset_m)?;

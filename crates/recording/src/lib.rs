@@ -35,6 +35,7 @@ pub mod topic;
 pub mod wire;
 pub mod writer;
 
+pub use decode::{MAX_AXLES, MAX_GRID_POINTS};
 pub use event::*;
 pub use reader::{ReaderContext, RecordingReader, Wire};
 pub use recording::Recording;

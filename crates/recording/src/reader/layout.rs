@@ -30,13 +30,27 @@ use std::path::Path;
 use mcap::records::{op, Record};
 use mcap::sans_io::{LinearReadEvent, LinearReader, LinearReaderOptions};
 
+use super::record;
 use crate::error::InputError;
 use crate::topic::Topic;
 
 /// A chunk larger than this (uncompressed) is refused rather than allocated:
-/// writers use chunks of about a megabyte, and a corrupt size field must not
-/// exhaust memory.
-const MAX_CHUNK_BYTES: u64 = 1 << 30;
+/// writers use chunks of about a megabyte (tortwin's own: 8 MiB), and a
+/// corrupt size field must not exhaust memory. Documented in
+/// docs/spec/recording-format.md "Limits".
+pub const MAX_CHUNK_BYTES: u64 = 256 << 20;
+
+/// A message of the format (a topic tortwin reads) larger than this is
+/// refused before it is parsed: a `/train/passage` of 10 000 axles is about
+/// 2.5 MB. Messages of other topics are skipped whatever their size.
+pub const MAX_MESSAGE_BYTES: u64 = 16 << 20;
+
+/// A Channel (or other small) record larger than this is refused.
+const MAX_SMALL_RECORD_BYTES: u64 = 16 << 20;
+
+/// Bytes of a Message record's header: channel_id u16, sequence u32,
+/// log_time u64, publish_time u64.
+pub(super) const MESSAGE_HEADER_BYTES: u64 = 22;
 
 /// Bytes of a record's framing: opcode (1) and body length (8).
 pub(super) const RECORD_HEADER_BYTES: u64 = 9;
@@ -82,19 +96,25 @@ pub(super) struct ChunkInfo {
     pub message_count: u64,
 }
 
-/// A Message record outside any chunk.
+/// Messages outside chunks that follow one another in the file (with no
+/// chunk between them) and are already in replay order: the replay reads
+/// such a run front to back, so an unchunked file written in time order
+/// is one run, read as a stream.
 #[derive(Debug, Clone, Copy)]
-pub(super) struct LooseMessage {
-    pub key: ReplayKey,
-    pub body_offset: u64,
-    pub body_len: u64,
+pub(super) struct LooseRun {
+    pub first: ReplayKey,
+    pub last: ReplayKey,
+    /// File offset of the first message's record (opcode byte).
+    pub record_offset: u64,
+    pub message_count: u64,
 }
 
 #[derive(Debug, Default)]
 pub(super) struct Layout {
     pub channels: HashMap<u16, ChannelInfo>,
     pub chunks: Vec<ChunkInfo>,
-    pub loose: Vec<LooseMessage>,
+    /// Runs of messages outside chunks, in file order.
+    pub loose: Vec<LooseRun>,
     /// The first two `/section` messages in replay order.
     pub sections: Vec<ReplayKey>,
 }
@@ -127,6 +147,9 @@ pub(super) fn scan_layout(path: &Path, file: &mut BufReader<File>) -> Result<Lay
     let mut layout = Layout::default();
     let mut message_count: u64 = 0;
     let mut offset = magic_len;
+    // Whether a message outside chunks may extend the last run (no chunk
+    // since it).
+    let mut run_open = false;
     file.seek(SeekFrom::Start(offset)).map_err(io_error)?;
     loop {
         if file_len - offset < RECORD_HEADER_BYTES {
@@ -152,6 +175,7 @@ pub(super) fn scan_layout(path: &Path, file: &mut BufReader<File>) -> Result<Lay
         match opcode {
             op::DATA_END | op::FOOTER => break,
             op::CHUNK => {
+                run_open = false;
                 // Reading the framing again keeps the chunk record whole for
                 // the chunk reader.
                 file.seek(SeekFrom::Start(offset)).map_err(io_error)?;
@@ -168,25 +192,51 @@ pub(super) fn scan_layout(path: &Path, file: &mut BufReader<File>) -> Result<Lay
                     message_count: message_count - first_index,
                 });
             }
-            op::CHANNEL | op::MESSAGE => {
-                let body = read_exact_vec(file, body_len).map_err(io_error)?;
-                let record = mcap::parse_record(opcode, &body)
-                    .map_err(|e| corrupt(format!("corrupt record at byte {offset}: {e}")))?;
-                match record {
-                    Record::Channel(channel) => add_channel(&mut layout, channel)
-                        .map_err(|e| corrupt(format!("record at byte {offset}: {e}")))?,
-                    Record::Message { header, .. } => {
-                        let key = message_key(&mut layout, &header, message_count)
-                            .map_err(|e| corrupt(format!("record at byte {offset}: {e}")))?;
-                        layout.loose.push(LooseMessage {
-                            key,
-                            body_offset,
-                            body_len,
-                        });
-                        message_count += 1;
-                    }
-                    _ => {}
+            op::CHANNEL => {
+                if body_len > MAX_SMALL_RECORD_BYTES {
+                    return Err(corrupt(format!(
+                        "the Channel record at byte {offset} claims {body_len} bytes (at most \
+                         {MAX_SMALL_RECORD_BYTES} are accepted)"
+                    )));
                 }
+                let body = read_exact_vec(file, body_len).map_err(io_error)?;
+                match record::parse(opcode, &body) {
+                    Ok(Record::Channel(channel)) => add_channel(&mut layout, channel)
+                        .map_err(|e| corrupt(format!("record at byte {offset}: {e}")))?,
+                    Ok(_) => {}
+                    Err(e) => return Err(corrupt(format!("corrupt record at byte {offset}: {e}"))),
+                }
+            }
+            op::MESSAGE => {
+                if body_len < MESSAGE_HEADER_BYTES {
+                    return Err(corrupt(format!(
+                        "corrupt record at byte {offset}: a Message record of {body_len} bytes \
+                         (its header alone is {MESSAGE_HEADER_BYTES})"
+                    )));
+                }
+                let head = read_exact_vec(file, MESSAGE_HEADER_BYTES).map_err(io_error)?;
+                let header = message_header(&head);
+                let key = message_key(&mut layout, &header, message_count)
+                    .and_then(|key| {
+                        check_message_size(key, body_len - MESSAGE_HEADER_BYTES).map(|()| key)
+                    })
+                    .map_err(|e| corrupt(format!("record at byte {offset}: {e}")))?;
+                match layout.loose.last_mut() {
+                    Some(run) if run_open && key > run.last => {
+                        run.last = key;
+                        run.message_count += 1;
+                    }
+                    _ => layout.loose.push(LooseRun {
+                        first: key,
+                        last: key,
+                        record_offset: offset,
+                        message_count: 1,
+                    }),
+                }
+                run_open = true;
+                message_count += 1;
+                file.seek_relative((body_len - MESSAGE_HEADER_BYTES) as i64)
+                    .map_err(io_error)?;
             }
             _ => {
                 let skip = i64::try_from(body_len)
@@ -202,7 +252,7 @@ pub(super) fn scan_layout(path: &Path, file: &mut BufReader<File>) -> Result<Lay
 /// Counts a chunk's messages (checking each against the header's time range)
 /// and collects its channels. Returns the chunk's `message_start_time`.
 fn scan_chunk(record: &[u8], layout: &mut Layout, message_count: &mut u64) -> Result<u64, String> {
-    let header = chunk_header(record).map_err(|e| e.to_string())?;
+    let header = chunk_header(record)?;
     if header.uncompressed_size > MAX_CHUNK_BYTES {
         return Err(format!(
             "it claims {} bytes uncompressed (at most {MAX_CHUNK_BYTES} are accepted)",
@@ -212,13 +262,13 @@ fn scan_chunk(record: &[u8], layout: &mut Layout, message_count: &mut u64) -> Re
     let (start, end) = (header.message_start_time, header.message_end_time);
     let mut failure: Option<String> = None;
     for_each_chunk_record(record, &header, |opcode, body| {
-        match mcap::parse_record(opcode, body)? {
+        match record::parse(opcode, body)? {
             Record::Channel(channel) => {
                 if let Err(e) = add_channel(layout, channel) {
                     failure.get_or_insert(e);
                 }
             }
-            Record::Message { header, .. } => {
+            Record::Message { header, data } => {
                 if header.log_time < start || header.log_time > end {
                     failure.get_or_insert(format!(
                         "message {} has log_time {} ns, outside the chunk's \
@@ -226,7 +276,9 @@ fn scan_chunk(record: &[u8], layout: &mut Layout, message_count: &mut u64) -> Re
                         *message_count, header.log_time
                     ));
                 }
-                if let Err(e) = message_key(layout, &header, *message_count) {
+                let checked = message_key(layout, &header, *message_count)
+                    .and_then(|key| check_message_size(key, data.len() as u64));
+                if let Err(e) = checked {
                     failure.get_or_insert(e);
                 }
                 *message_count += 1;
@@ -234,8 +286,7 @@ fn scan_chunk(record: &[u8], layout: &mut Layout, message_count: &mut u64) -> Re
             _ => {}
         }
         Ok(())
-    })
-    .map_err(|e| e.to_string())?;
+    })?;
     match failure {
         Some(e) => Err(e),
         None => Ok(start),
@@ -287,14 +338,41 @@ fn message_key(
     Ok(key)
 }
 
+/// A Message record's header from its first [`MESSAGE_HEADER_BYTES`].
+pub(super) fn message_header(head: &[u8]) -> mcap::records::MessageHeader {
+    let le = |range: std::ops::Range<usize>| {
+        let mut bytes = [0u8; 8];
+        bytes[..range.len()].copy_from_slice(&head[range]);
+        u64::from_le_bytes(bytes)
+    };
+    mcap::records::MessageHeader {
+        channel_id: le(0..2) as u16,
+        sequence: le(2..6) as u32,
+        log_time: le(6..14),
+        publish_time: le(14..22),
+    }
+}
+
+/// Refuses a message of the format larger than [`MAX_MESSAGE_BYTES`].
+fn check_message_size(key: ReplayKey, data_len: u64) -> Result<(), String> {
+    if key.topic != TopicRank::Unknown && data_len > MAX_MESSAGE_BYTES {
+        return Err(format!(
+            "message {} (log_time {} ns) is {data_len} bytes long; a message of the \
+             format may be at most {MAX_MESSAGE_BYTES} bytes",
+            key.index_in_file, key.log_time_ns
+        ));
+    }
+    Ok(())
+}
+
 /// The header of a chunk record given whole (framing included).
-pub(super) fn chunk_header(record: &[u8]) -> mcap::McapResult<mcap::records::ChunkHeader> {
+pub(super) fn chunk_header(record: &[u8]) -> Result<mcap::records::ChunkHeader, String> {
     let body = record
         .get(RECORD_HEADER_BYTES as usize..)
-        .ok_or(mcap::McapError::UnexpectedEof)?;
-    match mcap::parse_record(op::CHUNK, body)? {
+        .ok_or("the chunk record is cut short")?;
+    match record::parse(op::CHUNK, body)? {
         Record::Chunk { header, .. } => Ok(header),
-        _ => Err(mcap::McapError::BadIndex),
+        _ => Err("not a chunk record".to_string()),
     }
 }
 
@@ -305,8 +383,8 @@ pub(super) fn chunk_header(record: &[u8]) -> mcap::McapResult<mcap::records::Chu
 pub(super) fn for_each_chunk_record(
     record: &[u8],
     header: &mcap::records::ChunkHeader,
-    mut f: impl FnMut(u8, &[u8]) -> mcap::McapResult<()>,
-) -> mcap::McapResult<()> {
+    mut f: impl FnMut(u8, &[u8]) -> Result<(), String>,
+) -> Result<(), String> {
     // No record inside the chunk is longer than the chunk, and no more
     // compressed bytes need buffering than the record holds.
     let limit = header
@@ -322,7 +400,7 @@ pub(super) fn for_each_chunk_record(
     );
     let mut rest = record;
     while let Some(event) = reader.next_event() {
-        match event? {
+        match event.map_err(|e| e.to_string())? {
             LinearReadEvent::ReadRequest(need) => {
                 let n = need.min(rest.len());
                 let (now, later) = rest.split_at(n);
@@ -345,11 +423,19 @@ pub(super) fn read_at(
     offset: u64,
     len: u64,
 ) -> std::io::Result<Vec<u8>> {
-    file.seek(SeekFrom::Start(offset))?;
+    // Within the buffer, a relative seek keeps it (a run of messages is
+    // read front to back this way).
+    let pos = file.stream_position()?;
+    match i64::try_from(offset.wrapping_sub(pos)) {
+        Ok(delta) if offset >= pos || pos - offset < (1 << 20) => file.seek_relative(delta)?,
+        _ => {
+            file.seek(SeekFrom::Start(offset))?;
+        }
+    }
     read_exact_vec(file, len)
 }
 
-fn read_exact_vec(file: &mut BufReader<File>, len: u64) -> std::io::Result<Vec<u8>> {
+pub(super) fn read_exact_vec(file: &mut BufReader<File>, len: u64) -> std::io::Result<Vec<u8>> {
     let len = usize::try_from(len)
         .map_err(|_| std::io::Error::new(std::io::ErrorKind::InvalidData, "record too long"))?;
     let mut buf = vec![0u8; len];

@@ -25,6 +25,7 @@
 //! index in the file, and ends the iteration.
 
 mod layout;
+mod record;
 mod replay;
 
 use std::fs::File;
@@ -37,6 +38,7 @@ use crate::event::{Event, EventKind, Section};
 use crate::topic::Topic;
 use crate::wire::{MeasurementMsg, PassageMsg, PulseMsg, SectionMsg, WeatherMsg};
 use layout::TopicRank;
+pub use layout::{MAX_CHUNK_BYTES, MAX_MESSAGE_BYTES};
 use replay::{PendingMessage, ReplayQueue};
 
 /// What a recording needs from the replay before it: a recording continues
@@ -71,9 +73,23 @@ pub struct RecordingReader {
     section_msg: SectionMsg,
     section_log_time_ns: u64,
     unknown_topic_messages: u64,
-    /// Messages in the file, every topic (from the layout pass).
-    message_count: u64,
+    layout: LayoutSummary,
     finished: bool,
+}
+
+/// How a file holds its messages (from the layout pass): what the replay
+/// keeps in memory grows with the chunks that overlap in time and with the
+/// runs, not with the messages.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct LayoutSummary {
+    /// Messages in the file, every topic.
+    pub messages: u64,
+    pub chunks: u64,
+    /// Messages outside chunks.
+    pub loose_messages: u64,
+    /// Runs of messages outside chunks already in replay order: 1 for an
+    /// unchunked file written in time order.
+    pub loose_runs: u64,
 }
 
 impl RecordingReader {
@@ -89,9 +105,21 @@ impl RecordingReader {
         let Some(&first_section) = layout.sections.first() else {
             return Err(no_section());
         };
-        let message_count =
-            layout.chunks.iter().map(|c| c.message_count).sum::<u64>() + layout.loose.len() as u64;
-        let mut queue = ReplayQueue::new(path, file, layout.channels, layout.chunks, layout.loose);
+        let loose_messages = layout.loose.iter().map(|r| r.message_count).sum::<u64>();
+        let summary = LayoutSummary {
+            messages: layout.chunks.iter().map(|c| c.message_count).sum::<u64>() + loose_messages,
+            chunks: layout.chunks.len() as u64,
+            loose_messages,
+            loose_runs: layout.loose.len() as u64,
+        };
+        let mut queue = ReplayQueue::new(
+            path,
+            file,
+            layout.channels,
+            layout.chunks,
+            layout.loose,
+            false,
+        );
 
         let Some(first) = queue.next_message()? else {
             return Err(no_section());
@@ -134,7 +162,7 @@ impl RecordingReader {
             section_msg: msg,
             section_log_time_ns: first.key.log_time_ns,
             unknown_topic_messages: 0,
-            message_count,
+            layout: summary,
             finished: false,
         })
     }
@@ -142,7 +170,12 @@ impl RecordingReader {
     /// How many messages the file holds (every topic, `/section` included):
     /// the length of a replay, for a progress display.
     pub fn message_count(&self) -> u64 {
-        self.message_count
+        self.layout.messages
+    }
+
+    /// How the file holds its messages.
+    pub fn layout(&self) -> LayoutSummary {
+        self.layout
     }
 
     /// The `/section` message as it is on the wire (grams, rail names).
@@ -255,6 +288,99 @@ impl RecordingReader {
             },
             wire,
         )))
+    }
+}
+
+/// Every message of an MCAP file as written (any topic, any encoding), in
+/// replay order: the reader's layout pass and merge without the format's
+/// rules. What the MCAP conformance tests read (tests/mcap_conformance.rs).
+pub struct RawMessages {
+    queue: ReplayQueue,
+    finished: bool,
+}
+
+/// A message of [`RawMessages`].
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct RawMessage {
+    pub channel_id: u16,
+    pub topic: String,
+    pub message_encoding: String,
+    pub sequence: u32,
+    pub log_time_ns: u64,
+    pub publish_time_ns: u64,
+    /// Its place among the file's messages (chunks expanded), from 0.
+    pub index_in_file: u64,
+    pub data: Vec<u8>,
+}
+
+impl RawMessages {
+    /// Lays out the file (every chunk checked) as [`RecordingReader::open`]
+    /// does.
+    pub fn open(path: &Path) -> Result<Self, InputError> {
+        let file = File::open(path)
+            .map_err(|e| InputError::file(path, format!("cannot open the recording: {e}")))?;
+        let mut file = BufReader::new(file);
+        let layout = layout::scan_layout(path, &mut file)?;
+        Ok(Self {
+            queue: ReplayQueue::new(
+                path,
+                file,
+                layout.channels,
+                layout.chunks,
+                layout.loose,
+                true,
+            ),
+            finished: false,
+        })
+    }
+
+    /// The channels: id, topic and message encoding.
+    pub fn channels(&self) -> Vec<(u16, String, String)> {
+        let mut channels: Vec<_> = self
+            .queue
+            .channels()
+            .iter()
+            .map(|(&id, c)| (id, c.topic.clone(), c.message_encoding.clone()))
+            .collect();
+        channels.sort();
+        channels
+    }
+}
+
+impl Iterator for RawMessages {
+    type Item = Result<RawMessage, InputError>;
+
+    fn next(&mut self) -> Option<Self::Item> {
+        if self.finished {
+            return None;
+        }
+        let message = match self.queue.next_message() {
+            Ok(Some(m)) => m,
+            Ok(None) => {
+                self.finished = true;
+                return None;
+            }
+            Err(e) => {
+                self.finished = true;
+                return Some(Err(e));
+            }
+        };
+        let (topic, message_encoding) = self
+            .queue
+            .channels()
+            .get(&message.channel_id)
+            .map(|c| (c.topic.clone(), c.message_encoding.clone()))
+            .unwrap_or_default();
+        Some(Ok(RawMessage {
+            channel_id: message.channel_id,
+            topic,
+            message_encoding,
+            sequence: message.sequence,
+            log_time_ns: message.key.log_time_ns,
+            publish_time_ns: message.publish_time_ns,
+            index_in_file: message.key.index_in_file,
+            data: message.data,
+        }))
     }
 }
 

@@ -8,11 +8,12 @@
 //! is the number of messages before the chunk plus k. Only chunks whose time
 //! ranges overlap the frontier are in memory at once.
 //!
-//! Messages outside chunks (an unchunked file) are the fallback: their keys
-//! (log_time, topic, index, offset) are sorted in memory and each body is
-//! read back by offset when its turn comes. That list grows with the number
-//! of such messages, i.e. with the recording (about 40 bytes a message); the
-//! engine-facing behaviour is the same.
+//! Messages outside chunks (an unchunked file) come in runs (see
+//! [`LooseRun`]): the runs wait in order of their first message and are
+//! merged, each read front to back from the file when the frontier
+//! reaches it, holding one message per run in hand. A file written in time
+//! order is one run, read as a stream; memory grows with the number of
+//! runs (a file in reverse time order is the worst case: a run a message).
 
 use std::cmp::{Ordering, Reverse};
 use std::collections::{BinaryHeap, HashMap};
@@ -23,9 +24,10 @@ use std::path::{Path, PathBuf};
 use mcap::records::{op, Record};
 
 use super::layout::{
-    chunk_header, for_each_chunk_record, read_at, ChannelInfo, ChunkInfo, LooseMessage, ReplayKey,
-    TopicRank, RECORD_HEADER_BYTES,
+    chunk_header, for_each_chunk_record, message_header, read_at, read_exact_vec, ChannelInfo,
+    ChunkInfo, LooseRun, ReplayKey, TopicRank, MESSAGE_HEADER_BYTES, RECORD_HEADER_BYTES,
 };
+use super::record;
 use crate::error::{InputError, MessageLocation};
 
 /// A message taken out of its record, waiting for its turn.
@@ -33,6 +35,8 @@ use crate::error::{InputError, MessageLocation};
 pub(super) struct PendingMessage {
     pub key: ReplayKey,
     pub channel_id: u16,
+    pub sequence: u32,
+    pub publish_time_ns: u64,
     pub data: Vec<u8>,
 }
 
@@ -60,10 +64,25 @@ pub(super) struct ReplayQueue {
     channels: HashMap<u16, ChannelInfo>,
     /// Chunks not yet decompressed, the next one last.
     waiting_chunks: Vec<ChunkInfo>,
-    /// Messages outside chunks not yet replayed, the next one last.
-    waiting_loose: Vec<LooseMessage>,
+    /// Runs of messages outside chunks not yet started, the next one last.
+    waiting_runs: Vec<LooseRun>,
+    /// Runs started: each with its next message in hand.
+    active_runs: BinaryHeap<Reverse<RunHead>>,
     /// Messages of decompressed chunks not yet replayed.
     ready: BinaryHeap<Reverse<PendingMessage>>,
+    /// Whether messages on topics tortwin does not read keep their data
+    /// (outside chunks they are otherwise not read at all).
+    keep_unknown: bool,
+}
+
+/// A started run: its next message, and where the one after it is.
+#[derive(Debug, PartialEq, Eq, PartialOrd, Ord)]
+struct RunHead {
+    message: PendingMessage,
+    /// File offset of the record after `message`'s.
+    next_offset: u64,
+    /// Messages of the run after `message`.
+    remaining: u64,
 }
 
 impl ReplayQueue {
@@ -72,21 +91,24 @@ impl ReplayQueue {
         file: BufReader<File>,
         channels: HashMap<u16, ChannelInfo>,
         chunks: Vec<ChunkInfo>,
-        loose: Vec<LooseMessage>,
+        loose: Vec<LooseRun>,
+        keep_unknown: bool,
     ) -> Self {
         let mut waiting_chunks: Vec<ChunkInfo> =
             chunks.into_iter().filter(|c| c.message_count > 0).collect();
         // Next chunk last; equal start times in file order.
         waiting_chunks.sort_by_key(|c| Reverse((c.message_start_time, c.first_index)));
-        let mut waiting_loose = loose;
-        waiting_loose.sort_by_key(|m| Reverse(m.key));
+        let mut waiting_runs = loose;
+        waiting_runs.sort_by_key(|r| Reverse(r.first));
         Self {
             path: path.to_path_buf(),
             file,
             channels,
             waiting_chunks,
-            waiting_loose,
+            waiting_runs,
+            active_runs: BinaryHeap::new(),
             ready: BinaryHeap::new(),
+            keep_unknown,
         }
     }
 
@@ -98,42 +120,65 @@ impl ReplayQueue {
         InputError::file(&self.path, what)
     }
 
-    /// The next message in replay order, decompressing chunks as the frontier
-    /// reaches them.
+    /// The earliest message in hand.
+    fn in_hand(&self) -> Option<ReplayKey> {
+        let chunked = self.ready.peek().map(|Reverse(m)| m.key);
+        let loose = self.active_runs.peek().map(|Reverse(r)| r.message.key);
+        match (chunked, loose) {
+            (Some(a), Some(b)) => Some(a.min(b)),
+            (a, b) => a.or(b),
+        }
+    }
+
+    /// The next message in replay order, decompressing chunks and starting
+    /// runs as the frontier reaches them.
     pub(super) fn next_message(&mut self) -> Result<Option<PendingMessage>, InputError> {
         loop {
-            let in_hand = match (self.ready.peek(), self.waiting_loose.last()) {
-                (Some(Reverse(m)), Some(l)) => Some(m.key.min(l.key)),
-                (Some(Reverse(m)), None) => Some(m.key),
-                (None, Some(l)) => Some(l.key),
-                (None, None) => None,
-            };
+            let in_hand = self.in_hand();
             // A chunk whose first log_time is not later than the earliest
             // message in hand may hold a message that goes before it.
-            let load = match (self.waiting_chunks.last(), in_hand) {
-                (Some(chunk), Some(key)) => chunk.message_start_time <= key.log_time_ns,
-                (Some(_), None) => true,
-                (None, _) => false,
-            };
-            if !load {
-                break;
+            if let Some(chunk) = self.waiting_chunks.last() {
+                if in_hand.is_none_or(|key| chunk.message_start_time <= key.log_time_ns) {
+                    let chunk = chunk.clone();
+                    self.waiting_chunks.pop();
+                    self.load_chunk(&chunk)?;
+                    continue;
+                }
             }
-            if let Some(chunk) = self.waiting_chunks.pop() {
-                self.load_chunk(&chunk)?;
+            if let Some(&run) = self.waiting_runs.last() {
+                if in_hand.is_none_or(|key| run.first < key) {
+                    self.waiting_runs.pop();
+                    let head = self.read_run(
+                        run.record_offset,
+                        run.first.index_in_file,
+                        run.message_count,
+                    )?;
+                    self.active_runs.push(Reverse(head));
+                    continue;
+                }
             }
+            break;
         }
-        let take_loose = match (self.ready.peek(), self.waiting_loose.last()) {
-            (Some(Reverse(m)), Some(l)) => l.key < m.key,
+        let take_loose = match (self.ready.peek(), self.active_runs.peek()) {
+            (Some(Reverse(m)), Some(Reverse(r))) => r.message.key < m.key,
             (None, Some(_)) => true,
             (_, None) => false,
         };
-        if take_loose {
-            let Some(loose) = self.waiting_loose.pop() else {
-                return Ok(None);
-            };
-            return self.read_loose(loose).map(Some);
+        if !take_loose {
+            return Ok(self.ready.pop().map(|Reverse(m)| m));
         }
-        Ok(self.ready.pop().map(|Reverse(m)| m))
+        let Some(Reverse(head)) = self.active_runs.pop() else {
+            return Ok(None);
+        };
+        if head.remaining > 0 {
+            let next = self.read_run(
+                head.next_offset,
+                head.message.key.index_in_file + 1,
+                head.remaining,
+            )?;
+            self.active_runs.push(Reverse(next));
+        }
+        Ok(Some(head.message))
     }
 
     fn load_chunk(&mut self, chunk: &ChunkInfo) -> Result<(), InputError> {
@@ -153,7 +198,7 @@ impl ReplayQueue {
         let channels = &self.channels;
         let counted = chunk_header(&record).and_then(|header| {
             for_each_chunk_record(&record, &header, |opcode, body| {
-                let Record::Message { header, data } = mcap::parse_record(opcode, body)? else {
+                let Record::Message { header, data } = record::parse(opcode, body)? else {
                     return Ok(());
                 };
                 let topic = channels
@@ -166,6 +211,8 @@ impl ReplayQueue {
                         index_in_file: next_index,
                     },
                     channel_id: header.channel_id,
+                    sequence: header.sequence,
+                    publish_time_ns: header.publish_time,
                     data: data.into_owned(),
                 });
                 next_index += 1;
@@ -190,27 +237,61 @@ impl ReplayQueue {
         Ok(())
     }
 
-    fn read_loose(&mut self, loose: LooseMessage) -> Result<PendingMessage, InputError> {
-        let body = read_at(&mut self.file, loose.body_offset, loose.body_len).map_err(|e| {
-            self.corrupt(format!(
-                "cannot read the message at byte {}: {e}",
-                loose.body_offset
-            ))
-        })?;
-        match mcap::parse_record(op::MESSAGE, &body) {
-            Ok(Record::Message { header, data }) => Ok(PendingMessage {
-                key: loose.key,
-                channel_id: header.channel_id,
-                data: data.into_owned(),
-            }),
-            Ok(_) => Err(self.corrupt(format!(
-                "the message at byte {} changed while it was read",
-                loose.body_offset
-            ))),
-            Err(e) => Err(self.corrupt(format!(
-                "corrupt message record at byte {}: {e}",
-                loose.body_offset
-            ))),
+    /// The message of a run at or after `offset` (records that are not
+    /// messages skipped), with index `index`; `count` messages of the run
+    /// are left, this one included.
+    fn read_run(&mut self, offset: u64, index: u64, count: u64) -> Result<RunHead, InputError> {
+        let mut offset = offset;
+        loop {
+            let frame = read_at(&mut self.file, offset, RECORD_HEADER_BYTES).map_err(|e| {
+                self.corrupt(format!("cannot read the record at byte {offset}: {e}"))
+            })?;
+            let opcode = frame[0];
+            let mut len = [0u8; 8];
+            len.copy_from_slice(&frame[1..]);
+            let body_len = u64::from_le_bytes(len);
+            let next_offset = offset + RECORD_HEADER_BYTES + body_len;
+            if opcode != op::MESSAGE {
+                offset = next_offset;
+                continue;
+            }
+            let path = &self.path;
+            let changed = || {
+                InputError::file(
+                    path,
+                    format!("the message record at byte {offset} changed while it was read"),
+                )
+            };
+            let head =
+                read_exact_vec(&mut self.file, MESSAGE_HEADER_BYTES).map_err(|_| changed())?;
+            let header = message_header(&head);
+            let topic = self
+                .channels
+                .get(&header.channel_id)
+                .map_or(TopicRank::Unknown, |c| TopicRank::of(&c.topic));
+            let data_len = body_len
+                .checked_sub(MESSAGE_HEADER_BYTES)
+                .ok_or_else(changed)?;
+            let data = if topic == TopicRank::Unknown && !self.keep_unknown {
+                Vec::new()
+            } else {
+                read_exact_vec(&mut self.file, data_len).map_err(|_| changed())?
+            };
+            return Ok(RunHead {
+                message: PendingMessage {
+                    key: ReplayKey {
+                        log_time_ns: header.log_time,
+                        topic,
+                        index_in_file: index,
+                    },
+                    channel_id: header.channel_id,
+                    sequence: header.sequence,
+                    publish_time_ns: header.publish_time,
+                    data,
+                },
+                next_offset,
+                remaining: count - 1,
+            });
         }
     }
 
@@ -243,6 +324,10 @@ impl ReplayQueue {
                 message.key.index_in_file, message.channel_id
             ))),
         }
+    }
+
+    pub(super) fn channels(&self) -> &HashMap<u16, ChannelInfo> {
+        &self.channels
     }
 
     pub(super) fn path(&self) -> &Path {

@@ -2,12 +2,12 @@
 //! traffic, application, weather and measurement parameters, and their
 //! checks. Every field goes into the key.
 
+use std::f64::consts::PI;
 use std::str::FromStr;
 
 use serde::Serialize;
 
 use super::{round_dp, DAY_NS};
-use tortwin_engine::Grid;
 use tortwin_model::error::UsageError;
 use tortwin_recording::{Applicator, Section, Site};
 
@@ -219,9 +219,18 @@ impl SynthParams {
         if !(self.length_m.is_finite() && self.length_m > 0.0) {
             return bad("--length-m", &self.length_m, "finite and > 0");
         }
-        let grid = Grid::new(self.length_m, self.nominal_wheel_diameter_m);
-        if grid.d_m.len() > 10_000_000 {
-            return bad("--length-m", &self.length_m, "at most a few thousand km");
+        // The replay's limit (docs/spec/recording-format.md "Limits"),
+        // checked before the grid is made.
+        let points = (self.length_m / (PI * self.nominal_wheel_diameter_m)).floor() + 1.0;
+        if points > tortwin_recording::MAX_GRID_POINTS as f64 {
+            return bad(
+                "--length-m",
+                &self.length_m,
+                &format!(
+                    "at most {} grid points (one per wheel circumference)",
+                    tortwin_recording::MAX_GRID_POINTS
+                ),
+            );
         }
         if !(0.0..=self.length_m).contains(&self.applicator_position_m) {
             return bad(
