@@ -91,14 +91,21 @@ impl EngineError {
     /// not the machine or an output. A sink's error is opaque to the engine:
     /// it is bad input only where its causes hold one of the input errors
     /// (an output folder that cannot be made is a `UsageError` under the
-    /// sink's file error).
+    /// sink's file error) or an I/O error the user has to fix (a full disk,
+    /// a read-only folder: `tortwin_model::error::is_environment`).
     pub fn is_input(&self) -> bool {
         match self {
             EngineError::Sink(e) => std::iter::successors(
                 Some(e.as_ref() as &(dyn std::error::Error + 'static)),
                 |e| e.source(),
             )
-            .any(|e| e.is::<InputError>() || e.is::<ConfigError>() || e.is::<UsageError>()),
+            .any(|e| {
+                e.is::<InputError>()
+                    || e.is::<ConfigError>()
+                    || e.is::<UsageError>()
+                    || e.downcast_ref::<std::io::Error>()
+                        .is_some_and(tortwin_model::error::is_environment)
+            }),
             EngineError::MeasurementTooLate { .. } | EngineError::UndefinedFactor { .. } => true,
         }
     }

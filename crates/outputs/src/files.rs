@@ -10,10 +10,23 @@
 //! An output folder that does not exist yet is made, as a user of
 //! `--out-rrd out/demo.rrd` expects; one that cannot be made is a
 //! [`UsageError`] (exit status 2) under a [`FileError`] that names it.
+//! So is an output the machine refuses to write: a full disk, a file-size
+//! limit, a read-only folder (see [`is_environment`]).
+//!
+//! A run killed outright (SIGKILL, power loss) cannot delete its temporary
+//! files. Every temporary file is locked (`flock`) by the run writing it,
+//! and making a new one sweeps the folder of its own leftovers: a
+//! `.NAME.partial-*` beside the same output that no run holds locked and
+//! that has not changed for [`STALE_AFTER`]. So they do not pile up over
+//! runs, and two runs writing one output path each write their own
+//! temporary file and rename it into place whole: the last to finish wins,
+//! never a mix.
 
 use std::ffi::OsString;
+use std::fs::File;
 use std::io::Write as _;
 use std::path::{Path, PathBuf};
+use std::time::{Duration, SystemTime};
 
 use tempfile::{NamedTempFile, TempPath};
 use tortwin_model::error::UsageError;
@@ -57,12 +70,25 @@ pub enum FileError {
 }
 
 impl FileError {
-    /// Whether the user asked for the impossible: an output folder that
-    /// cannot be made (exit status 2); the others are the machine's.
+    /// Whether the user has to fix it (exit status 2): an output folder that
+    /// cannot be made, or a file the machine refuses to write (full disk,
+    /// read-only folder: [`is_environment`]).
     pub fn is_input(&self) -> bool {
-        matches!(self, FileError::Folder { .. })
+        match self {
+            FileError::Folder { .. } => true,
+            FileError::Temporary { source, .. }
+            | FileError::Write { source, .. }
+            | FileError::Persist { source, .. } => is_environment(source),
+            FileError::NotAFileName { .. } | FileError::AlreadyCommitted { .. } => false,
+        }
     }
 }
+
+pub use tortwin_model::error::{caused_by_environment, is_environment};
+
+/// A leftover temporary file that nobody holds locked and that has not
+/// changed for this long is deleted by the next run writing beside it.
+pub const STALE_AFTER: Duration = Duration::from_secs(60);
 
 /// A file being written under a temporary name beside its final path, for
 /// writers that open a path themselves (the MCAP and rerun writers).
@@ -70,6 +96,9 @@ impl FileError {
 pub struct PartialFile {
     /// `None` once moved into place.
     temp: Option<TempPath>,
+    /// Holds the temporary file's lock while it is written (module
+    /// documentation).
+    _lock: File,
     final_path: PathBuf,
 }
 
@@ -78,10 +107,21 @@ impl PartialFile {
     /// `final_path` (made if missing); the writer opens it by
     /// [`PartialFile::temp_path`] and truncates it.
     pub fn beside(final_path: &Path) -> Result<Self, FileError> {
+        let (lock, temp) = temporary_beside(final_path)?.into_parts();
         Ok(Self {
-            temp: Some(temporary_beside(final_path)?.into_temp_path()),
+            temp: Some(temp),
+            _lock: lock,
             final_path: final_path.to_path_buf(),
         })
+    }
+
+    /// After a writer that reports no cause failed (rerun's file writer
+    /// thread only says it stopped): what writing to the temporary file
+    /// says now, e.g. "No space left on device".
+    pub fn probe_write(&self) -> std::io::Result<()> {
+        let mut file = File::options().append(true).open(self.temp_path())?;
+        file.write_all(&[0u8; 4096])?;
+        file.sync_data()
     }
 
     /// Where to write: the temporary file, or the final path once committed.
@@ -154,18 +194,59 @@ fn temporary_beside(final_path: &Path) -> Result<NamedTempFile, FileError> {
     let mut prefix = OsString::from(".");
     prefix.push(file_name);
     prefix.push(".partial-");
+    sweep_leftovers(folder, &prefix);
     let mut builder = tempfile::Builder::new();
     builder.prefix(&prefix);
     // tempfile makes 0600 files; an output is made like any new file
     // (0666 less the umask), as it was before it went through a temporary.
     #[cfg(unix)]
     builder.permissions(std::os::unix::fs::PermissionsExt::from_mode(0o666));
-    builder
+    let temp = builder
         .tempfile_in(folder)
         .map_err(|source| FileError::Temporary {
             folder: folder.to_path_buf(),
             source,
-        })
+        })?;
+    // Locked at once; the sweep leaves files younger than STALE_AFTER
+    // alone, so a file cannot be swept between its creation and its lock.
+    // A file system without locks (some network mounts) only loses the
+    // sweep's protection of a live run's file, after STALE_AFTER without a
+    // write.
+    let _ = temp.as_file().try_lock();
+    Ok(temp)
+}
+
+/// Deletes `folder/PREFIX*` files that no run holds locked and that have
+/// not changed for [`STALE_AFTER`]: what a killed run left. Best effort: a
+/// file that cannot be checked or deleted is left.
+fn sweep_leftovers(folder: &Path, prefix: &OsString) {
+    let Ok(entries) = std::fs::read_dir(folder) else {
+        return;
+    };
+    let prefix = prefix.as_encoded_bytes();
+    let now = SystemTime::now();
+    for entry in entries.flatten() {
+        if !entry.file_name().as_encoded_bytes().starts_with(prefix) {
+            continue;
+        }
+        let path = entry.path();
+        let stale = std::fs::symlink_metadata(&path).is_ok_and(|m| {
+            m.is_file()
+                && m.modified()
+                    .ok()
+                    .and_then(|t| now.duration_since(t).ok())
+                    .is_some_and(|age| age >= STALE_AFTER)
+        });
+        if !stale {
+            continue;
+        }
+        let Ok(file) = File::options().read(true).open(&path) else {
+            continue;
+        };
+        if file.try_lock().is_ok() {
+            let _ = std::fs::remove_file(&path);
+        }
+    }
 }
 
 #[cfg(test)]

@@ -178,13 +178,8 @@ impl Table {
                 .set_compression(Compression::ZSTD(ZstdLevel::default()))
                 .set_created_by(format!("tortwin {}", env!("CARGO_PKG_VERSION")))
                 .build();
-            let writer =
-                ArrowWriter::try_new(out, schema.clone(), Some(props)).map_err(|source| {
-                    TableError::Parquet {
-                        path: partial.final_path().to_path_buf(),
-                        source,
-                    }
-                })?;
+            let writer = ArrowWriter::try_new(out, schema.clone(), Some(props))
+                .map_err(|source| parquet_error(partial.final_path(), source))?;
             Some((partial, writer))
         } else {
             None
@@ -194,10 +189,7 @@ impl Table {
             let mut writer = csv::Writer::from_writer(out);
             writer
                 .write_record(fields.iter().map(|(n, _)| *n))
-                .map_err(|source| TableError::Csv {
-                    path: partial.final_path().to_path_buf(),
-                    source,
-                })?;
+                .map_err(|source| csv_error(partial.final_path(), source))?;
             Some((partial, writer))
         } else {
             None
@@ -234,10 +226,8 @@ impl Table {
                 Value::Count(n) => n.to_string(),
                 Value::Index(i) => i.map_or(String::new(), |i| i.to_string()),
             });
-            csv.write_record(fields).map_err(|source| TableError::Csv {
-                path: partial.final_path().to_path_buf(),
-                source,
-            })?;
+            csv.write_record(fields)
+                .map_err(|source| csv_error(partial.final_path(), source))?;
         }
         self.rows += 1;
         if self.rows >= BATCH_ROWS {
@@ -275,10 +265,9 @@ impl Table {
             }
         })?;
         if let Some((partial, writer)) = &mut self.parquet {
-            writer.write(&batch).map_err(|source| TableError::Parquet {
-                path: partial.final_path().to_path_buf(),
-                source,
-            })?;
+            writer
+                .write(&batch)
+                .map_err(|source| parquet_error(partial.final_path(), source))?;
         }
         if let Some(batches) = &mut self.batches {
             batches.push(batch);
@@ -291,10 +280,9 @@ impl Table {
     fn finish(&mut self) -> Result<(), TableError> {
         self.flush()?;
         if let Some((mut partial, writer)) = self.parquet.take() {
-            writer.close().map_err(|source| TableError::Parquet {
-                path: partial.final_path().to_path_buf(),
-                source,
-            })?;
+            writer
+                .close()
+                .map_err(|source| parquet_error(partial.final_path(), source))?;
             partial.commit()?;
         }
         if let Some((mut partial, mut csv)) = self.csv.take() {
@@ -558,5 +546,40 @@ impl TableSink {
             field: self.field.map(keep),
             trains: keep(self.trains),
         }
+    }
+}
+
+/// A CSV writer's error; the file system's answer (a full disk) as the
+/// [`FileError`] it is, so that it is classified like any other output's.
+fn csv_error(path: &Path, source: csv::Error) -> TableError {
+    if let csv::ErrorKind::Io(io) = source.kind() {
+        return TableError::File(FileError::Write {
+            path: path.to_path_buf(),
+            source: std::io::Error::new(io.kind(), io.to_string()),
+        });
+    }
+    TableError::Csv {
+        path: path.to_path_buf(),
+        source,
+    }
+}
+
+/// A Parquet writer's error, the file system's answer as in [`csv_error`].
+fn parquet_error(path: &Path, source: parquet::errors::ParquetError) -> TableError {
+    match source {
+        parquet::errors::ParquetError::External(e) => match e.downcast::<std::io::Error>() {
+            Ok(io) => TableError::File(FileError::Write {
+                path: path.to_path_buf(),
+                source: *io,
+            }),
+            Err(e) => TableError::Parquet {
+                path: path.to_path_buf(),
+                source: parquet::errors::ParquetError::External(e),
+            },
+        },
+        source => TableError::Parquet {
+            path: path.to_path_buf(),
+            source,
+        },
     }
 }

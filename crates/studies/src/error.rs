@@ -142,7 +142,8 @@ pub enum Error {
 impl Error {
     /// Whether the user's input is at fault: a recording or state that
     /// breaks its format, a configuration, an impossible request (an output
-    /// folder that cannot be made is one), or bad input met by the engine.
+    /// folder that cannot be made is one), bad input met by the engine, or
+    /// an output the machine refuses (a full disk, a read-only folder).
     /// The command line exits with status 2 for these, 1 otherwise.
     pub fn is_input(&self) -> bool {
         match self {
@@ -154,11 +155,15 @@ impl Error {
             Error::Plot(e) => e.is_input(),
             Error::Table(TableError::File(e)) => e.is_input(),
             Error::Import(ImportError::Input(_)) | Error::Export(ExportError::Input(_)) => true,
-            Error::Table(_) | Error::Import(_) | Error::Export(_) => false,
             Error::Context { source, .. } => source.is_input(),
-            Error::Recording { .. }
-            | Error::Io { .. }
-            | Error::Json { .. }
+            // Outputs (and inputs) the machine refuses: a full disk, a
+            // read-only folder, a missing file.
+            Error::Table(_)
+            | Error::Import(_)
+            | Error::Export(_)
+            | Error::Recording { .. }
+            | Error::Io { .. } => tortwin_model::error::caused_by_environment(self),
+            Error::Json { .. }
             | Error::Threads(_)
             | Error::Optimiser(_)
             | Error::NoFitPoint

@@ -118,7 +118,8 @@ impl McapError {
     pub fn is_input(&self) -> bool {
         match self {
             McapError::File(e) => e.is_input(),
-            _ => false,
+            // A full disk, a file-size limit: the user's to fix.
+            other => crate::files::caused_by_environment(other),
         }
     }
 }

@@ -37,6 +37,14 @@ pub enum RerunError {
         #[source]
         source: SinkFlushError,
     },
+    /// The SDK's file writer stopped and writing to the file fails: the
+    /// cause, found by [`crate::files::PartialFile::probe_write`].
+    #[error("rerun output {}: the file writer stopped", path.display())]
+    Write {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
     #[error("rerun output {}: already finished", path.display())]
     Finished { path: PathBuf },
     #[error("rerun output {}: no section: the sink was never begun", path.display())]
@@ -81,7 +89,7 @@ impl RerunError {
     pub fn is_input(&self) -> bool {
         match self {
             RerunError::File(e) => e.is_input(),
-            _ => false,
+            other => crate::files::caused_by_environment(other),
         }
     }
 }

@@ -323,10 +323,19 @@ impl RerunSink {
         let rec = self.rec.take().ok_or_else(|| RerunError::Finished {
             path: self.file.final_path().to_path_buf(),
         })?;
-        rec.flush_blocking().map_err(|source| RerunError::Flush {
-            path: self.path().to_path_buf(),
-            source,
-        })?;
+        if let Err(source) = rec.flush_blocking() {
+            // The SDK's error does not say why; the file does.
+            return Err(match self.file.probe_write() {
+                Err(io) => RerunError::Write {
+                    path: self.path().to_path_buf(),
+                    source: io,
+                },
+                Ok(()) => RerunError::Flush {
+                    path: self.path().to_path_buf(),
+                    source,
+                },
+            });
+        }
         // Dropping the only handle joins the SDK's threads; the file sink
         // writes the rrd footer and closes the file before this returns.
         drop(rec);
