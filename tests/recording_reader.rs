@@ -419,6 +419,60 @@ proptest! {
     }
 }
 
+// ---------------------------------------------------------------------------
+// Limits (docs/spec/recording-format.md "Limits").
+
+#[test]
+fn a_train_of_more_than_ten_thousand_axles_is_refused() {
+    let axles: Vec<Value> = (0..10_001)
+        .map(|i| axle(i as f64 * 2.5, "leading"))
+        .collect();
+    let msgs = with(base(), 2, |v| v["axles"] = Value::Array(axles));
+    expect_error(&msgs, 2, &["10001 axles; a train may have at most 10000"]);
+}
+
+#[test]
+fn a_grid_of_more_than_200000_points_is_refused_before_it_is_made() {
+    // 600 m of 1 mm wheels: 190 986 points passes, 0.9 mm does not.
+    let ok = with(base(), 0, |v| v["nominal_wheel_diameter_m"] = json!(0.001));
+    read_msgs(&ok, Layout::OneChunk).unwrap();
+    let bad = with(base(), 0, |v| v["nominal_wheel_diameter_m"] = json!(1e-9));
+    expect_error(
+        &bad,
+        0,
+        &[
+            "make a grid of 190985931711 points a rail",
+            "at most 200000",
+        ],
+    );
+}
+
+#[test]
+fn a_message_of_the_format_over_16_mib_is_refused_and_one_of_another_topic_is_skipped() {
+    let pad = "x".repeat(17 << 20);
+    // An unknown extra field is ignored by the format, its size is not.
+    let big = with(base(), 1, |v| v["pad"] = json!(pad));
+    for layout in LAYOUTS {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("big.mcap");
+        write_recording(&path, &big, layout);
+        expect_file_error(
+            &path,
+            &[
+                "message 1 (log_time",
+                "a message of the format may be at most 16777216 bytes",
+            ],
+        );
+    }
+    let mut msgs = base();
+    msgs[6] = msg("/diagnostics/heartbeat", T0 + 2 * SEC, json!({"pad": pad}));
+    for layout in LAYOUTS {
+        let (reader, events) = read_msgs(&msgs, layout).unwrap();
+        assert_eq!(events.len(), 7, "{layout:?}");
+        assert_eq!(reader.unknown_topic_messages(), 1);
+    }
+}
+
 /// The bundled recordings rewritten without chunks: in time order they are
 /// one run, read as a stream; with the tribometer readings at the end of
 /// the file (as written), two. The events are the originals'.
