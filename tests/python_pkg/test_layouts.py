@@ -84,13 +84,22 @@ def test_every_layout_replays_to_the_same_bits(tmp_path, recording, layout):
             assert a == b, (layout, name)
 
 
-def test_messages_in_reverse_file_order_replay_to_the_same_bits(tmp_path):
+@pytest.mark.parametrize(
+    "layout",
+    [
+        dict(compression=CompressionType.LZ4, chunk_size=4096),
+        # Unchunked and reversed: every message a run of its own, merged.
+        dict(use_chunking=False),
+    ],
+    ids=["4 kB lz4 chunks", "unchunked"],
+)
+def test_messages_in_reverse_file_order_replay_to_the_same_bits(tmp_path, layout):
     """Every message but /section written in reverse (across 4 kB lz4
-    chunks): the reader's replay order (log_time, topic) makes the same run;
-    only the messages' indices in the file differ."""
+    chunks, or without chunks): the reader's replay order (log_time, topic)
+    makes the same run; only the messages' indices in the file differ."""
     original = RECORDINGS / "curve_day_bands_rain.mcap"
     rewritten = tmp_path / "reversed.mcap"
-    rewrite(original, rewritten, reverse=True, compression=CompressionType.LZ4, chunk_size=4096)
+    rewrite(original, rewritten, reverse=True, **layout)
     expected = outputs(original)
     got = outputs(rewritten)
     keys = ["time_utc", "site", "rail", "quantity", "train_id", "axle_index"]

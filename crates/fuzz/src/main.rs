@@ -151,13 +151,13 @@ fn run(args: &RunArgs) -> Result<bool> {
         }
         println!(
             "{:<9} {:>9} executions: {:>8} accepted, {:>8} refused (input errors), {} findings; \
-             largest allocation {:.1} MB, slowest {:.0} ms",
+             largest allocation {:.0} kB, slowest {:.0} ms",
             kind.name(),
             total.executions,
             total.accepted,
             total.rejected,
             total.findings,
-            total.largest_allocation_bytes as f64 / 1e6,
+            total.largest_allocation_bytes as f64 / 1e3,
             total.slowest_ms
         );
         summary.insert(kind.name(), total);
