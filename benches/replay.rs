@@ -1,6 +1,8 @@
 //! End-to-end replay throughput with the outputs on: the reference
 //! recordings of tests/reference/recordings read from MCAP, stepped,
-//! and written to MCAP and rerun files. Reported as contacts per second.
+//! and written to MCAP and rerun files; and issue 16's case, three days of
+//! the synthetic 600 m curve (`tortwin synth --days 3 --trains-per-day 56`,
+//! seed 1: about 5 M contacts) with the MCAP output only. Reported as contacts per second.
 //! Peak memory is measured by scripts/bench-memory.sh (criterion cannot).
 //!
 //! `cargo bench --bench replay`
@@ -36,6 +38,33 @@ fn replay_with_outputs(c: &mut Criterion) {
             b.iter(|| replay(&a, &mut []).expect("replays"))
         });
     }
+    // Issue 16's yardstick: 3 days on the 600 m curve, MCAP out.
+    let recording = out.path().join("curve_3day.mcap");
+    let status = std::process::Command::new(env!("CARGO_BIN_EXE_tortwin"))
+        .args([
+            "synth",
+            "--days",
+            "3",
+            "--trains-per-day",
+            "56",
+            "--seed",
+            "1",
+            "-q",
+            "--out",
+        ])
+        .arg(&recording)
+        .status()
+        .expect("tortwin synth runs");
+    assert!(status.success(), "tortwin synth failed");
+    let a = ReplayArgs {
+        out_mcap: Some(out.path().join("bench.mcap")),
+        ..ReplayArgs::new(recording)
+    };
+    let contacts = replay(&a, &mut []).expect("replays").contacts;
+    group.throughput(Throughput::Elements(contacts));
+    group.bench_function("curve_3day_mcap_out", |b| {
+        b.iter(|| replay(&a, &mut []).expect("replays"))
+    });
     group.finish();
 }
 
