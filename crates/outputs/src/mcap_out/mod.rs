@@ -258,12 +258,6 @@ impl McapSink {
         message: &T,
     ) -> Result<(), McapError> {
         let path = self.temp.final_path();
-        let mut json = self.writer.buffer();
-        serde_json::to_writer(&mut json, message).map_err(|source| McapError::Json {
-            path: path.to_path_buf(),
-            topic: topic.name(),
-            source,
-        })?;
         self.last_log_time_ns = self.last_log_time_ns.max(log_time_ns);
         // Sequence 0, "not used" (MCAP spec): a file has no gaps to detect,
         // and counters in every header cost a year's file 5 %.
@@ -273,7 +267,13 @@ impl McapSink {
             log_time: log_time_ns,
             publish_time: log_time_ns,
         };
-        self.writer.send(header, json, topic.name())
+        self.writer.push(header, topic.name(), |bytes| {
+            serde_json::to_writer(bytes, message).map_err(|source| McapError::Json {
+                path: path.to_path_buf(),
+                topic: topic.name(),
+                source,
+            })
+        })
     }
 
     /// An error for what the engine handed over on `topic`.

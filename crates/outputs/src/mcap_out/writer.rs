@@ -1,8 +1,12 @@
 //! The MCAP writer on a thread of its own: the engine's thread serializes
-//! each message and hands it over; chunk compression (zstd at a high level,
-//! about a second per month of traffic) runs beside the engine instead of
-//! after every chunk's worth of it. The buffers travel back for reuse, so
-//! the steady state allocates nothing.
+//! each message into a batch and hands the batch over when it is full;
+//! chunk compression (zstd at a high level, about a second per month of
+//! traffic) runs beside the engine instead of after every chunk's worth of
+//! it. Batches (about 64 kB of messages each) rather than single messages
+//! cross the channel: a hand-over wakes the other thread, and a wake-up per
+//! message cost the engine's thread a tenth of its time. The batches travel
+//! back for reuse, so the steady state allocates nothing. The writer sees
+//! the same messages in the same order either way: the file is the same.
 
 use std::fs::File;
 use std::io::BufWriter;
@@ -14,20 +18,33 @@ use super::McapError;
 
 pub(super) type Writer = mcap::Writer<BufWriter<File>>;
 
-/// Messages in flight between the threads: a few chunks' worth at most.
-const QUEUE: usize = 64;
+/// Batches in flight between the threads.
+const QUEUE: usize = 16;
 
-/// A message for the writer thread.
-struct Job {
+/// A batch is handed over once its messages hold this many bytes.
+const BATCH_BYTES: usize = 64 << 10;
+
+/// A message of a batch: its header, where its bytes are, its topic.
+struct Entry {
     header: mcap::records::MessageHeader,
-    data: Vec<u8>,
+    start: usize,
+    end: usize,
     topic: &'static str,
+}
+
+/// Messages for the writer thread, their bytes one after the other.
+#[derive(Default)]
+struct Batch {
+    bytes: Vec<u8>,
+    entries: Vec<Entry>,
 }
 
 /// The sending end; the writer comes back from [`WriterThread::close`].
 pub(super) struct WriterThread {
-    jobs: Option<SyncSender<Job>>,
-    spare: Receiver<Vec<u8>>,
+    jobs: Option<SyncSender<Batch>>,
+    spare: Receiver<Batch>,
+    /// The batch being filled.
+    batch: Batch,
     thread: Option<JoinHandle<Result<Writer, McapError>>>,
     path: PathBuf,
 }
@@ -35,23 +52,27 @@ pub(super) struct WriterThread {
 impl WriterThread {
     /// Starts the thread that writes to `writer`; `path` names the output in errors.
     pub(super) fn start(writer: Writer, path: &Path) -> Result<WriterThread, McapError> {
-        let (jobs, incoming) = sync_channel::<Job>(QUEUE);
-        let (give_back, spare) = sync_channel::<Vec<u8>>(QUEUE);
+        let (jobs, incoming) = sync_channel::<Batch>(QUEUE);
+        let (give_back, spare) = sync_channel::<Batch>(QUEUE + 1);
         let thread_path = path.to_path_buf();
         let thread = std::thread::Builder::new()
             .name("tortwin-mcap".to_owned())
             .spawn(move || {
                 let mut writer = writer;
-                for job in incoming {
-                    writer
-                        .write_to_known_channel(&job.header, &job.data)
-                        .map_err(|source| McapError::Mcap {
-                            path: thread_path.clone(),
-                            what: format!("writing {}", job.topic),
-                            source,
-                        })?;
+                for mut batch in incoming {
+                    for e in &batch.entries {
+                        writer
+                            .write_to_known_channel(&e.header, &batch.bytes[e.start..e.end])
+                            .map_err(|source| McapError::Mcap {
+                                path: thread_path.clone(),
+                                what: format!("writing {}", e.topic),
+                                source,
+                            })?;
+                    }
+                    batch.bytes.clear();
+                    batch.entries.clear();
                     // The engine's side may have stopped taking them back.
-                    let _ = give_back.try_send(job.data);
+                    let _ = give_back.try_send(batch);
                 }
                 Ok(writer)
             })
@@ -63,32 +84,54 @@ impl WriterThread {
         Ok(WriterThread {
             jobs: Some(jobs),
             spare,
+            batch: Batch::default(),
             thread: Some(thread),
             path: path.to_path_buf(),
         })
     }
 
-    /// A cleared buffer to serialize the next message into.
-    pub(super) fn buffer(&self) -> Vec<u8> {
-        let mut buffer = self.spare.try_recv().unwrap_or_default();
-        buffer.clear();
-        buffer
-    }
-
-    /// Hands a serialized message to the writer thread. If that thread has
+    /// Adds a message: `serialize` writes its bytes to the end of the
+    /// buffer it is given (on its error they are dropped again). Hands the
+    /// batch to the writer thread when it is full; if that thread has
     /// stopped, its error.
-    pub(super) fn send(
+    pub(super) fn push(
         &mut self,
         header: mcap::records::MessageHeader,
-        data: Vec<u8>,
         topic: &'static str,
+        serialize: impl FnOnce(&mut Vec<u8>) -> Result<(), McapError>,
     ) -> Result<(), McapError> {
+        if self.jobs.is_none() {
+            return Err(McapError::Finished {
+                path: self.path.clone(),
+            });
+        }
+        let start = self.batch.bytes.len();
+        if let Err(e) = serialize(&mut self.batch.bytes) {
+            self.batch.bytes.truncate(start);
+            return Err(e);
+        }
+        self.batch.entries.push(Entry {
+            header,
+            start,
+            end: self.batch.bytes.len(),
+            topic,
+        });
+        if self.batch.bytes.len() >= BATCH_BYTES {
+            self.hand_over()?;
+        }
+        Ok(())
+    }
+
+    /// Sends the batch being filled (if it has messages) and takes a spare
+    /// one; if the thread has stopped, its error.
+    fn hand_over(&mut self) -> Result<(), McapError> {
+        if self.batch.entries.is_empty() {
+            return Ok(());
+        }
+        let next = self.spare.try_recv().unwrap_or_default();
+        let full = std::mem::replace(&mut self.batch, next);
         let sent = match &self.jobs {
-            Some(jobs) => jobs.send(Job {
-                header,
-                data,
-                topic,
-            }),
+            Some(jobs) => jobs.send(full),
             None => {
                 return Err(McapError::Finished {
                     path: self.path.clone(),
@@ -98,7 +141,7 @@ impl WriterThread {
         match sent {
             Ok(()) => Ok(()),
             // The thread stopped on an error: that error.
-            Err(_) => match self.close() {
+            Err(_) => match self.join() {
                 Err(e) => Err(e),
                 Ok(_) => Err(McapError::Finished {
                     path: self.path.clone(),
@@ -107,9 +150,17 @@ impl WriterThread {
         }
     }
 
-    /// Waits for the thread to write everything sent; the writer, or the
-    /// thread's error.
+    /// Hands over what is left, waits for the thread to write everything;
+    /// the writer, or the thread's error.
     pub(super) fn close(&mut self) -> Result<Writer, McapError> {
+        if self.jobs.is_some() {
+            self.hand_over()?;
+        }
+        self.join()
+    }
+
+    /// Stops the thread after what it was given; the writer, or its error.
+    fn join(&mut self) -> Result<Writer, McapError> {
         drop(self.jobs.take());
         let Some(thread) = self.thread.take() else {
             return Err(McapError::Finished {
@@ -129,8 +180,9 @@ impl WriterThread {
 
 impl Drop for WriterThread {
     fn drop(&mut self) {
-        // Stop and join the thread: its writer (and file) closes before the
+        // Stop and join the thread without handing over the rest (the
+        // output is abandoned): its writer (and file) closes before the
         // temporary file is deleted.
-        let _ = self.close();
+        let _ = self.join();
     }
 }
