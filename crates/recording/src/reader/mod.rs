@@ -291,6 +291,83 @@ impl RecordingReader {
     }
 }
 
+/// Events per hand-over from the reading thread of [`read_ahead`].
+const READ_AHEAD_BATCH: usize = 512;
+
+/// Runs `consume` over `reader`'s events while a thread of its own reads
+/// them ahead (decompressing chunks, merging, parsing JSON and checking
+/// every rule), a few batches in front; returns what `consume` returned
+/// and the reader (for its counts). The events come in the same order as
+/// from the reader itself; when `consume` stops early, the thread stops at
+/// its next batch.
+pub fn read_ahead<T>(
+    reader: RecordingReader,
+    consume: impl FnOnce(&mut ReadAhead) -> T,
+) -> (T, RecordingReader) {
+    let (batches, incoming) = std::sync::mpsc::sync_channel::<Vec<Result<Event, InputError>>>(4);
+    let (give_back, spare) = std::sync::mpsc::sync_channel::<Vec<Result<Event, InputError>>>(6);
+    std::thread::scope(|scope| {
+        let producer = scope.spawn(move || {
+            let mut reader = reader;
+            loop {
+                let mut batch = spare
+                    .try_recv()
+                    .unwrap_or_else(|_| Vec::with_capacity(READ_AHEAD_BATCH));
+                batch.clear();
+                let mut ended = false;
+                while batch.len() < READ_AHEAD_BATCH {
+                    match reader.next() {
+                        Some(event) => batch.push(event),
+                        None => {
+                            ended = true;
+                            break;
+                        }
+                    }
+                }
+                // The consumer pops from the end.
+                batch.reverse();
+                if (!batch.is_empty() && batches.send(batch).is_err()) || ended {
+                    return reader;
+                }
+            }
+        });
+        let mut events = ReadAhead {
+            incoming,
+            give_back,
+            current: Vec::new(),
+        };
+        let out = consume(&mut events);
+        drop(events);
+        match producer.join() {
+            Ok(reader) => (out, reader),
+            Err(panic) => std::panic::resume_unwind(panic),
+        }
+    })
+}
+
+/// The events of [`read_ahead`], in replay order.
+pub struct ReadAhead {
+    incoming: std::sync::mpsc::Receiver<Vec<Result<Event, InputError>>>,
+    give_back: std::sync::mpsc::SyncSender<Vec<Result<Event, InputError>>>,
+    /// The batch being taken, the next event last.
+    current: Vec<Result<Event, InputError>>,
+}
+
+impl Iterator for ReadAhead {
+    type Item = Result<Event, InputError>;
+
+    fn next(&mut self) -> Option<Self::Item> {
+        loop {
+            if let Some(event) = self.current.pop() {
+                return Some(event);
+            }
+            let next = self.incoming.recv().ok()?;
+            let used = std::mem::replace(&mut self.current, next);
+            let _ = self.give_back.try_send(used);
+        }
+    }
+}
+
 /// Every message of an MCAP file as written (any topic, any encoding), in
 /// replay order: the reader's layout pass and merge without the format's
 /// rules. What the MCAP conformance tests read (tests/mcap_conformance.rs).

@@ -9,7 +9,7 @@ use tortwin_outputs::mcap_out::McapSink;
 use tortwin_outputs::provenance::Provenance;
 use tortwin_outputs::rerun_out::{RerunOptions, RerunSink};
 use tortwin_recording::error::InputError;
-use tortwin_recording::reader::ReaderContext;
+use tortwin_recording::reader::{read_ahead, ReaderContext};
 use tortwin_recording::RecordingReader;
 
 use super::load_config;
@@ -174,7 +174,7 @@ pub fn replay_from(
         },
         None => ReaderContext::default(),
     };
-    let mut reader = RecordingReader::open(&args.recording, ctx)?;
+    let reader = RecordingReader::open(&args.recording, ctx)?;
     let opts = EngineOptions {
         snapshot_every_wheel: args.every_wheel,
         every_wheel_contacts: args.per_train,
@@ -237,24 +237,30 @@ pub fn replay_from(
         &format!("replaying {} (messages)", args.recording.display()),
         reader.message_count(),
     );
-    // The /section message was read when the reader opened.
-    let mut messages = 1u64;
-    for event in reader.by_ref() {
-        let event = event?;
-        messages += 1;
-        if messages.is_multiple_of(1024) {
-            progress.done(messages);
-            crate::progress::check(progress)?;
+    // The /section message was read when the reader opened. The rest are
+    // read ahead on a thread of their own while the engine steps.
+    let message_count = reader.message_count();
+    let (stepped, reader) = read_ahead(reader, |events| -> Result<()> {
+        let mut messages = 1u64;
+        for event in events {
+            let event = event?;
+            messages += 1;
+            if messages.is_multiple_of(1024) {
+                progress.done(messages);
+                crate::progress::check(progress)?;
+            }
+            engine
+                .push(event, &mut fanout)
+                .map_err(|source| Error::Replay {
+                    what: args.recording.display().to_string(),
+                    source,
+                })?;
         }
-        engine
-            .push(event, &mut fanout)
-            .map_err(|source| Error::Replay {
-                what: args.recording.display().to_string(),
-                source,
-            })?;
-    }
+        Ok(())
+    });
+    stepped?;
     let summary = engine.finish(&mut fanout, reader.unknown_topic_messages())?;
-    progress.done(reader.message_count());
+    progress.done(message_count);
     drop(fanout);
     Ok(Replayed {
         summary,
