@@ -291,8 +291,10 @@ impl RecordingReader {
     }
 }
 
-/// Events per hand-over from the reading thread of [`read_ahead`].
-const READ_AHEAD_BATCH: usize = 512;
+/// Events per hand-over from the reading thread of [`read_ahead`]. With
+/// two batches queued, one being filled and one being taken, at most about
+/// a thousand events are in flight: a few MB even if all were long trains.
+const READ_AHEAD_BATCH: usize = 256;
 
 /// Runs `consume` over `reader`'s events while a thread of its own reads
 /// them ahead (decompressing chunks, merging, parsing JSON and checking
@@ -304,8 +306,8 @@ pub fn read_ahead<T>(
     reader: RecordingReader,
     consume: impl FnOnce(&mut ReadAhead) -> T,
 ) -> (T, RecordingReader) {
-    let (batches, incoming) = std::sync::mpsc::sync_channel::<Vec<Result<Event, InputError>>>(4);
-    let (give_back, spare) = std::sync::mpsc::sync_channel::<Vec<Result<Event, InputError>>>(6);
+    let (batches, incoming) = std::sync::mpsc::sync_channel::<Vec<Result<Event, InputError>>>(2);
+    let (give_back, spare) = std::sync::mpsc::sync_channel::<Vec<Result<Event, InputError>>>(4);
     std::thread::scope(|scope| {
         let producer = scope.spawn(move || {
             let mut reader = reader;
