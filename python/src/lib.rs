@@ -73,24 +73,11 @@ fn parse(argv: Vec<String>) -> PyResult<Command> {
     Command::try_parse_from(argv).map_err(|e| InputError::new_err(e.to_string()))
 }
 
-/// The message the command line prints after "error: ": every cause, outer
-/// first, joined by ": " (anyhow's `{:#}`).
-fn message(err: &Error) -> String {
-    let mut text = err.to_string();
-    let mut source = std::error::Error::source(err);
-    while let Some(cause) = source {
-        text.push_str(": ");
-        text.push_str(&cause.to_string());
-        source = cause.source();
-    }
-    text
-}
-
 fn to_py(err: Error) -> PyErr {
     if err.is_input() {
-        InputError::new_err(message(&err))
+        InputError::new_err(err.full_message())
     } else {
-        TortwinError::new_err(message(&err))
+        TortwinError::new_err(err.full_message())
     }
 }
 

@@ -30,33 +30,31 @@ impl Meter {
         PEAK.fetch_max(live, Ordering::Relaxed);
         size <= REFUSE_BYTES
     }
+
+    /// Counts a request of `size` bytes and makes it with `make`, or refuses
+    /// it; takes the count back if nothing was made.
+    fn counted(size: usize, make: impl FnOnce() -> *mut u8) -> *mut u8 {
+        let p = if Self::note(size) {
+            make()
+        } else {
+            std::ptr::null_mut()
+        };
+        if p.is_null() {
+            LIVE.fetch_sub(size, Ordering::Relaxed);
+        }
+        p
+    }
 }
 
 // SAFETY: every call is passed to `System` unchanged, or refused with a
 // null pointer (which `GlobalAlloc` allows).
 unsafe impl GlobalAlloc for Meter {
     unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        if !Self::note(layout.size()) {
-            LIVE.fetch_sub(layout.size(), Ordering::Relaxed);
-            return std::ptr::null_mut();
-        }
-        let p = unsafe { System.alloc(layout) };
-        if p.is_null() {
-            LIVE.fetch_sub(layout.size(), Ordering::Relaxed);
-        }
-        p
+        Self::counted(layout.size(), || unsafe { System.alloc(layout) })
     }
 
     unsafe fn alloc_zeroed(&self, layout: Layout) -> *mut u8 {
-        if !Self::note(layout.size()) {
-            LIVE.fetch_sub(layout.size(), Ordering::Relaxed);
-            return std::ptr::null_mut();
-        }
-        let p = unsafe { System.alloc_zeroed(layout) };
-        if p.is_null() {
-            LIVE.fetch_sub(layout.size(), Ordering::Relaxed);
-        }
-        p
+        Self::counted(layout.size(), || unsafe { System.alloc_zeroed(layout) })
     }
 
     unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
@@ -65,14 +63,10 @@ unsafe impl GlobalAlloc for Meter {
     }
 
     unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        if !Self::note(new_size) {
-            LIVE.fetch_sub(new_size, Ordering::Relaxed);
-            return std::ptr::null_mut();
-        }
-        let p = unsafe { System.realloc(ptr, layout, new_size) };
-        if p.is_null() {
-            LIVE.fetch_sub(new_size, Ordering::Relaxed);
-        } else {
+        let p = Self::counted(new_size, || unsafe {
+            System.realloc(ptr, layout, new_size)
+        });
+        if !p.is_null() {
             LIVE.fetch_sub(layout.size(), Ordering::Relaxed);
         }
         p

@@ -248,13 +248,7 @@ fn replay(args: ReplayArgs) -> Outcome {
 }
 
 fn classify(e: &tortwin_studies::Error) -> Outcome {
-    let mut text = e.to_string();
-    let mut source = std::error::Error::source(e);
-    while let Some(s) = source {
-        text.push_str(": ");
-        text.push_str(&s.to_string());
-        source = s.source();
-    }
+    let text = e.full_message();
     if e.is_input() {
         Outcome::Rejected(text)
     } else {

@@ -174,6 +174,19 @@ impl Error {
         }
     }
 
+    /// The message the command line prints after "error: ": every cause,
+    /// outer first, joined by ": " (anyhow's `{:#}`).
+    pub fn full_message(&self) -> String {
+        let mut text = self.to_string();
+        let mut source = std::error::Error::source(self);
+        while let Some(cause) = source {
+            text.push_str(": ");
+            text.push_str(&cause.to_string());
+            source = cause.source();
+        }
+        text
+    }
+
     /// `self` as the cause of `what` the caller was doing.
     pub(crate) fn context(self, what: impl Into<String>) -> Error {
         Error::Context {
