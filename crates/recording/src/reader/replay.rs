@@ -25,7 +25,8 @@ use mcap::records::{op, Record};
 
 use super::layout::{
     chunk_header, for_each_chunk_record, message_header, read_at, read_exact_vec, ChannelInfo,
-    ChunkInfo, LooseRun, ReplayKey, TopicRank, MESSAGE_HEADER_BYTES, RECORD_HEADER_BYTES,
+    ChunkInfo, LooseRun, ReplayKey, TopicRank, MAX_MESSAGE_BYTES, MESSAGE_HEADER_BYTES,
+    RECORD_HEADER_BYTES,
 };
 use super::record;
 use crate::error::{InputError, MessageLocation};
@@ -250,7 +251,9 @@ impl ReplayQueue {
             let mut len = [0u8; 8];
             len.copy_from_slice(&frame[1..]);
             let body_len = u64::from_le_bytes(len);
-            let next_offset = offset + RECORD_HEADER_BYTES + body_len;
+            let next_offset = offset
+                .saturating_add(RECORD_HEADER_BYTES)
+                .saturating_add(body_len);
             if opcode != op::MESSAGE {
                 offset = next_offset;
                 continue;
@@ -274,6 +277,9 @@ impl ReplayQueue {
                 .ok_or_else(changed)?;
             let data = if topic == TopicRank::Unknown && !self.keep_unknown {
                 Vec::new()
+            } else if topic != TopicRank::Unknown && data_len > MAX_MESSAGE_BYTES {
+                // The layout pass refused such a message: the file changed.
+                return Err(changed());
             } else {
                 read_exact_vec(&mut self.file, data_len).map_err(|_| changed())?
             };
