@@ -160,8 +160,7 @@ pub(super) fn scan_layout(path: &Path, file: &mut BufReader<File>) -> Result<Lay
         }
         let mut frame = [0u8; RECORD_HEADER_BYTES as usize];
         file.read_exact(&mut frame).map_err(io_error)?;
-        let [opcode, l0, l1, l2, l3, l4, l5, l6, l7] = frame;
-        let body_len = u64::from_le_bytes([l0, l1, l2, l3, l4, l5, l6, l7]);
+        let (opcode, body_len) = record_frame(&frame);
         let body_offset = offset + RECORD_HEADER_BYTES;
         let end = body_offset
             .checked_add(body_len)
@@ -336,6 +335,14 @@ fn message_key(
         layout.sections.truncate(2);
     }
     Ok(key)
+}
+
+/// A record's framing (its first [`RECORD_HEADER_BYTES`]): opcode and
+/// body length.
+pub(super) fn record_frame(frame: &[u8]) -> (u8, u64) {
+    let mut len = [0u8; 8];
+    len.copy_from_slice(&frame[1..RECORD_HEADER_BYTES as usize]);
+    (frame[0], u64::from_le_bytes(len))
 }
 
 /// A Message record's header from its first [`MESSAGE_HEADER_BYTES`].

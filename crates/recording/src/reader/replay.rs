@@ -24,9 +24,9 @@ use std::path::{Path, PathBuf};
 use mcap::records::{op, Record};
 
 use super::layout::{
-    chunk_header, for_each_chunk_record, message_header, read_at, read_exact_vec, ChannelInfo,
-    ChunkInfo, LooseRun, ReplayKey, TopicRank, MAX_MESSAGE_BYTES, MESSAGE_HEADER_BYTES,
-    RECORD_HEADER_BYTES,
+    chunk_header, for_each_chunk_record, message_header, read_at, read_exact_vec, record_frame,
+    ChannelInfo, ChunkInfo, LooseRun, ReplayKey, TopicRank, MAX_MESSAGE_BYTES,
+    MESSAGE_HEADER_BYTES, RECORD_HEADER_BYTES,
 };
 use super::record;
 use crate::error::{InputError, MessageLocation};
@@ -138,25 +138,31 @@ impl ReplayQueue {
             let in_hand = self.in_hand();
             // A chunk whose first log_time is not later than the earliest
             // message in hand may hold a message that goes before it.
-            if let Some(chunk) = self.waiting_chunks.last() {
-                if in_hand.is_none_or(|key| chunk.message_start_time <= key.log_time_ns) {
-                    let chunk = chunk.clone();
-                    self.waiting_chunks.pop();
+            let chunk_due = self
+                .waiting_chunks
+                .last()
+                .is_some_and(|c| in_hand.is_none_or(|key| c.message_start_time <= key.log_time_ns));
+            if chunk_due {
+                if let Some(chunk) = self.waiting_chunks.pop() {
                     self.load_chunk(&chunk)?;
-                    continue;
                 }
+                continue;
             }
-            if let Some(&run) = self.waiting_runs.last() {
-                if in_hand.is_none_or(|key| run.first < key) {
-                    self.waiting_runs.pop();
+            // A run whose first message goes before the earliest in hand.
+            let run_due = self
+                .waiting_runs
+                .last()
+                .is_some_and(|r| in_hand.is_none_or(|key| r.first < key));
+            if run_due {
+                if let Some(run) = self.waiting_runs.pop() {
                     let head = self.read_run(
                         run.record_offset,
                         run.first.index_in_file,
                         run.message_count,
                     )?;
                     self.active_runs.push(Reverse(head));
-                    continue;
                 }
+                continue;
             }
             break;
         }
@@ -247,10 +253,7 @@ impl ReplayQueue {
             let frame = read_at(&mut self.file, offset, RECORD_HEADER_BYTES).map_err(|e| {
                 self.corrupt(format!("cannot read the record at byte {offset}: {e}"))
             })?;
-            let opcode = frame[0];
-            let mut len = [0u8; 8];
-            len.copy_from_slice(&frame[1..]);
-            let body_len = u64::from_le_bytes(len);
+            let (opcode, body_len) = record_frame(&frame);
             let next_offset = offset
                 .saturating_add(RECORD_HEADER_BYTES)
                 .saturating_add(body_len);
