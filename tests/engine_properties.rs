@@ -1,7 +1,9 @@
 //! Properties of the engine on random traffic: whatever trains, pulses,
 //! weather and effects come, masses stay in [0, m_max], mu in [muC, muD],
 //! adhesion in [0, mu], and the mass balance (applied = on the rails + carried
-//! out + consumed + squeezed out + lost to effects) closes to 1e-12.
+//! out + consumed + squeezed out + lost to effects) closes to 1e-12. And
+//! the tracks rolled as a wavefront, on one thread or several, end in the
+//! same bits as the wheels rolled one at a time in the serial order.
 
 use proptest::prelude::*;
 
@@ -82,6 +84,12 @@ fn section() -> Section {
 }
 
 fn events(trains: &[TrainSpec]) -> Vec<Event> {
+    events_on(trains, section().length_m)
+}
+
+/// The events of `trains` on a section `length_m` long (one train after
+/// the other has left).
+fn events_on(trains: &[TrainSpec], length_m: f64) -> Vec<Event> {
     let mut out = Vec::new();
     let mut t = 1_000.0;
     for (k, tr) in trains.iter().enumerate() {
@@ -150,7 +158,7 @@ fn events(trains: &[TrainSpec]) -> Vec<Event> {
                 });
             }
         }
-        t += (120.0 + last) / tr.speed_mps;
+        t += (length_m + last) / tr.speed_mps;
     }
     out.sort_by_key(|e| e.log_time_ns);
     out
@@ -233,5 +241,89 @@ proptest! {
         for track in engine.tracks() {
             prop_assert!(track.rail_mass_kg.iter().all(|m| (0.0..=cfg.product.m_max_kg).contains(m)));
         }
+    }
+}
+
+/// Rolls the events with `opts` on a rayon pool of `threads`; returns every
+/// track's state and the mass balance, as bits.
+fn rolled_bits(
+    cfg: &ModelConfig,
+    section: &Section,
+    events: &[Event],
+    opts: EngineOptions,
+    threads: usize,
+) -> Result<Vec<u64>, String> {
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .map_err(|e| e.to_string())?;
+    pool.install(|| {
+        struct Discard;
+        impl Sink for Discard {}
+        let mut engine = Engine::new(section.clone(), cfg.clone(), opts, 0);
+        for e in events {
+            engine
+                .push(e.clone(), &mut Discard)
+                .map_err(|e| format!("{e:#}"))?;
+        }
+        let b = engine
+            .finish(&mut Discard, 0)
+            .map_err(|e| format!("{e:#}"))?
+            .mass_balance;
+        let mut bits: Vec<u64> = [
+            b.applied_kg,
+            b.on_rail_end_kg,
+            b.carried_out_kg,
+            b.consumed_kg,
+            b.capped_kg,
+            b.effects_lost_kg,
+        ]
+        .iter()
+        .map(|x| x.to_bits())
+        .collect();
+        for t in engine.tracks() {
+            bits.push(t.wheel_pass);
+            for v in [&t.rail_mass_kg, &t.last_touch_s, &t.precip_at_touch_mm] {
+                bits.extend(v.iter().map(|x| x.to_bits()));
+            }
+        }
+        Ok(bits)
+    })
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(24))]
+
+    /// Long trains on a 1.2 km section, so that the tracks are rolled on
+    /// two threads (each has well over the engine's minimum of contacts).
+    #[test]
+    fn threads_and_wavefront_give_the_serial_bits(
+        trains in prop::collection::vec(train_spec(), 1..5),
+        extra_axles in 8..40usize,
+        config in effects(),
+    ) {
+        let cfg = ModelConfig::from_overlay_str(&config, "prop").unwrap();
+        let mut section = section();
+        section.length_m = 1200.0;
+        let trains: Vec<TrainSpec> = trains
+            .into_iter()
+            .map(|mut t| {
+                let first = t.axles[0];
+                t.axles.extend(std::iter::repeat_n(first, extra_axles));
+                t
+            })
+            .collect();
+        let events = events_on(&trains, section.length_m);
+        // One wheel at a time in the serial order (what a sink that wants
+        // every wheel gets), as the engine rolled before the wavefront.
+        let serial = EngineOptions { every_wheel_contacts: true, ..EngineOptions::default() };
+        let run = |opts, threads| {
+            rolled_bits(&cfg, &section, &events, opts, threads).map_err(TestCaseError::fail)
+        };
+        let reference = run(serial, 1)?;
+        let one_thread = run(EngineOptions::default(), 1)?;
+        let two_threads = run(EngineOptions::default(), 2)?;
+        prop_assert!(reference == one_thread, "the wavefront on one thread differs");
+        prop_assert!(reference == two_threads, "the tracks on two threads differ");
     }
 }

@@ -36,7 +36,7 @@ use tortwin_model::contact::{
 };
 use tortwin_model::effects::{Named, TimeEffects};
 use tortwin_model::error::{ConfigError, UsageError};
-use tortwin_model::generic::{ActsOn, Driver};
+use tortwin_model::generic::Driver;
 use tortwin_model::product;
 use tortwin_recording::error::InputError;
 use tortwin_recording::{
@@ -281,8 +281,6 @@ pub struct Engine {
     applicator_at: Vec<Vec<u32>>,
     /// Per point: the sites there (usually none).
     sites_at: Vec<Vec<usize>>,
-    /// Per applicator and track: the latest pulse's mass (m0), NaN before one.
-    latest_pulse_kg: Vec<f64>,
     /// `exp(-(N - 1) / cN)` for N - 1 = 0 ..= i_last.
     revolution: Vec<f64>,
     time_effects: TimeEffects,
@@ -307,15 +305,15 @@ pub struct Engine {
     recent: VecDeque<TrainRecord>,
     // Scratch, reused from train to train.
     timeline: WeatherTimeline,
-    point_events: Vec<Vec<PointEvent>>,
-    pending_at: Vec<Vec<u32>>,
-    /// Per track: what its last wheel saw at each point.
-    observed: Vec<roll::Observed>,
+    /// Per track: its point events, latest pulses and what its roll reports.
+    work: Vec<roll::TrackWork>,
+    /// The totals of a train's roll, sorted into the serial order.
+    ledger: Vec<roll::Addend>,
     /// Per track: the axle that rolled over it last in the current train.
     last_axle: Vec<usize>,
-    /// Per track: the points where an applicator or a measurement site is,
-    /// ascending. Pulses land and readings are taken only there.
-    special_points: Vec<Vec<usize>>,
+    /// Per track and point: whether an applicator or a measurement site is
+    /// there. Pulses land and readings are taken only there.
+    special: Vec<Vec<bool>>,
     snapshot: roll::SnapshotBuffers,
     /// Hertz shapes by wheel diameter (bits).
     hertz_shapes: Vec<(u64, HertzShape)>,
@@ -408,17 +406,13 @@ impl Engine {
                 nu: cfg.contact.nu,
             },
             tracks: (0..n_tracks).map(|_| TrackState::new(points)).collect(),
-            latest_pulse_kg: vec![f64::NAN; section.applicators.len() * n_tracks],
-            point_events: vec![Vec::new(); n_tracks],
-            pending_at: vec![vec![0; points]; n_tracks],
-            observed: vec![roll::Observed::new(points); n_tracks],
+            work: vec![roll::TrackWork::new(points, section.applicators.len()); n_tracks],
+            ledger: Vec::new(),
             last_axle: vec![usize::MAX; n_tracks],
-            special_points: (0..n_tracks)
+            special: (0..n_tracks)
                 .map(|t| {
                     (0..points)
-                        .filter(|&i| {
-                            applicator_at[t][i] != NO_APPLICATOR || !sites_at[i].is_empty()
-                        })
+                        .map(|i| applicator_at[t][i] != NO_APPLICATOR || !sites_at[i].is_empty())
                         .collect()
                 })
                 .collect(),
@@ -599,8 +593,11 @@ impl Engine {
                     let share = pulse_mass / self.pulse_tracks[pulse.rail].len() as f64;
                     let point = self.applicator_points[pulse.applicator];
                     let weather = self.weather;
-                    self.land_pulse(
+                    let (ctx, states, works) = self.split();
+                    let added = ctx.land_pulse(
                         track,
+                        &mut states[track],
+                        &mut works[track],
                         point,
                         time_s,
                         pulse.applicator,
@@ -608,6 +605,7 @@ impl Engine {
                         pulse_mass,
                         &weather,
                     );
+                    self.totals.add_pulse(&added);
                 }
                 self.emit_pulse(event.log_time_ns, pulse, sink)
             }
@@ -617,7 +615,8 @@ impl Engine {
                         let track = self.reading_track[m.rail];
                         let point = self.site_points[m.site];
                         let weather = self.weather;
-                        self.read_rail(track, point, time_s, &weather)
+                        let (ctx, states, _) = self.split();
+                        ctx.read_rail(track, &states[track], point, time_s, &weather)
                     }
                     Measured::Mu(axle) | Measured::Adhesion(axle) => {
                         self.contact_value(event, m, axle)?
@@ -797,8 +796,8 @@ impl Engine {
         };
         // The weather over the occupation, and the point events per track.
         self.timeline.reset(self.weather);
-        for q in &mut self.point_events {
-            q.clear();
+        for work in &mut self.work {
+            work.events.clear();
         }
         for (b, buffered) in self.window.iter().enumerate() {
             match &buffered.event.kind {
@@ -807,7 +806,7 @@ impl Engine {
                     let tracks = &self.pulse_tracks[p.rail];
                     for &track in tracks {
                         let point = self.applicator_points[p.applicator];
-                        self.point_events[track].push(PointEvent {
+                        self.work[track].events.push(PointEvent {
                             point,
                             time_s: buffered.time_s,
                             buffered: b,
@@ -818,20 +817,20 @@ impl Engine {
                             },
                             done: false,
                         });
-                        self.pending_at[track][point] += 1;
+                        self.work[track].pending_at[point] += 1;
                     }
                 }
                 EventKind::Measurement(m) if m.of == Measured::RailMu => {
                     let track = self.reading_track[m.rail];
                     let point = self.site_points[m.site];
-                    self.point_events[track].push(PointEvent {
+                    self.work[track].events.push(PointEvent {
                         point,
                         time_s: buffered.time_s,
                         buffered: b,
                         kind: PointEventKind::Reading,
                         done: false,
                     });
-                    self.pending_at[track][point] += 1;
+                    self.work[track].pending_at[point] += 1;
                 }
                 _ => {}
             }
@@ -841,14 +840,24 @@ impl Engine {
 
         // Point events after the last wheel at their point, in replay order.
         for track in 0..self.tracks.len() {
-            for k in 0..self.point_events[track].len() {
-                let ev = self.point_events[track][k];
+            for k in 0..self.work[track].events.len() {
+                let ev = self.work[track].events[k];
                 if !ev.done {
-                    let weather = *self.timeline.at(ev.time_s);
-                    self.run_point_event(track, k, &weather);
+                    let (ctx, states, works) = self.split();
+                    let weather = *ctx.timeline.at(ev.time_s);
+                    if let roll::Ran::Pulse(added) = ctx.run_point_event(
+                        track,
+                        &mut states[track],
+                        &mut works[track],
+                        k,
+                        &weather,
+                    ) {
+                        self.totals.add_pulse(&added);
+                    }
                 }
             }
         }
+        self.settle(&mut record);
         self.weather = self.timeline.last();
         self.occupied_until_s = record.end_s.max(self.occupied_until_s);
 
@@ -929,13 +938,8 @@ impl Engine {
     }
 
     /// Eq. (4) with muD and muC as the friction terms make them.
-    pub(crate) fn friction_at(&self, (mu_d, mu_c): (f64, f64), mass_kg: f64) -> f64 {
-        let params = product::ProductParams {
-            mu_d,
-            mu_c,
-            ..self.cfg.product
-        };
-        product::friction(&params, mass_kg)
+    pub(crate) fn friction_at(&self, levels: (f64, f64), mass_kg: f64) -> f64 {
+        friction_at(&self.cfg.product, levels, mass_kg)
     }
 
     /// T/N by Polach with mu0 = mu (contact.md).
@@ -956,113 +960,6 @@ impl Engine {
             &self.cfg.polach.params(),
         )
         .t_over_q
-    }
-
-    /// A pulse landing at `point` of `track` at `time_s` (model.md, "A pulse
-    /// landing"): time effects up to now, add, cap, touch.
-    #[allow(clippy::too_many_arguments)]
-    pub(crate) fn land_pulse(
-        &mut self,
-        track: usize,
-        point: usize,
-        time_s: f64,
-        applicator: usize,
-        mass_kg: f64,
-        pulse_mass_kg: f64,
-        weather: &WeatherState,
-    ) {
-        let (mut mass_kg, mut pulse_mass_kg) = (mass_kg, pulse_mass_kg);
-        if self.generic.any(ActsOn::PulseMass) {
-            let g = self.generic.factor(
-                ActsOn::PulseMass,
-                generic::Which::All,
-                Some(applicator),
-                self.track_info[track].rail,
-                generic::When {
-                    time_s,
-                    weather: &weather.current,
-                    wheel: None,
-                },
-            );
-            mass_kg *= g;
-            pulse_mass_kg *= g;
-        }
-        let effects = self.time_effects;
-        let t = &mut self.tracks[track];
-        let precip = weather.precip_mm_at(time_s);
-        let mut m = t.rail_mass_kg[point];
-        let last = t.last_touch_s[point];
-        if effects.any() && !last.is_nan() {
-            let aged = effects.apply(m, time_s - last, precip - t.precip_at_touch_mm[point]);
-            self.totals.effects_lost_kg += m - aged;
-            m = aged;
-        }
-        m += mass_kg;
-        self.totals.applied_kg += mass_kg;
-        self.totals.capped_kg += product::cap(&self.cfg.product, &mut m);
-        t.rail_mass_kg[point] = m;
-        t.last_touch_s[point] = time_s;
-        t.precip_at_touch_mm[point] = precip;
-        self.latest_pulse_kg[applicator * self.tracks.len() + track] = pulse_mass_kg;
-    }
-
-    /// A tribometer reading (model.md): eq. (4) with the rail mass alone, the
-    /// time effects since the last touch applied to the value read only.
-    pub(crate) fn read_rail(
-        &self,
-        track: usize,
-        point: usize,
-        time_s: f64,
-        weather: &WeatherState,
-    ) -> f64 {
-        let t = &self.tracks[track];
-        let mut m = t.rail_mass_kg[point];
-        let last = t.last_touch_s[point];
-        if self.time_effects.any() && !last.is_nan() {
-            let rain = weather.precip_mm_at(time_s) - t.precip_at_touch_mm[point];
-            m = self.time_effects.apply(m, time_s - last, rain);
-        }
-        if self.generic.any_friction() {
-            let p = &self.cfg.product;
-            let levels = self.generic.friction_levels(
-                p.mu_d,
-                p.mu_c,
-                self.track_info[track].rail,
-                time_s,
-                &weather.current,
-                None,
-            );
-            return self.friction_at(levels, m);
-        }
-        product::friction(&self.cfg.product, m)
-    }
-
-    /// Runs point event `k` of `track` (a pulse or a reading of the window).
-    pub(crate) fn run_point_event(&mut self, track: usize, k: usize, weather: &WeatherState) {
-        let ev = self.point_events[track][k];
-        match ev.kind {
-            PointEventKind::Pulse {
-                applicator,
-                mass_kg,
-                pulse_mass_kg,
-            } => {
-                self.land_pulse(
-                    track,
-                    ev.point,
-                    ev.time_s,
-                    applicator,
-                    mass_kg,
-                    pulse_mass_kg,
-                    weather,
-                );
-            }
-            PointEventKind::Reading => {
-                let value = self.read_rail(track, ev.point, ev.time_s, weather);
-                self.window[ev.buffered].reading = Some(value);
-            }
-        }
-        self.point_events[track][k].done = true;
-        self.pending_at[track][ev.point] -= 1;
     }
 
     fn emit_pulse(
@@ -1150,6 +1047,20 @@ fn wheel_drivers(speed_mps: f64, axle: &Axle, rail: usize) -> WheelDrivers {
 }
 
 /// Whether a direction enters at d = 0.
+/// Eq. (4) with muD and muC as the friction terms make them.
+pub(crate) fn friction_at(
+    product: &product::ProductParams,
+    (mu_d, mu_c): (f64, f64),
+    mass_kg: f64,
+) -> f64 {
+    let params = product::ProductParams {
+        mu_d,
+        mu_c,
+        ..*product
+    };
+    product::friction(&params, mass_kg)
+}
+
 pub(crate) fn enters_at_zero(direction: Direction) -> bool {
     direction == Direction::Up
 }

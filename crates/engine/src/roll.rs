@@ -5,14 +5,17 @@
 use std::sync::Arc;
 
 use super::generic::{GenericSet, When, Which};
+use super::weather::WeatherState;
 use super::weather::WeatherTimeline;
 use super::{
-    enters_at_zero, Engine, EngineError, SnapshotKind, TrackState, TrainRecord, NO_APPLICATOR,
+    enters_at_zero, Engine, EngineError, PointEvent, PointEventKind, SnapshotKind, Totals,
+    TrackState, TrainRecord, NO_APPLICATOR,
 };
-use crate::sink::{FieldSnapshot, Sink, WheelContacts};
+use crate::sink::{FieldSnapshot, Sink, TrackInfo, WheelContacts};
 use tortwin_model::effects::{self, Named, TimeEffects};
 use tortwin_model::generic::ActsOn;
 use tortwin_model::product::{self, ContactConditions, ProductParams};
+use tortwin_recording::Section;
 
 /// What a wheel saw at every point of its track (kept for the last wheel of
 /// each track, or for every wheel when a sink asks for it).
@@ -34,6 +37,7 @@ impl Observed {
 }
 
 /// The rolling wheel's own state.
+#[derive(Clone)]
 struct WheelRoll {
     wheel_kg: f64,
     /// The wheel_edge_reservoir effect's m_e.
@@ -47,6 +51,7 @@ struct WheelRoll {
 }
 
 /// What a contact needs that depends only on the wheel: computed once.
+#[derive(Clone)]
 struct Roller {
     params: ProductParams,
     time_effects: TimeEffects,
@@ -206,8 +211,200 @@ pub(crate) struct SnapshotBuffers {
     wheel_mass_kg: Vec<f64>,
 }
 
+/// How many wheels of one track roll at once, as a wavefront: wheel k+1 at
+/// point i while wheel k is at the next point of the path. Each wheel's
+/// contacts depend on the one before through the wheel's own mass, a chain
+/// of exponentials; interleaving the wheels lets the core overlap the
+/// chains. Every contact computes exactly what it computes alone.
+const LANES: usize = 4;
+
+/// Rolling the tracks on several threads pays only when a train has this
+/// many contacts on each (a thread's start is a few microseconds).
+const PARALLEL_MIN_CONTACTS: usize = 4096;
+
+/// What one track's roll changes besides its [`TrackState`]: the track's
+/// point events and latest pulses, and what the roll reports back to the
+/// engine (settled in the serial order by [`Engine::settle`]). Each track
+/// owns one, so that tracks can be rolled at once.
+#[derive(Debug, Clone)]
+pub(crate) struct TrackWork {
+    /// The pulses and readings of the window on this track.
+    pub(crate) events: Vec<PointEvent>,
+    /// Per point: how many of `events` are still to run there.
+    pub(crate) pending_at: Vec<u32>,
+    /// What the last wheel (or every wheel) saw.
+    pub(crate) observed: Observed,
+    /// Per applicator: the latest pulse's mass on this track (m0), NaN
+    /// before one.
+    pub(crate) latest_pulse_kg: Vec<f64>,
+    /// This train's axles whose wheel runs on this track, in order.
+    axles: Vec<usize>,
+    /// The roll's contributions to the run totals, to be added in the
+    /// serial order (floating-point sums depend on their order).
+    ledger: Vec<Addend>,
+    /// Tribometer readings taken: (window index, simulated value).
+    readings: Vec<(usize, f64)>,
+    /// Contacts at measurement sites.
+    sites: Vec<SiteValue>,
+}
+
+impl TrackWork {
+    pub(crate) fn new(points: usize, applicators: usize) -> Self {
+        Self {
+            events: Vec::new(),
+            pending_at: vec![0; points],
+            observed: Observed::new(points),
+            latest_pulse_kg: vec![f64::NAN; applicators],
+            axles: Vec::new(),
+            ledger: Vec::new(),
+            readings: Vec::new(),
+            sites: Vec::new(),
+        }
+    }
+}
+
+/// A contact at a measurement site: [`TrainRecord::site_mass_kg`]'s index,
+/// its step-2 mass and, with friction terms, muD and muC there.
+#[derive(Debug, Clone, Copy)]
+struct SiteValue {
+    index: usize,
+    mass_kg: f64,
+    levels: Option<(f64, f64)>,
+}
+
+/// One addition to the run totals, with its place in the serial order:
+/// `(axle * rails + rail) << 32 | k`, k counting the pulses landed during
+/// that wheel's roll and `u32::MAX` for the wheel's own totals at its end.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Addend {
+    order: u64,
+    kind: AddendKind,
+}
+
+#[derive(Debug, Clone, Copy)]
+enum AddendKind {
+    Pulse(PulseTotals),
+    Wheel {
+        contacts: u64,
+        consumed_kg: f64,
+        capped_kg: f64,
+        lost_kg: f64,
+        carried_kg: f64,
+    },
+}
+
+/// What landing one pulse adds to the totals.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct PulseTotals {
+    /// What the time effects took since the point's last touch (none where
+    /// there are no time effects or the point was never touched).
+    pub(crate) lost_kg: Option<f64>,
+    pub(crate) applied_kg: f64,
+    pub(crate) capped_kg: f64,
+}
+
+impl Totals {
+    pub(crate) fn add_pulse(&mut self, p: &PulseTotals) {
+        if let Some(lost) = p.lost_kg {
+            self.effects_lost_kg += lost;
+        }
+        self.applied_kg += p.applied_kg;
+        self.capped_kg += p.capped_kg;
+    }
+
+    fn add(&mut self, addend: &Addend) {
+        match addend.kind {
+            AddendKind::Pulse(p) => self.add_pulse(&p),
+            AddendKind::Wheel {
+                contacts,
+                consumed_kg,
+                capped_kg,
+                lost_kg,
+                carried_kg,
+            } => {
+                self.wheels += 1;
+                self.contacts += contacts;
+                self.consumed_kg += consumed_kg;
+                self.capped_kg += capped_kg;
+                self.effects_lost_kg += lost_kg;
+                self.carried_out_kg += carried_kg;
+            }
+        }
+    }
+}
+
+/// What a point event did, for the engine to take in.
+pub(crate) enum Ran {
+    Pulse(PulseTotals),
+    Reading,
+}
+
+/// Everything a roll reads and no roll changes: borrowed from the engine
+/// beside the per-track state, so that tracks can be rolled at once.
+pub(crate) struct RollContext<'a> {
+    pub(crate) product: &'a ProductParams,
+    effects: &'a tortwin_model::config::Effects,
+    section: &'a Section,
+    d_m: &'a [f64],
+    revolution: &'a [f64],
+    pub(crate) timeline: &'a WeatherTimeline,
+    time_effects: TimeEffects,
+    generic: &'a Arc<GenericSet>,
+    track_info: &'a [TrackInfo],
+    applicator_at: &'a [Vec<u32>],
+    special: &'a [Vec<bool>],
+    sites_at: &'a [Vec<usize>],
+    last_axle: &'a [usize],
+    observe_every_wheel: bool,
+    origin_ns: i64,
+}
+
+/// A wheel in the wavefront.
+#[derive(Clone)]
+struct Lane {
+    axle: usize,
+    /// Its place in the serial order: axle * rails + rail.
+    serial: u64,
+    /// Pulses landed during its roll so far.
+    pulses: u64,
+    st: WheelRoll,
+    roller: Roller,
+}
+
 impl Engine {
-    /// Rolls every wheel of the train, axle by axle, rail by rail.
+    /// The engine's fields split into what rolling reads and the per-track
+    /// state it changes.
+    pub(crate) fn split(&mut self) -> (RollContext<'_>, &mut [TrackState], &mut [TrackWork]) {
+        (
+            RollContext {
+                product: &self.cfg.product,
+                effects: &self.cfg.effects,
+                section: &self.section,
+                d_m: &self.grid.d_m,
+                revolution: &self.revolution,
+                timeline: &self.timeline,
+                time_effects: self.time_effects,
+                generic: &self.generic,
+                track_info: &self.track_info,
+                applicator_at: &self.applicator_at,
+                special: &self.special,
+                sites_at: &self.sites_at,
+                last_axle: &self.last_axle,
+                observe_every_wheel: self.opts.snapshot_every_wheel
+                    || self.opts.every_wheel_contacts,
+                origin_ns: self.origin_ns,
+            },
+            &mut self.tracks,
+            &mut self.work,
+        )
+    }
+
+    /// Rolls every wheel of the train. Tracks (rail x band) are independent
+    /// within a train: each track's wheels roll in axle order, the tracks on
+    /// as many threads as rayon offers, and what they add to the totals is
+    /// settled in the serial order (axle by axle, rail by rail), so that
+    /// the result does not depend on the threads. When a sink asks for
+    /// every wheel, the wheels roll one at a time in the serial order.
     pub(super) fn roll_train(
         &mut self,
         record: &mut TrainRecord,
@@ -216,18 +413,52 @@ impl Engine {
         let rails = self.section.rails.len();
         let axles = record.passage.axles.len();
         self.last_axle.fill(usize::MAX);
-        for a in 0..axles {
-            for r in 0..rails {
-                self.last_axle[record.wheels[a * rails + r].track] = a;
-            }
+        for work in &mut self.work {
+            work.axles.clear();
         }
         for a in 0..axles {
             for r in 0..rails {
                 let track = record.wheels[a * rails + r].track;
-                let observe = self.opts.snapshot_every_wheel
-                    || self.opts.every_wheel_contacts
-                    || self.last_axle[track] == a;
-                self.roll_wheel(record, a, r, observe);
+                self.last_axle[track] = a;
+                self.work[track].axles.push(a);
+            }
+        }
+        if !(self.opts.snapshot_every_wheel || self.opts.every_wheel_contacts) {
+            let points = self.grid.d_m.len();
+            let (ctx, states, works) = self.split();
+            let record_ref: &TrainRecord = record;
+            let parallel = states.len() > 1
+                && rayon::current_num_threads() > 1
+                && works
+                    .iter()
+                    .filter(|w| w.axles.len() * points >= PARALLEL_MIN_CONTACTS)
+                    .count()
+                    > 1;
+            if parallel {
+                use rayon::prelude::*;
+                states
+                    .par_iter_mut()
+                    .zip(works.par_iter_mut())
+                    .enumerate()
+                    .for_each(|(track, (state, work))| {
+                        ctx.roll_track(record_ref, track, state, work);
+                    });
+            } else {
+                for (track, (state, work)) in states.iter_mut().zip(works.iter_mut()).enumerate() {
+                    ctx.roll_track(record_ref, track, state, work);
+                }
+            }
+            self.settle(record);
+            return Ok(());
+        }
+        for a in 0..axles {
+            for r in 0..rails {
+                let track = record.wheels[a * rails + r].track;
+                {
+                    let (ctx, states, works) = self.split();
+                    ctx.roll_group(record, track, &mut states[track], &mut works[track], &[a]);
+                }
+                self.settle(record);
                 if self.opts.every_wheel_contacts {
                     // With friction terms mu is not eq. (4) of the mass alone.
                     let mut mu = std::mem::take(&mut self.snapshot.contact_mu);
@@ -241,7 +472,7 @@ impl Engine {
                         direction: record.passage.direction,
                         train_seq: record.passage.train_seq,
                         axle: a,
-                        seen_mass_kg: &self.observed[track].mass_kg,
+                        seen_mass_kg: &self.work[track].observed.mass_kg,
                         mu: with_terms.then_some(mu.as_slice()),
                     });
                     self.snapshot.contact_mu = mu;
@@ -256,6 +487,34 @@ impl Engine {
         Ok(())
     }
 
+    /// Takes in what the tracks' rolls (or point events) reported: the
+    /// readings into the window, the site contacts into the record, and the
+    /// totals in the serial order.
+    pub(crate) fn settle(&mut self, record: &mut TrainRecord) {
+        let mut ledger = std::mem::take(&mut self.ledger);
+        for work in &mut self.work {
+            for &(b, value) in &work.readings {
+                self.window[b].reading = Some(value);
+            }
+            work.readings.clear();
+            for site in &work.sites {
+                record.site_mass_kg[site.index] = site.mass_kg;
+                if let Some(levels) = site.levels {
+                    record.site_levels[site.index] = levels;
+                }
+            }
+            work.sites.clear();
+            ledger.append(&mut work.ledger);
+        }
+        // Every order is distinct: the sort's result is the serial order.
+        ledger.sort_unstable_by_key(|a| a.order);
+        for addend in &ledger {
+            self.totals.add(addend);
+        }
+        ledger.clear();
+        self.ledger = ledger;
+    }
+
     /// The log_time at which axle `a` leaves the section: the passage's
     /// log_time plus its time on the section in integer nanoseconds.
     fn wheel_exit_ns(&self, record: &TrainRecord, a: usize) -> u64 {
@@ -265,27 +524,179 @@ impl Engine {
             .log_time_ns
             .saturating_add((on_section_s * 1e9).round() as u64)
     }
+}
 
-    /// One wheel (axle `a` on rail `r`) over every grid point of its track.
-    ///
-    /// The path runs in tight segments between the track's special points
-    /// (applicators and measurement sites, the only places where a pulse
-    /// lands, a reading is taken or a contact is recorded); at a special
-    /// point the events that come before this wheel run first.
-    fn roll_wheel(&mut self, record: &mut TrainRecord, a: usize, r: usize, observe: bool) {
+impl RollContext<'_> {
+    /// `time_s = (log_time_ns - origin_ns) * 1e-9` (model.md).
+    fn time_s(&self, log_time_ns: u64) -> f64 {
+        (log_time_ns as i64).wrapping_sub(self.origin_ns) as f64 * 1e-9
+    }
+
+    /// Every wheel of this train on `track`, in axle order, [`LANES`] at a
+    /// time.
+    fn roll_track(
+        &self,
+        record: &TrainRecord,
+        track: usize,
+        state: &mut TrackState,
+        work: &mut TrackWork,
+    ) {
+        let axles = std::mem::take(&mut work.axles);
+        for group in axles.chunks(LANES) {
+            self.roll_group(record, track, state, work, group);
+        }
+        work.axles = axles;
+    }
+
+    /// The wheels of `group` (consecutive wheels of one track, at most
+    /// [`LANES`]) as a wavefront: at step s, wheel j of the group is at step
+    /// s - j of its path. Wheel j reaches every point one step after wheel
+    /// j - 1 left it and before wheel j + 1, so every point sees the wheels
+    /// in their order; the pulses and readings at a special point run when
+    /// the first wheel after them arrives, as in the serial order. Nothing
+    /// else is shared between the wheels of a track.
+    fn roll_group(
+        &self,
+        record: &TrainRecord,
+        track: usize,
+        state: &mut TrackState,
+        work: &mut TrackWork,
+        group: &[usize],
+    ) {
+        let n = group.len();
+        debug_assert!((1..=LANES).contains(&n));
+        let points = self.d_m.len();
+        let up = enters_at_zero(record.passage.direction);
+        // Unused lanes repeat the last wheel and are never stepped.
+        let mut lanes: [Lane; LANES] =
+            std::array::from_fn(|j| self.lane(record, track, group[j.min(n - 1)]));
+        let special = &self.special[track];
+        for s in 0..points + n - 1 {
+            let lo = s.saturating_sub(points - 1);
+            let hi = n.min(s + 1);
+            for (j, lane) in lanes.iter_mut().enumerate().take(hi).skip(lo) {
+                let step = s - j;
+                let i = if up { step } else { points - 1 - step };
+                if special[i] {
+                    self.special_contact(record, track, state, work, lane, i);
+                } else {
+                    lane.roller.contact(
+                        &mut lane.st,
+                        state,
+                        &mut work.observed,
+                        self.d_m,
+                        self.revolution,
+                        self.timeline,
+                        i,
+                    );
+                }
+            }
+            // The lane that took its last step now.
+            if s + 1 >= points {
+                let lane = &lanes[s + 1 - points];
+                let st = &lane.st;
+                work.ledger.push(Addend {
+                    order: lane.serial << 32 | u64::from(u32::MAX),
+                    kind: AddendKind::Wheel {
+                        contacts: points as u64,
+                        consumed_kg: st.consumed_kg,
+                        capped_kg: st.capped_kg,
+                        lost_kg: st.lost_kg,
+                        carried_kg: st.wheel_kg + st.edge_kg,
+                    },
+                });
+                state.wheel_pass += 1;
+            }
+        }
+    }
+
+    /// A contact at a special point (an applicator or a measurement site):
+    /// the pulses and readings there that come before this wheel run first.
+    fn special_contact(
+        &self,
+        record: &TrainRecord,
+        track: usize,
+        state: &mut TrackState,
+        work: &mut TrackWork,
+        lane: &mut Lane,
+        i: usize,
+    ) {
+        let t = lane.roller.time_at(self.d_m, i);
+        if work.pending_at[i] > 0 {
+            for k in 0..work.events.len() {
+                let ev = work.events[k];
+                if !ev.done && ev.point == i && ev.time_s < t {
+                    let weather = *self.timeline.at(ev.time_s);
+                    if let Ran::Pulse(totals) =
+                        self.run_point_event(track, state, work, k, &weather)
+                    {
+                        work.ledger.push(Addend {
+                            order: lane.serial << 32 | lane.pulses,
+                            kind: AddendKind::Pulse(totals),
+                        });
+                        lane.pulses += 1;
+                    }
+                }
+            }
+        }
+        let app = self.applicator_at[track][i];
+        if app != NO_APPLICATOR {
+            // The wheel passes this applicator: N counts from here and m0
+            // is its latest pulse that landed before this wheel.
+            lane.st.applicator_point = Some(i);
+            let latest = work.latest_pulse_kg[app as usize];
+            lane.st.m0_kg = if latest.is_nan() {
+                self.section.applicators[app as usize].nominal_pulse_kg
+            } else {
+                latest
+            };
+        }
+        let m_kg = lane.roller.contact(
+            &mut lane.st,
+            state,
+            &mut work.observed,
+            self.d_m,
+            self.revolution,
+            self.timeline,
+            i,
+        );
+        let sites_here = &self.sites_at[i];
+        if sites_here.is_empty() {
+            return;
+        }
+        let rail = self.track_info[track].rail;
+        let levels = (!record.site_levels.is_empty()).then(|| {
+            let rails = self.section.rails.len();
+            self.generic.friction_levels(
+                self.product.mu_d,
+                self.product.mu_c,
+                rail,
+                t,
+                &self.timeline.at(t).current,
+                Some(&record.wheels[lane.axle * rails + rail].drivers),
+            )
+        });
+        let (rails, sites) = (self.section.rails.len(), self.section.sites.len());
+        for &s in sites_here {
+            work.sites.push(SiteValue {
+                index: (lane.axle * rails + rail) * sites + s,
+                mass_kg: m_kg,
+                levels,
+            });
+        }
+    }
+
+    /// A wheel (axle `a` on `track`'s rail) ready to roll: everything that
+    /// depends only on the wheel, computed once.
+    fn lane(&self, record: &TrainRecord, track: usize, a: usize) -> Lane {
         let rails = self.section.rails.len();
-        let sites = self.section.sites.len();
+        let r = self.track_info[track].rail;
         let wheel = record.wheels[a * rails + r];
-        let track = wheel.track;
-        let n_tracks = self.tracks.len();
         let speed_mps = record.passage.speed_mps;
         let up = enters_at_zero(record.passage.direction);
-        let points = self.grid.d_m.len();
-        let point_of = |step: usize| if up { step } else { points - 1 - step };
-
         // Every wheel enters clean; before it passes an applicator, m0 is the
         // first listed applicator's nominal pulse and there is no transfer.
-        let mut st = WheelRoll {
+        let st = WheelRoll {
             wheel_kg: 0.0,
             edge_kg: 0.0,
             m0_kg: self
@@ -298,7 +709,7 @@ impl Engine {
             capped_kg: 0.0,
             lost_kg: 0.0,
         };
-        let generic = &self.generic;
+        let generic = self.generic;
         let wheel_generic = |acts_on| {
             generic.factor(
                 acts_on,
@@ -315,7 +726,7 @@ impl Engine {
         let transfer_generic = wheel_generic(ActsOn::Transfer);
         let consumption_generic = wheel_generic(ActsOn::Consumption);
         let roller = Roller {
-            params: self.cfg.product,
+            params: *self.product,
             time_effects: self.time_effects,
             t_passage_s: self.time_s(record.log_time_ns),
             offset_m: record.passage.axles[a].offset_m,
@@ -323,7 +734,6 @@ impl Engine {
             d_entry_m: if up { 0.0 } else { self.section.length_m },
             fp_fc: wheel.fp_fc,
             transfer_factor: self
-                .cfg
                 .effects
                 .param(Named::SpeedTransfer, 0)
                 .map_or(1.0, |n| effects::speed_transfer_factor(speed_mps, n))
@@ -333,9 +743,8 @@ impl Engine {
             consumption_varies: generic.varies(ActsOn::Consumption, r),
             generic: Arc::clone(generic),
             rail: r,
-            temperature_beta: self.cfg.effects.param(Named::TemperatureConsumption, 0),
+            temperature_beta: self.effects.param(Named::TemperatureConsumption, 0),
             temperature_factor: self
-                .cfg
                 .effects
                 .param(Named::TemperatureConsumption, 0)
                 .filter(|_| self.timeline.is_constant())
@@ -346,120 +755,145 @@ impl Engine {
                     )
                 }),
             reservoir: self
-                .cfg
                 .effects
                 .get(Named::WheelEdgeReservoir)
                 .map(|p| (p[0], p[1])),
-            observe,
+            observe: self.observe_every_wheel || self.last_axle[track] == a,
         };
-
-        let mut next_special = if up {
-            0
-        } else {
-            self.special_points[track].len()
-        };
-        let mut step = 0;
-        while step < points {
-            // The next special point on the path, as a step.
-            let specials = &self.special_points[track];
-            let special_step = if up {
-                specials.get(next_special).copied()
-            } else {
-                next_special
-                    .checked_sub(1)
-                    .and_then(|k| specials.get(k))
-                    .map(|&i| points - 1 - i)
-            }
-            .unwrap_or(points);
-            {
-                let d_m = &self.grid.d_m;
-                let revolution = &self.revolution;
-                let timeline = &self.timeline;
-                let state = &mut self.tracks[track];
-                let observed = &mut self.observed[track];
-                for s in step..special_step {
-                    roller.contact(
-                        &mut st,
-                        state,
-                        observed,
-                        d_m,
-                        revolution,
-                        timeline,
-                        point_of(s),
-                    );
-                }
-            }
-            if special_step == points {
-                break;
-            }
-            let i = point_of(special_step);
-            let t = roller.time_at(&self.grid.d_m, i);
-            // Pulses and readings at this point that come before this wheel.
-            if self.pending_at[track][i] > 0 {
-                for k in 0..self.point_events[track].len() {
-                    let ev = self.point_events[track][k];
-                    if !ev.done && ev.point == i && ev.time_s < t {
-                        let weather = *self.timeline.at(ev.time_s);
-                        self.run_point_event(track, k, &weather);
-                    }
-                }
-            }
-            let app = self.applicator_at[track][i];
-            if app != NO_APPLICATOR {
-                // The wheel passes this applicator: N counts from here and m0
-                // is its latest pulse that landed before this wheel.
-                st.applicator_point = Some(i);
-                let latest = self.latest_pulse_kg[app as usize * n_tracks + track];
-                st.m0_kg = if latest.is_nan() {
-                    self.section.applicators[app as usize].nominal_pulse_kg
-                } else {
-                    latest
-                };
-            }
-            let m_kg = roller.contact(
-                &mut st,
-                &mut self.tracks[track],
-                &mut self.observed[track],
-                &self.grid.d_m,
-                &self.revolution,
-                &self.timeline,
-                i,
-            );
-            for &s in &self.sites_at[i] {
-                record.site_mass_kg[(a * rails + r) * sites + s] = m_kg;
-            }
-            if !record.site_levels.is_empty() {
-                let p = &self.cfg.product;
-                let levels = self.generic.friction_levels(
-                    p.mu_d,
-                    p.mu_c,
-                    r,
-                    t,
-                    &self.timeline.at(t).current,
-                    Some(&wheel.drivers),
-                );
-                for &s in &self.sites_at[i] {
-                    record.site_levels[(a * rails + r) * sites + s] = levels;
-                }
-            }
-            step = special_step + 1;
-            if up {
-                next_special += 1;
-            } else {
-                next_special -= 1;
-            }
+        Lane {
+            axle: a,
+            serial: (a * rails + r) as u64,
+            pulses: 0,
+            st,
+            roller,
         }
-
-        let t = &mut self.totals;
-        t.wheels += 1;
-        t.contacts += points as u64;
-        t.consumed_kg += st.consumed_kg;
-        t.capped_kg += st.capped_kg;
-        t.effects_lost_kg += st.lost_kg;
-        t.carried_out_kg += st.wheel_kg + st.edge_kg;
-        self.tracks[track].wheel_pass += 1;
     }
 
+    /// A pulse landing at `point` of `track` at `time_s` (model.md, "A pulse
+    /// landing"): time effects up to now, add, cap, touch. Returns what it
+    /// adds to the totals.
+    #[allow(clippy::too_many_arguments)]
+    pub(crate) fn land_pulse(
+        &self,
+        track: usize,
+        state: &mut TrackState,
+        work: &mut TrackWork,
+        point: usize,
+        time_s: f64,
+        applicator: usize,
+        mass_kg: f64,
+        pulse_mass_kg: f64,
+        weather: &WeatherState,
+    ) -> PulseTotals {
+        let (mut mass_kg, mut pulse_mass_kg) = (mass_kg, pulse_mass_kg);
+        if self.generic.any(ActsOn::PulseMass) {
+            let g = self.generic.factor(
+                ActsOn::PulseMass,
+                Which::All,
+                Some(applicator),
+                self.track_info[track].rail,
+                When {
+                    time_s,
+                    weather: &weather.current,
+                    wheel: None,
+                },
+            );
+            mass_kg *= g;
+            pulse_mass_kg *= g;
+        }
+        let effects = self.time_effects;
+        let precip = weather.precip_mm_at(time_s);
+        let mut m = state.rail_mass_kg[point];
+        let last = state.last_touch_s[point];
+        let mut lost_kg = None;
+        if effects.any() && !last.is_nan() {
+            let aged = effects.apply(m, time_s - last, precip - state.precip_at_touch_mm[point]);
+            lost_kg = Some(m - aged);
+            m = aged;
+        }
+        m += mass_kg;
+        let capped_kg = product::cap(self.product, &mut m);
+        state.rail_mass_kg[point] = m;
+        state.last_touch_s[point] = time_s;
+        state.precip_at_touch_mm[point] = precip;
+        work.latest_pulse_kg[applicator] = pulse_mass_kg;
+        PulseTotals {
+            lost_kg,
+            applied_kg: mass_kg,
+            capped_kg,
+        }
+    }
+
+    /// A tribometer reading (model.md): eq. (4) with the rail mass alone, the
+    /// time effects since the last touch applied to the value read only.
+    pub(crate) fn read_rail(
+        &self,
+        track: usize,
+        state: &TrackState,
+        point: usize,
+        time_s: f64,
+        weather: &WeatherState,
+    ) -> f64 {
+        let mut m = state.rail_mass_kg[point];
+        let last = state.last_touch_s[point];
+        if self.time_effects.any() && !last.is_nan() {
+            let rain = weather.precip_mm_at(time_s) - state.precip_at_touch_mm[point];
+            m = self.time_effects.apply(m, time_s - last, rain);
+        }
+        if self.generic.any_friction() {
+            let levels = self.generic.friction_levels(
+                self.product.mu_d,
+                self.product.mu_c,
+                self.track_info[track].rail,
+                time_s,
+                &weather.current,
+                None,
+            );
+            return super::friction_at(self.product, levels, m);
+        }
+        product::friction(self.product, m)
+    }
+
+    /// Runs point event `k` of `track` (a pulse or a reading of the window);
+    /// a reading's value goes to the track's readings.
+    pub(crate) fn run_point_event(
+        &self,
+        track: usize,
+        state: &mut TrackState,
+        work: &mut TrackWork,
+        k: usize,
+        weather: &WeatherState,
+    ) -> Ran {
+        let ev = work.events[k];
+        let ran = match ev.kind {
+            PointEventKind::Pulse {
+                applicator,
+                mass_kg,
+                pulse_mass_kg,
+            } => Ran::Pulse(self.land_pulse(
+                track,
+                state,
+                work,
+                ev.point,
+                ev.time_s,
+                applicator,
+                mass_kg,
+                pulse_mass_kg,
+                weather,
+            )),
+            PointEventKind::Reading => {
+                let value = self.read_rail(track, state, ev.point, ev.time_s, weather);
+                work.readings.push((ev.buffered, value));
+                Ran::Reading
+            }
+        };
+        work.events[k].done = true;
+        work.pending_at[ev.point] -= 1;
+        ran
+    }
+}
+
+impl Engine {
     /// Publishes the field of every track after the train.
     pub(super) fn emit_fields(
         &mut self,
@@ -484,7 +918,7 @@ impl Engine {
     /// them at each contact's time and weather.
     fn fill_mu(&self, record: &TrainRecord, track: usize, a: usize, out: &mut Vec<f64>) {
         out.clear();
-        let observed = &self.observed[track];
+        let observed = &self.work[track].observed;
         if !self.generic.any_friction() {
             out.extend(
                 observed
@@ -538,7 +972,7 @@ impl Engine {
         buf.adhesion.clear();
         buf.wheel_mass_kg.clear();
         self.fill_mu(record, track, a, &mut buf.mu);
-        let observed = &self.observed[track];
+        let observed = &self.work[track].observed;
         for (&mu, &wheel_mass_kg) in buf.mu.iter().zip(&observed.wheel_mass_kg) {
             buf.adhesion
                 .push(self.adhesion(&wheel, record.passage.speed_mps, mu));

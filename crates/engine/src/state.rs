@@ -69,7 +69,6 @@ pub enum StateError {
 }
 
 pub(super) fn capture(engine: &Engine) -> EngineState {
-    let n_tracks = engine.tracks.len();
     EngineState {
         format: STATE_FORMAT.into(),
         version: STATE_VERSION,
@@ -92,13 +91,13 @@ pub(super) fn capture(engine: &Engine) -> EngineState {
                 precip_at_touch_mm: t.precip_at_touch_mm.clone(),
             })
             .collect(),
-        latest_pulse_kg: engine
-            .latest_pulse_kg
-            .chunks(n_tracks.max(1))
-            .map(|per_track| {
-                per_track
+        latest_pulse_kg: (0..engine.section.applicators.len())
+            .map(|a| {
+                engine
+                    .work
                     .iter()
-                    .map(|&x| (!x.is_nan()).then_some(x))
+                    .map(|w| w.latest_pulse_kg[a])
+                    .map(|x| (!x.is_nan()).then_some(x))
                     .collect()
             })
             .collect(),
@@ -200,7 +199,7 @@ pub(super) fn restore(
     }
     for (a, per_track) in saved.latest_pulse_kg.iter().enumerate() {
         for (t, m) in per_track.iter().enumerate() {
-            engine.latest_pulse_kg[a * n_tracks + t] = m.unwrap_or(f64::NAN);
+            engine.work[t].latest_pulse_kg[a] = m.unwrap_or(f64::NAN);
         }
     }
     engine.weather = saved.weather;
