@@ -13,6 +13,9 @@ use super::{
 };
 use crate::sink::{FieldSnapshot, Sink, TrackInfo, WheelContacts};
 use tortwin_model::effects::{self, Named, TimeEffects};
+#[cfg(target_arch = "x86_64")]
+use tortwin_model::exp::exp4_inline;
+use tortwin_model::exp::exp4_is_vectorised;
 use tortwin_model::generic::ActsOn;
 use tortwin_model::product::{self, ContactConditions, ProductParams};
 use tortwin_recording::Section;
@@ -95,7 +98,9 @@ impl Roller {
     }
 
     /// One contact at point i, steps 1 to 6 of model.md. Returns the total
-    /// mass of step 2 (what a measurement of this contact sees).
+    /// mass of step 2 (what a measurement of this contact sees). The
+    /// phases are those [`RollContext::contacts4`] runs for four wheels at
+    /// once, with the exponentials taken here one by one.
     #[allow(clippy::too_many_arguments)]
     #[inline(always)]
     fn contact(
@@ -108,27 +113,73 @@ impl Roller {
         timeline: &WeatherTimeline,
         i: usize,
     ) -> f64 {
+        let mut touch = self.touch(track, d_m, timeline, i);
+        if touch.aged {
+            let exps = self
+                .time_effects
+                .exp_args(touch.dt_s, touch.rain_mm)
+                .map(f64::exp);
+            self.age(st, &mut touch, exps);
+        }
+        self.touched(track, &touch, i);
+        let conditions = self.conditions(st, &touch, revolution, i);
+        self.finish(st, track, observed, &touch, &conditions, None, i)
+    }
+
+    /// Step 1, what it reads: the time, the weather, the rail mass and the
+    /// time since the point's last touch.
+    #[inline(always)]
+    fn touch<'w>(
+        &self,
+        track: &TrackState,
+        d_m: &[f64],
+        timeline: &'w WeatherTimeline,
+        i: usize,
+    ) -> Touch<'w> {
         let t = self.time_at(d_m, i);
-        // Step 1: time effects since the last touch; touch.
         let weather = timeline.at(t);
         let precip_mm = weather.precip_mm_at(t);
-        let mut rail_kg = track.rail_mass_kg[i];
         let last = track.last_touch_s[i];
-        if self.time_effects.any() && !last.is_nan() {
-            let aged =
-                self.time_effects
-                    .apply(rail_kg, t - last, precip_mm - track.precip_at_touch_mm[i]);
-            st.lost_kg += rail_kg - aged;
-            rail_kg = aged;
+        Touch {
+            t,
+            weather,
+            precip_mm,
+            rail_kg: track.rail_mass_kg[i],
+            aged: self.time_effects.any() && !last.is_nan(),
+            dt_s: t - last,
+            rain_mm: precip_mm - track.precip_at_touch_mm[i],
         }
-        track.last_touch_s[i] = t;
-        track.precip_at_touch_mm[i] = precip_mm;
+    }
 
-        // Step 2: what a measurement of this contact sees.
-        let m_kg = st.wheel_kg + rail_kg;
+    /// Step 1, the time effects since the last touch (`touch.aged`), their
+    /// exponentials given.
+    #[inline(always)]
+    fn age(&self, st: &mut WheelRoll, touch: &mut Touch<'_>, exps: [f64; 2]) {
+        let aged = self
+            .time_effects
+            .apply_given(touch.rail_kg, touch.rain_mm, exps);
+        st.lost_kg += touch.rail_kg - aged;
+        touch.rail_kg = aged;
+    }
 
-        // Steps 3 to 5: transfer, consumption, cap. Effect factors: the
-        // named effect's first, then the generic terms'.
+    /// Step 1, the touch.
+    #[inline(always)]
+    fn touched(&self, track: &mut TrackState, touch: &Touch<'_>, i: usize) {
+        track.last_touch_s[i] = touch.t;
+        track.precip_at_touch_mm[i] = touch.precip_mm;
+    }
+
+    /// Steps 3 to 5, what they need besides the masses. Effect factors: the
+    /// named effect's first, then the generic terms'.
+    #[inline(always)]
+    fn conditions(
+        &self,
+        st: &WheelRoll,
+        touch: &Touch<'_>,
+        revolution: &[f64],
+        i: usize,
+    ) -> ContactConditions {
+        let (t, weather) = (touch.t, touch.weather);
         let mut transfer_factor = self.transfer_factor;
         if self.transfer_varies {
             transfer_factor *= self.event_factor(ActsOn::Transfer, t, weather);
@@ -143,24 +194,49 @@ impl Roller {
         if self.consumption_varies {
             consumption_factor *= self.event_factor(ActsOn::Consumption, t, weather);
         }
-        let conditions = ContactConditions {
+        ContactConditions {
             m0_kg: st.m0_kg,
             fp_fc: self.fp_fc,
             transfer_revolution: st
                 .applicator_point
                 .map(|ia| revolution[i.abs_diff(ia)] * transfer_factor),
             consumption_factor,
+        }
+    }
+
+    /// Step 2 (what a measurement of this contact sees, returned), steps 3
+    /// to 5 (transfer, consumption, cap; their exponentials given, or taken
+    /// here when `exps` is None) and 6 (wheel-side effects).
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
+    fn finish(
+        &self,
+        st: &mut WheelRoll,
+        track: &mut TrackState,
+        observed: &mut Observed,
+        touch: &Touch<'_>,
+        conditions: &ContactConditions,
+        exps: Option<[f64; 2]>,
+        i: usize,
+    ) -> f64 {
+        let mut rail_kg = touch.rail_kg;
+        let m_kg = st.wheel_kg + rail_kg;
+        let losses = match exps {
+            Some(exps) => product::roll_given(
+                &self.params,
+                &mut st.wheel_kg,
+                &mut rail_kg,
+                conditions,
+                exps,
+            ),
+            None => product::roll(&self.params, &mut st.wheel_kg, &mut rail_kg, conditions),
         };
-        let losses = product::roll(&self.params, &mut st.wheel_kg, &mut rail_kg, &conditions);
         st.consumed_kg += losses.consumed_kg;
         st.capped_kg += losses.capped_kg;
-
-        // Step 6: wheel-side effects.
         if let Some((alpha, r)) = self.reservoir {
             (st.wheel_kg, st.edge_kg) =
                 effects::wheel_edge_reservoir(st.wheel_kg, st.edge_kg, alpha, r);
         }
-
         track.rail_mass_kg[i] = rail_kg;
         if self.observe {
             observed.mass_kg[i] = m_kg;
@@ -168,6 +244,18 @@ impl Roller {
         }
         m_kg
     }
+}
+
+/// What step 1 of a contact read.
+struct Touch<'w> {
+    t: f64,
+    weather: &'w super::weather::WeatherState,
+    precip_mm: f64,
+    rail_kg: f64,
+    /// Whether the time effects act: one is on and the point was touched.
+    aged: bool,
+    dt_s: f64,
+    rain_mm: f64,
 }
 
 impl Roller {
@@ -563,6 +651,44 @@ impl RollContext<'_> {
         work: &mut TrackWork,
         group: &[usize],
     ) {
+        #[cfg(target_arch = "x86_64")]
+        if exp4_is_vectorised() {
+            // SAFETY: the CPU has AVX2 and FMA.
+            unsafe { self.roll_group_fma(record, track, state, work, group) };
+            return;
+        }
+        self.roll_group_with(record, track, state, work, group, |x| x.map(f64::exp));
+    }
+
+    /// [`RollContext::roll_group`] compiled for AVX2 and FMA, the four
+    /// lanes' exponentials in one vector register. (No multiply-add is
+    /// fused that the source does not ask for: Rust never contracts.)
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    fn roll_group_fma(
+        &self,
+        record: &TrainRecord,
+        track: usize,
+        state: &mut TrackState,
+        work: &mut TrackWork,
+        group: &[usize],
+    ) {
+        // SAFETY: this function runs only on a CPU with AVX2 and FMA.
+        self.roll_group_with(record, track, state, work, group, |x| unsafe {
+            exp4_inline(x)
+        });
+    }
+
+    #[inline(always)]
+    fn roll_group_with(
+        &self,
+        record: &TrainRecord,
+        track: usize,
+        state: &mut TrackState,
+        work: &mut TrackWork,
+        group: &[usize],
+        exp4: impl Fn([f64; LANES]) -> [f64; LANES] + Copy,
+    ) {
         let n = group.len();
         debug_assert!((1..=LANES).contains(&n));
         let points = self.d_m.len();
@@ -574,6 +700,17 @@ impl RollContext<'_> {
         for s in 0..points + n - 1 {
             let lo = s.saturating_sub(points - 1);
             let hi = n.min(s + 1);
+            if lo == 0 && hi == LANES {
+                let is: [usize; LANES] =
+                    std::array::from_fn(|j| if up { s - j } else { points - 1 - (s - j) });
+                if !is.iter().any(|&i| special[i]) {
+                    self.contacts4(&mut lanes, state, &mut work.observed, is, exp4);
+                    if s + 1 >= points {
+                        self.finish_lane(&lanes[s + 1 - points], state, work, points);
+                    }
+                    continue;
+                }
+            }
             for (j, lane) in lanes.iter_mut().enumerate().take(hi).skip(lo) {
                 let step = s - j;
                 let i = if up { step } else { points - 1 - step };
@@ -593,20 +730,94 @@ impl RollContext<'_> {
             }
             // The lane that took its last step now.
             if s + 1 >= points {
-                let lane = &lanes[s + 1 - points];
-                let st = &lane.st;
-                work.ledger.push(Addend {
-                    order: lane.serial << 32 | u64::from(u32::MAX),
-                    kind: AddendKind::Wheel {
-                        contacts: points as u64,
-                        consumed_kg: st.consumed_kg,
-                        capped_kg: st.capped_kg,
-                        lost_kg: st.lost_kg,
-                        carried_kg: st.wheel_kg + st.edge_kg,
-                    },
-                });
-                state.wheel_pass += 1;
+                self.finish_lane(&lanes[s + 1 - points], state, work, points);
             }
+        }
+    }
+
+    /// A wheel that has left the track: its totals for the ledger.
+    fn finish_lane(
+        &self,
+        lane: &Lane,
+        state: &mut TrackState,
+        work: &mut TrackWork,
+        points: usize,
+    ) {
+        let st = &lane.st;
+        work.ledger.push(Addend {
+            order: lane.serial << 32 | u64::from(u32::MAX),
+            kind: AddendKind::Wheel {
+                contacts: points as u64,
+                consumed_kg: st.consumed_kg,
+                capped_kg: st.capped_kg,
+                lost_kg: st.lost_kg,
+                carried_kg: st.wheel_kg + st.edge_kg,
+            },
+        });
+        state.wheel_pass += 1;
+    }
+
+    /// Four ordinary contacts (no special point), one per lane, at the
+    /// distinct points `is`: the phases of [`Roller::contact`] lane by
+    /// lane, with each phase's exponentials taken for the four lanes at
+    /// once ([`exp4`]; bit for bit `f64::exp` with glibc on an FMA CPU).
+    #[inline(always)]
+    fn contacts4(
+        &self,
+        lanes: &mut [Lane; LANES],
+        state: &mut TrackState,
+        observed: &mut Observed,
+        is: [usize; LANES],
+        exp4: impl Fn([f64; LANES]) -> [f64; LANES],
+    ) {
+        let mut touches: [Touch<'_>; LANES] =
+            std::array::from_fn(|j| lanes[j].roller.touch(state, self.d_m, self.timeline, is[j]));
+        if touches.iter().any(|t| t.aged) {
+            let args: [[f64; 2]; LANES] = std::array::from_fn(|j| {
+                self.time_effects
+                    .exp_args(touches[j].dt_s, touches[j].rain_mm)
+            });
+            let ageing = exp4(args.map(|a| a[0]));
+            let washoff = if self.time_effects.rain_k_per_mm.is_some() {
+                exp4(args.map(|a| a[1]))
+            } else {
+                [1.0; LANES]
+            };
+            for (j, (lane, touch)) in lanes.iter_mut().zip(&mut touches).enumerate() {
+                if touch.aged {
+                    lane.roller
+                        .age(&mut lane.st, touch, [ageing[j], washoff[j]]);
+                }
+            }
+        }
+        for (lane, (touch, &i)) in lanes.iter().zip(touches.iter().zip(&is)) {
+            lane.roller.touched(state, touch, i);
+        }
+        let conditions: [ContactConditions; LANES] = std::array::from_fn(|j| {
+            lanes[j]
+                .roller
+                .conditions(&lanes[j].st, &touches[j], self.revolution, is[j])
+        });
+        let args: [[f64; 2]; LANES] = std::array::from_fn(|j| {
+            product::roll_exp_args(
+                self.product,
+                lanes[j].st.wheel_kg,
+                touches[j].rail_kg,
+                &conditions[j],
+            )
+        });
+        let transfer = exp4(args.map(|a| a[0]));
+        let consumption = exp4(args.map(|a| a[1]));
+        for (j, lane) in lanes.iter_mut().enumerate() {
+            lane.roller.finish(
+                &mut lane.st,
+                state,
+                observed,
+                &touches[j],
+                &conditions[j],
+                Some([transfer[j], consumption[j]]),
+                is[j],
+            );
         }
     }
 

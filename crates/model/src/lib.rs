@@ -17,6 +17,7 @@ pub mod config;
 pub mod contact;
 pub mod effects;
 pub mod error;
+pub mod exp;
 pub mod generic;
 pub mod product;
 mod quantity;

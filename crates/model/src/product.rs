@@ -75,11 +75,31 @@ pub fn creepage_factor(params: &ProductParams, cx: f64, cy: f64) -> f64 {
 ///   applied before the limit `c <= m` (effects.md, temperature_consumption).
 #[inline]
 pub fn consumption(params: &ProductParams, m_kg: f64, m0_kg: f64, fp_fc: f64, factor: f64) -> f64 {
-    // Multiplying by the reciprocal keeps the division off the wheel mass's
-    // dependency chain in the stepping loop (it depends only on m0); the
-    // result differs from the literal quotient by at most an ulp.
+    consumption_given(params, m_kg, m0_kg, fp_fc, factor, |arg| arg.exp())
+}
+
+/// The argument of eq. (1)'s exponential, `-m / (m0 km2)`. Multiplying by
+/// the reciprocal keeps the division off the wheel mass's dependency chain
+/// in the stepping loop (it depends only on m0); the result differs from
+/// the literal quotient by at most an ulp.
+#[inline(always)]
+fn saturation_arg(params: &ProductParams, m_kg: f64, m0_kg: f64) -> f64 {
+    -m_kg * (1.0 / (m0_kg * params.km2))
+}
+
+/// [`consumption`] with its exponential taken by `exp` (of
+/// [`saturation_arg`], asked only when `m0 > 0`).
+#[inline(always)]
+fn consumption_given(
+    params: &ProductParams,
+    m_kg: f64,
+    m0_kg: f64,
+    fp_fc: f64,
+    factor: f64,
+    exp: impl FnOnce(f64) -> f64,
+) -> f64 {
     let saturation = if m0_kg > 0.0 {
-        1.0 - (-m_kg * (1.0 / (m0_kg * params.km2))).exp()
+        1.0 - exp(saturation_arg(params, m_kg, m0_kg))
     } else {
         1.0
     };
@@ -108,14 +128,32 @@ pub fn revolution_factor(params: &ProductParams, n: u32) -> f64 {
 /// `factor` (1 without one), clamped to at most 0.5 (equal shares; model.md).
 /// `revolution` is [`revolution_factor`] for this N.
 #[inline]
+#[cfg_attr(not(test), allow(dead_code))]
 pub(crate) fn transfer_fraction(
     params: &ProductParams,
     m1_kg: f64,
     revolution: f64,
     factor: f64,
 ) -> f64 {
-    // `1 / cm` is a constant the compiler hoists out of the stepping loop.
-    let t = params.kt * (1.0 - (-m1_kg * (1.0 / params.cm_kg)).exp()) * revolution;
+    transfer_fraction_given(
+        params,
+        transfer_arg(params, m1_kg).exp(),
+        revolution,
+        factor,
+    )
+}
+
+/// The argument of eq. (6)'s exponential, `-m1 / cm` (`1 / cm` is a
+/// constant the compiler hoists out of the stepping loop).
+#[inline(always)]
+fn transfer_arg(params: &ProductParams, m1_kg: f64) -> f64 {
+    -m1_kg * (1.0 / params.cm_kg)
+}
+
+/// [`transfer_fraction`] with `e = exp(-m1 / cm)` given.
+#[inline(always)]
+fn transfer_fraction_given(params: &ProductParams, e: f64, revolution: f64, factor: f64) -> f64 {
+    let t = params.kt * (1.0 - e) * revolution;
     (t * factor).min(TRANSFER_FRACTION_MAX)
 }
 
@@ -125,7 +163,7 @@ pub(crate) fn transfer_fraction(
 pub(crate) fn transfer(
     wheel_kg: f64,
     rail_kg: f64,
-    fraction_of: impl Fn(f64) -> f64,
+    fraction_of: impl FnOnce(f64) -> f64,
 ) -> (f64, f64) {
     if wheel_kg > rail_kg {
         let moved = fraction_of(wheel_kg) * (wheel_kg - rail_kg);
@@ -172,6 +210,65 @@ pub fn roll(
     rail_kg: &mut f64,
     conditions: &ContactConditions,
 ) -> ContactLosses {
+    roll_core(
+        params,
+        wheel_kg,
+        rail_kg,
+        conditions,
+        |arg| arg.exp(),
+        |arg| arg.exp(),
+    )
+}
+
+/// The arguments of the two exponentials [`roll`] may take, from the masses
+/// before the contact: eq. (6)'s `-m1 / cm` (m1 the larger mass, the donor)
+/// and eq. (1)'s `-m / (m0 km2)`. For a caller that takes the exponentials
+/// of several contacts at once and hands them to [`roll_given`].
+#[inline(always)]
+pub fn roll_exp_args(
+    params: &ProductParams,
+    wheel_kg: f64,
+    rail_kg: f64,
+    conditions: &ContactConditions,
+) -> [f64; 2] {
+    [
+        transfer_arg(params, wheel_kg.max(rail_kg)),
+        saturation_arg(params, wheel_kg + rail_kg, conditions.m0_kg),
+    ]
+}
+
+/// [`roll`] with its exponentials given: `exps` is `exp` of
+/// [`roll_exp_args`] for the same masses. The same operations in the same
+/// order, so the same bits as [`roll`] wherever `exp` is the same.
+#[inline(always)]
+pub fn roll_given(
+    params: &ProductParams,
+    wheel_kg: &mut f64,
+    rail_kg: &mut f64,
+    conditions: &ContactConditions,
+    exps: [f64; 2],
+) -> ContactLosses {
+    roll_core(
+        params,
+        wheel_kg,
+        rail_kg,
+        conditions,
+        |_| exps[0],
+        |_| exps[1],
+    )
+}
+
+/// Steps 3 to 5, the exponentials of eq. (6) and eq. (1) taken by
+/// `transfer_exp` and `consumption_exp` (each given its argument).
+#[inline(always)]
+fn roll_core(
+    params: &ProductParams,
+    wheel_kg: &mut f64,
+    rail_kg: &mut f64,
+    conditions: &ContactConditions,
+    transfer_exp: impl FnOnce(f64) -> f64,
+    consumption_exp: impl FnOnce(f64) -> f64,
+) -> ContactLosses {
     let m = *wheel_kg + *rail_kg;
     let mut losses = ContactLosses::default();
     if m > 0.0 {
@@ -179,15 +276,21 @@ pub fn roll(
         let per_m = 1.0 / m;
         if let Some(revolution) = conditions.transfer_revolution {
             (*wheel_kg, *rail_kg) = transfer(*wheel_kg, *rail_kg, |m1| {
-                transfer_fraction(params, m1, revolution, 1.0)
+                transfer_fraction_given(
+                    params,
+                    transfer_exp(transfer_arg(params, m1)),
+                    revolution,
+                    1.0,
+                )
             });
         }
-        let c = consumption(
+        let c = consumption_given(
             params,
             m,
             conditions.m0_kg,
             conditions.fp_fc,
             conditions.consumption_factor,
+            consumption_exp,
         );
         let f = (m - c) * per_m;
         let before = *wheel_kg + *rail_kg;
@@ -343,6 +446,37 @@ mod tests {
                 let mu = friction(&p, m);
                 prop_assert!((p.mu_c..=p.mu_d).contains(&mu));
             }
+        }
+    }
+
+    proptest! {
+        /// The exponentials taken elsewhere (four contacts at once in the
+        /// engine) give the bits of the contact that takes its own.
+        #[test]
+        fn roll_given_is_roll(
+            wheel in prop_oneof![Just(0.0), 0.0..3e-4f64],
+            rail in prop_oneof![Just(0.0), 0.0..3e-4f64],
+            m0 in prop_oneof![Just(0.0), 1e-6..3e-4f64],
+            fp_fc in 0.0..3.0f64,
+            revolution in prop_oneof![Just(None), (0.0..1.0f64).prop_map(Some)],
+            factor in 0.1..3.0f64,
+        ) {
+            let p = table2();
+            let conditions = ContactConditions {
+                m0_kg: m0,
+                fp_fc,
+                transfer_revolution: revolution,
+                consumption_factor: factor,
+            };
+            let (mut w1, mut r1) = (wheel, rail);
+            let l1 = roll(&p, &mut w1, &mut r1, &conditions);
+            let exps = roll_exp_args(&p, wheel, rail, &conditions).map(f64::exp);
+            let (mut w2, mut r2) = (wheel, rail);
+            let l2 = roll_given(&p, &mut w2, &mut r2, &conditions, exps);
+            prop_assert_eq!(w1.to_bits(), w2.to_bits());
+            prop_assert_eq!(r1.to_bits(), r2.to_bits());
+            prop_assert_eq!(l1.consumed_kg.to_bits(), l2.consumed_kg.to_bits());
+            prop_assert_eq!(l1.capped_kg.to_bits(), l2.capped_kg.to_bits());
         }
     }
 }
