@@ -152,6 +152,7 @@ fn write_synthetic(sink: &mut McapSink) -> tortwin_engine::sink::SinkResult {
     for (k, rail_name) in ["high", "low"].into_iter().enumerate() {
         sink.pulse(&PulseEvent {
             log_time_ns: ORIGIN_NS + 1_000 + k as u64,
+            applicator: 0,
             applicator_id: "A1",
             rail: k,
             rail_name,

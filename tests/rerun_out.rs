@@ -118,6 +118,7 @@ fn feed(sink: &mut dyn Sink, trains: u64) -> Result<Logged, tortwin_engine::sink
         for rail in 0..2 {
             let pulse = PulseEvent {
                 log_time_ns: start_ns - 60_000_000_000,
+                applicator: 0,
                 applicator_id: "A1",
                 rail,
                 rail_name: &section.rails[rail],

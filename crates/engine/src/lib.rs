@@ -20,6 +20,7 @@
 pub mod generic;
 mod roll;
 pub mod sink;
+mod sink_thread;
 mod state;
 pub mod weather;
 
@@ -971,6 +972,7 @@ impl Engine {
         self.totals.pulses += 1;
         sink.pulse(&PulseEvent {
             log_time_ns,
+            applicator: pulse.applicator,
             applicator_id: &self.section.applicators[pulse.applicator].id,
             rail: pulse.rail,
             rail_name: &self.section.rails[pulse.rail],

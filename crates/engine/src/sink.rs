@@ -9,6 +9,8 @@
 
 use tortwin_recording::{Direction, Quantity, Section};
 
+pub use crate::sink_thread::SinkThread;
+
 /// What a sink learns before the first event.
 #[derive(Debug, Clone)]
 pub struct SectionInfo<'a> {
@@ -52,6 +54,8 @@ pub struct TrainEvent<'a> {
 #[derive(Debug, Clone)]
 pub struct PulseEvent<'a> {
     pub log_time_ns: u64,
+    /// Index in `section.applicators`.
+    pub applicator: usize,
     pub applicator_id: &'a str,
     pub rail: usize,
     pub rail_name: &'a str,

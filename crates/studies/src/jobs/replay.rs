@@ -2,7 +2,10 @@
 
 use std::path::{Path, PathBuf};
 
-use tortwin_engine::sink::{Fanout, RunSummary, Sink};
+use tortwin_engine::sink::{
+    Fanout, FieldSnapshot, MeasurementOutput, PulseEvent, RunSummary, SectionInfo, Sink,
+    SinkResult, SinkThread, TrainEvent, WheelContacts,
+};
 use tortwin_engine::{Engine, EngineOptions, EngineState};
 use tortwin_model::error::UsageError;
 use tortwin_outputs::mcap_out::McapSink;
@@ -203,12 +206,12 @@ pub fn replay_from(
         None => Engine::new(section, cfg, opts, reader.origin_ns()),
     };
 
-    let mut mcap = args
+    let mcap = args
         .out_mcap
         .as_deref()
         .map(|p| McapSink::create(p, provenance.as_ref()))
         .transpose()?;
-    let mut rrd = args
+    let rrd = args
         .out_rrd
         .as_deref()
         .map(|p| {
@@ -219,14 +222,26 @@ pub fn replay_from(
             RerunSink::create(p, options)
         })
         .transpose()?;
+    // The files are encoded and written on a thread of their own while the
+    // engine steps (the same calls in the same order: the same files).
+    let mut files = if mcap.is_some() || rrd.is_some() {
+        let files = FileOutputs { mcap, rrd };
+        let path = args.out_mcap.as_ref().or(args.out_rrd.as_ref());
+        Some(
+            SinkThread::spawn("tortwin-outputs", files).map_err(|source| Error::Io {
+                what: "cannot start the thread that writes",
+                path: path.cloned().unwrap_or_default(),
+                source,
+            })?,
+        )
+    } else {
+        None
+    };
     let mut fanout = Fanout::default();
     if let Some(s) = per_train.as_mut() {
         fanout.sinks.push(s);
     }
-    if let Some(s) = mcap.as_mut() {
-        fanout.sinks.push(s);
-    }
-    if let Some(s) = rrd.as_mut() {
+    if let Some(s) = files.as_mut() {
         fanout.sinks.push(s);
     }
     for s in extra.iter_mut() {
@@ -267,6 +282,48 @@ pub fn replay_from(
         state: engine.state(),
         per_train: per_train.map(|p| p.rows().to_vec()),
     })
+}
+
+/// The MCAP and rerun outputs as one sink, for their thread.
+struct FileOutputs {
+    mcap: Option<McapSink>,
+    rrd: Option<RerunSink>,
+}
+
+impl FileOutputs {
+    fn each(&mut self, mut call: impl FnMut(&mut dyn Sink) -> SinkResult) -> SinkResult {
+        if let Some(s) = self.mcap.as_mut() {
+            call(s)?;
+        }
+        if let Some(s) = self.rrd.as_mut() {
+            call(s)?;
+        }
+        Ok(())
+    }
+}
+
+impl Sink for FileOutputs {
+    fn begin(&mut self, info: &SectionInfo<'_>) -> SinkResult {
+        self.each(|s| s.begin(info))
+    }
+    fn train(&mut self, train: &TrainEvent<'_>) -> SinkResult {
+        self.each(|s| s.train(train))
+    }
+    fn pulse(&mut self, pulse: &PulseEvent<'_>) -> SinkResult {
+        self.each(|s| s.pulse(pulse))
+    }
+    fn measurement(&mut self, m: &MeasurementOutput<'_>) -> SinkResult {
+        self.each(|s| s.measurement(m))
+    }
+    fn field(&mut self, f: &FieldSnapshot<'_>) -> SinkResult {
+        self.each(|s| s.field(f))
+    }
+    fn wheel_contacts(&mut self, w: &WheelContacts<'_>) -> SinkResult {
+        self.each(|s| s.wheel_contacts(w))
+    }
+    fn finish(&mut self, summary: &RunSummary) -> SinkResult {
+        self.each(|s| s.finish(summary))
+    }
 }
 
 /// The lines that say where the outputs are and how to open them.

@@ -1,0 +1,641 @@
+//! A sink on a thread of its own: the engine's thread copies what it
+//! publishes (a few kB a train) and goes on stepping while the file sinks
+//! encode it (JSON and zstd for MCAP, Arrow for rerun). The sink sees the
+//! same calls in the same order as it would on the engine's thread, so it
+//! writes the same files.
+//!
+//! Calls cross in batches (a wake-up per measurement would cost the engine
+//! more than the encoding saves). An error of the sink stops its thread; the
+//! engine gets that error at its next call (or at `finish`), as it would
+//! have at the failing call itself, only a little later: nothing is renamed
+//! into place before `finish` succeeds. Dropping a [`SinkThread`] waits for
+//! the sink to be dropped, so a failed run's temporary files are gone when
+//! the run returns.
+
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc::{sync_channel, Receiver, SyncSender};
+use std::sync::Arc;
+use std::thread::JoinHandle;
+
+use tortwin_recording::{Direction, Quantity, Section};
+
+use crate::sink::{
+    FieldSnapshot, MeasurementOutput, PulseEvent, RunSummary, SectionInfo, Sink, SinkError,
+    SinkResult, SnapshotKind, TrackInfo, TrainEvent, WheelContacts,
+};
+
+/// Calls in one hand-over.
+const BATCH: usize = 512;
+/// Batches in flight.
+const QUEUE: usize = 8;
+
+/// One call to the sink, owning its data.
+enum Call {
+    Begin {
+        section: Section,
+        grid_d_m: Vec<f64>,
+        tracks: Vec<TrackInfo>,
+        applicator_points: Vec<usize>,
+        site_points: Vec<usize>,
+        origin_ns: i64,
+    },
+    Train {
+        log_time_ns: u64,
+        end_ns: u64,
+        train_id: Arc<str>,
+        direction: Direction,
+        speed_mps: f64,
+        axles: usize,
+    },
+    Pulse {
+        log_time_ns: u64,
+        applicator: usize,
+        rail: usize,
+        mass_kg: f64,
+    },
+    Measurement {
+        log_time_ns: u64,
+        index_in_file: u64,
+        site: usize,
+        rail: usize,
+        quantity: Quantity,
+        train_id: Option<Arc<str>>,
+        axle_index: Option<usize>,
+        measured: f64,
+        simulated: f64,
+    },
+    Field {
+        kind: SnapshotKind,
+        log_time_ns: u64,
+        train_id: Arc<str>,
+        track: usize,
+        wheel_pass: u64,
+        /// mu, adhesion, rail mass, wheel mass, one after the other.
+        values: Vec<f64>,
+    },
+    WheelContacts {
+        track: usize,
+        rail: usize,
+        direction: Direction,
+        train_seq: usize,
+        axle: usize,
+        seen_mass_kg: Vec<f64>,
+        mu: Option<Vec<f64>>,
+    },
+    Finish(RunSummary),
+}
+
+/// A [`Sink`] that runs another on a thread of its own.
+pub struct SinkThread {
+    batch: Vec<Call>,
+    to_thread: Option<SyncSender<Vec<Call>>>,
+    /// Emptied batches coming back for reuse.
+    spare: Receiver<Vec<Call>>,
+    failed: Arc<AtomicBool>,
+    thread: Option<JoinHandle<SinkResult>>,
+    /// The train id of the latest calls, shared by them.
+    train_id: Option<Arc<str>>,
+}
+
+impl SinkThread {
+    /// Starts `sink` on a thread named `name`.
+    pub fn spawn<S: Sink + Send + 'static>(name: &str, sink: S) -> std::io::Result<Self> {
+        let (to_thread, calls) = sync_channel::<Vec<Call>>(QUEUE);
+        let (give_back, spare) = sync_channel::<Vec<Call>>(QUEUE + 2);
+        let failed = Arc::new(AtomicBool::new(false));
+        let flag = Arc::clone(&failed);
+        let thread = std::thread::Builder::new()
+            .name(name.to_owned())
+            .spawn(move || {
+                let result = run(sink, &calls, &give_back);
+                if result.is_err() {
+                    flag.store(true, Ordering::Release);
+                }
+                result
+            })?;
+        Ok(Self {
+            batch: Vec::with_capacity(BATCH),
+            to_thread: Some(to_thread),
+            spare,
+            failed,
+            thread: Some(thread),
+            train_id: None,
+        })
+    }
+
+    fn push(&mut self, call: Call) -> SinkResult {
+        if self.failed.load(Ordering::Acquire) {
+            return Err(self.join());
+        }
+        self.batch.push(call);
+        if self.batch.len() >= BATCH {
+            self.hand_over()?;
+        }
+        Ok(())
+    }
+
+    fn hand_over(&mut self) -> SinkResult {
+        let next = self
+            .spare
+            .try_recv()
+            .unwrap_or_else(|_| Vec::with_capacity(BATCH));
+        let batch = std::mem::replace(&mut self.batch, next);
+        let sent = self.to_thread.as_ref().map(|tx| tx.send(batch));
+        match sent {
+            Some(Ok(())) => Ok(()),
+            // The thread has ended: it failed.
+            _ => Err(self.join()),
+        }
+    }
+
+    /// Ends the thread and returns its error (or says it ended early).
+    fn join(&mut self) -> SinkError {
+        self.to_thread = None;
+        match self.thread.take().map(JoinHandle::join) {
+            Some(Ok(Err(e))) => e,
+            Some(Err(panic)) => std::panic::resume_unwind(panic),
+            _ => "the output thread ended before the run".into(),
+        }
+    }
+
+    fn train_id(&mut self, id: &str) -> Arc<str> {
+        match &self.train_id {
+            Some(known) if **known == *id => Arc::clone(known),
+            _ => {
+                let new: Arc<str> = Arc::from(id);
+                self.train_id = Some(Arc::clone(&new));
+                new
+            }
+        }
+    }
+}
+
+impl Drop for SinkThread {
+    fn drop(&mut self) {
+        // Unfinished: the sink is dropped on its thread (its temporary files
+        // removed) before the run returns.
+        self.to_thread = None;
+        if let Some(thread) = self.thread.take() {
+            let _ = thread.join();
+        }
+    }
+}
+
+impl Sink for SinkThread {
+    fn begin(&mut self, info: &SectionInfo<'_>) -> SinkResult {
+        self.push(Call::Begin {
+            section: info.section.clone(),
+            grid_d_m: info.grid_d_m.to_vec(),
+            tracks: info.tracks.to_vec(),
+            applicator_points: info.applicator_points.to_vec(),
+            site_points: info.site_points.to_vec(),
+            origin_ns: info.origin_ns,
+        })
+    }
+
+    fn train(&mut self, t: &TrainEvent<'_>) -> SinkResult {
+        let train_id = self.train_id(t.train_id);
+        self.push(Call::Train {
+            log_time_ns: t.log_time_ns,
+            end_ns: t.end_ns,
+            train_id,
+            direction: t.direction,
+            speed_mps: t.speed_mps,
+            axles: t.axles,
+        })
+    }
+
+    fn pulse(&mut self, p: &PulseEvent<'_>) -> SinkResult {
+        self.push(Call::Pulse {
+            log_time_ns: p.log_time_ns,
+            applicator: p.applicator,
+            rail: p.rail,
+            mass_kg: p.mass_kg,
+        })
+    }
+
+    fn measurement(&mut self, m: &MeasurementOutput<'_>) -> SinkResult {
+        let train_id = m.train_id.map(|id| self.train_id(id));
+        self.push(Call::Measurement {
+            log_time_ns: m.log_time_ns,
+            index_in_file: m.index_in_file,
+            site: m.site,
+            rail: m.rail,
+            quantity: m.quantity,
+            train_id,
+            axle_index: m.axle_index,
+            measured: m.measured,
+            simulated: m.simulated,
+        })
+    }
+
+    fn field(&mut self, f: &FieldSnapshot<'_>) -> SinkResult {
+        let train_id = self.train_id(f.train_id);
+        let mut values = Vec::with_capacity(4 * f.mu.len());
+        for v in [f.mu, f.adhesion, f.rail_mass_kg, f.wheel_mass_kg] {
+            values.extend_from_slice(v);
+        }
+        self.push(Call::Field {
+            kind: f.kind,
+            log_time_ns: f.log_time_ns,
+            train_id,
+            track: f.track,
+            wheel_pass: f.wheel_pass,
+            values,
+        })
+    }
+
+    fn wheel_contacts(&mut self, w: &WheelContacts<'_>) -> SinkResult {
+        self.push(Call::WheelContacts {
+            track: w.track,
+            rail: w.rail,
+            direction: w.direction,
+            train_seq: w.train_seq,
+            axle: w.axle,
+            seen_mass_kg: w.seen_mass_kg.to_vec(),
+            mu: w.mu.map(<[f64]>::to_vec),
+        })
+    }
+
+    fn finish(&mut self, summary: &RunSummary) -> SinkResult {
+        self.push(Call::Finish(summary.clone()))?;
+        self.hand_over()?;
+        self.to_thread = None;
+        match self.thread.take().map(JoinHandle::join) {
+            Some(Ok(result)) => result,
+            Some(Err(panic)) => std::panic::resume_unwind(panic),
+            None => Err("the output thread ended before the run".into()),
+        }
+    }
+}
+
+/// The thread: every call of every batch, in order, until the first error.
+fn run<S: Sink>(
+    mut sink: S,
+    calls: &Receiver<Vec<Call>>,
+    give_back: &SyncSender<Vec<Call>>,
+) -> SinkResult {
+    // What the borrowed structs point into.
+    let mut section: Option<Section> = None;
+    let mut grid_d_m: Vec<f64> = Vec::new();
+    let mut tracks: Vec<TrackInfo> = Vec::new();
+    for mut batch in calls.iter() {
+        for call in batch.drain(..) {
+            match call {
+                Call::Begin {
+                    section: s,
+                    grid_d_m: grid,
+                    tracks: t,
+                    applicator_points,
+                    site_points,
+                    origin_ns,
+                } => {
+                    let s = section.insert(s);
+                    (grid_d_m, tracks) = (grid, t);
+                    sink.begin(&SectionInfo {
+                        section: s,
+                        grid_d_m: &grid_d_m,
+                        tracks: &tracks,
+                        applicator_points: &applicator_points,
+                        site_points: &site_points,
+                        origin_ns,
+                    })?;
+                }
+                Call::Train {
+                    log_time_ns,
+                    end_ns,
+                    train_id,
+                    direction,
+                    speed_mps,
+                    axles,
+                } => sink.train(&TrainEvent {
+                    log_time_ns,
+                    end_ns,
+                    train_id: &train_id,
+                    direction,
+                    speed_mps,
+                    axles,
+                })?,
+                Call::Pulse {
+                    log_time_ns,
+                    applicator,
+                    rail,
+                    mass_kg,
+                } => {
+                    let s = begun(&section)?;
+                    sink.pulse(&PulseEvent {
+                        log_time_ns,
+                        applicator_id: &s.applicators[applicator].id,
+                        applicator,
+                        rail,
+                        rail_name: &s.rails[rail],
+                        mass_kg,
+                    })?;
+                }
+                Call::Measurement {
+                    log_time_ns,
+                    index_in_file,
+                    site,
+                    rail,
+                    quantity,
+                    train_id,
+                    axle_index,
+                    measured,
+                    simulated,
+                } => {
+                    let s = begun(&section)?;
+                    sink.measurement(&MeasurementOutput {
+                        log_time_ns,
+                        index_in_file,
+                        site_id: &s.sites[site].id,
+                        site,
+                        rail_name: &s.rails[rail],
+                        rail,
+                        quantity,
+                        train_id: train_id.as_deref(),
+                        axle_index,
+                        measured,
+                        simulated,
+                    })?;
+                }
+                Call::Field {
+                    kind,
+                    log_time_ns,
+                    train_id,
+                    track,
+                    wheel_pass,
+                    values,
+                } => {
+                    let n = grid_d_m.len();
+                    let info = tracks.get(track).ok_or("a field before the section")?;
+                    sink.field(&FieldSnapshot {
+                        kind,
+                        log_time_ns,
+                        train_id: &train_id,
+                        track,
+                        rail_name: &info.rail_name,
+                        band: &info.band,
+                        wheel_pass,
+                        d_m: &grid_d_m,
+                        mu: &values[..n],
+                        adhesion: &values[n..2 * n],
+                        rail_mass_kg: &values[2 * n..3 * n],
+                        wheel_mass_kg: &values[3 * n..],
+                    })?;
+                }
+                Call::WheelContacts {
+                    track,
+                    rail,
+                    direction,
+                    train_seq,
+                    axle,
+                    seen_mass_kg,
+                    mu,
+                } => sink.wheel_contacts(&WheelContacts {
+                    track,
+                    rail,
+                    direction,
+                    train_seq,
+                    axle,
+                    seen_mass_kg: &seen_mass_kg,
+                    mu: mu.as_deref(),
+                })?,
+                Call::Finish(summary) => sink.finish(&summary)?,
+            }
+        }
+        // The engine's thread may have gone; then nobody needs it back.
+        let _ = give_back.try_send(batch);
+    }
+    Ok(())
+}
+
+fn begun(section: &Option<Section>) -> Result<&Section, SinkError> {
+    section
+        .as_ref()
+        .ok_or_else(|| "an event before the section".into())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::sync::Mutex;
+    use tortwin_recording::Applicator;
+
+    /// Writes every call it gets as a line; fails at call `fail_at`.
+    struct Log {
+        lines: Arc<Mutex<Vec<String>>>,
+        fail_at: Option<usize>,
+        dropped: Arc<AtomicBool>,
+    }
+
+    impl Log {
+        fn line(&mut self, line: String) -> SinkResult {
+            let mut lines = self.lines.lock().expect("not poisoned");
+            if Some(lines.len()) == self.fail_at {
+                return Err(format!("disk full at call {}", lines.len()).into());
+            }
+            lines.push(line);
+            Ok(())
+        }
+    }
+
+    impl Drop for Log {
+        fn drop(&mut self) {
+            self.dropped.store(true, Ordering::Release);
+        }
+    }
+
+    impl Sink for Log {
+        fn begin(&mut self, i: &SectionInfo<'_>) -> SinkResult {
+            self.line(format!("begin {} {:?}", i.section.section_id, i.grid_d_m))
+        }
+        fn train(&mut self, t: &TrainEvent<'_>) -> SinkResult {
+            self.line(format!(
+                "train {} {} {}",
+                t.train_id, t.log_time_ns, t.axles
+            ))
+        }
+        fn pulse(&mut self, p: &PulseEvent<'_>) -> SinkResult {
+            self.line(format!(
+                "pulse {} {} {}",
+                p.applicator_id, p.rail_name, p.mass_kg
+            ))
+        }
+        fn measurement(&mut self, m: &MeasurementOutput<'_>) -> SinkResult {
+            self.line(format!(
+                "measurement {} {} {} {:?} {:?} {}",
+                m.index_in_file, m.site_id, m.rail_name, m.train_id, m.axle_index, m.simulated
+            ))
+        }
+        fn field(&mut self, f: &FieldSnapshot<'_>) -> SinkResult {
+            self.line(format!(
+                "field {} {} {} {:?} {:?} {:?} {:?}",
+                f.train_id, f.rail_name, f.band, f.mu, f.adhesion, f.rail_mass_kg, f.wheel_mass_kg
+            ))
+        }
+        fn wheel_contacts(&mut self, w: &WheelContacts<'_>) -> SinkResult {
+            self.line(format!("wheel {} {:?} {:?}", w.axle, w.seen_mass_kg, w.mu))
+        }
+        fn finish(&mut self, s: &RunSummary) -> SinkResult {
+            self.line(format!("finish {}", s.trains))
+        }
+    }
+
+    /// Every kind of call, `trains` trains' worth (over several batches).
+    fn drive(sink: &mut dyn Sink, trains: usize) -> SinkResult {
+        let section = Section {
+            section_id: "s".into(),
+            length_m: 6.0,
+            rails: vec!["high".into(), "low".into()],
+            curve_radius_m: None,
+            rail_head_radius_m: 0.3,
+            nominal_wheel_diameter_m: 0.92,
+            applicators: vec![Applicator {
+                id: "A1".into(),
+                position_m: 1.0,
+                rails: vec![0, 1],
+                nominal_pulse_kg: 1e-4,
+            }],
+            sites: vec![tortwin_recording::Site {
+                id: "S1".into(),
+                position_m: 3.0,
+            }],
+        };
+        let tracks = vec![
+            TrackInfo {
+                rail: 0,
+                rail_name: "high".into(),
+                band: "top".into(),
+            },
+            TrackInfo {
+                rail: 1,
+                rail_name: "low".into(),
+                band: "top".into(),
+            },
+        ];
+        let d_m = [0.0, 2.9, 5.8];
+        sink.begin(&SectionInfo {
+            section: &section,
+            grid_d_m: &d_m,
+            tracks: &tracks,
+            applicator_points: &[0],
+            site_points: &[1],
+            origin_ns: 0,
+        })?;
+        for k in 0..trains {
+            let id = format!("T{}", k / 2);
+            let x = k as f64;
+            sink.train(&TrainEvent {
+                log_time_ns: k as u64,
+                end_ns: k as u64 + 1,
+                train_id: &id,
+                direction: Direction::Up,
+                speed_mps: 20.0,
+                axles: 4,
+            })?;
+            sink.pulse(&PulseEvent {
+                log_time_ns: k as u64,
+                applicator: 0,
+                applicator_id: "A1",
+                rail: k % 2,
+                rail_name: &section.rails[k % 2],
+                mass_kg: x,
+            })?;
+            for j in 0..3 {
+                sink.measurement(&MeasurementOutput {
+                    log_time_ns: k as u64,
+                    index_in_file: (3 * k + j) as u64,
+                    site_id: "S1",
+                    site: 0,
+                    rail_name: &section.rails[j % 2],
+                    rail: j % 2,
+                    quantity: Quantity::Mu,
+                    train_id: (j < 2).then_some(id.as_str()),
+                    axle_index: Some(j),
+                    measured: 0.3,
+                    simulated: 0.3 + x,
+                })?;
+            }
+            sink.wheel_contacts(&WheelContacts {
+                track: 1,
+                rail: 1,
+                direction: Direction::Up,
+                train_seq: k,
+                axle: 0,
+                seen_mass_kg: &[x, 2.0 * x, 3.0 * x],
+                mu: (k % 3 == 0).then_some(&[0.1, 0.2, 0.3][..]),
+            })?;
+            sink.field(&FieldSnapshot {
+                kind: SnapshotKind::Train,
+                log_time_ns: k as u64,
+                train_id: &id,
+                track: k % 2,
+                rail_name: &tracks[k % 2].rail_name,
+                band: &tracks[k % 2].band,
+                wheel_pass: k as u64,
+                d_m: &d_m,
+                mu: &[x, 1.0, 2.0],
+                adhesion: &[3.0, x, 4.0],
+                rail_mass_kg: &[5.0, 6.0, x],
+                wheel_mass_kg: &[7.0, 8.0, 9.0 + x],
+            })?;
+        }
+        sink.finish(&RunSummary {
+            trains: trains as u64,
+            ..RunSummary::default()
+        })
+    }
+
+    fn log(fail_at: Option<usize>) -> (Log, Arc<Mutex<Vec<String>>>, Arc<AtomicBool>) {
+        let lines = Arc::new(Mutex::new(Vec::new()));
+        let dropped = Arc::new(AtomicBool::new(false));
+        let sink = Log {
+            lines: Arc::clone(&lines),
+            fail_at,
+            dropped: Arc::clone(&dropped),
+        };
+        (sink, lines, dropped)
+    }
+
+    #[test]
+    fn the_thread_gets_the_same_calls_in_the_same_order() {
+        let (mut direct, direct_lines, _) = log(None);
+        drive(&mut direct, 700).expect("the direct sink takes every call");
+        let (sink, threaded_lines, dropped) = log(None);
+        let mut threaded = SinkThread::spawn("test", sink).expect("a thread");
+        drive(&mut threaded, 700).expect("the threaded sink takes every call");
+        assert!(dropped.load(Ordering::Acquire), "finish ends the thread");
+        let (a, b) = (direct_lines.lock().unwrap(), threaded_lines.lock().unwrap());
+        assert_eq!(a.len(), 1 + 700 * 7 + 1);
+        assert!(*a == *b, "the calls differ");
+    }
+
+    #[test]
+    fn an_error_of_the_sink_comes_back_and_the_sink_is_dropped() {
+        for fail_at in [0, 1, 1500, 4901] {
+            let (sink, _, dropped) = log(Some(fail_at));
+            let mut threaded = SinkThread::spawn("test", sink).expect("a thread");
+            let err = drive(&mut threaded, 700).expect_err("the sink fails");
+            assert_eq!(err.to_string(), format!("disk full at call {fail_at}"));
+            drop(threaded);
+            assert!(dropped.load(Ordering::Acquire));
+        }
+        // Dropped unfinished (the engine failed): the sink is gone too.
+        let (sink, lines, dropped) = log(None);
+        let mut threaded = SinkThread::spawn("test", sink).expect("a thread");
+        threaded
+            .train(&TrainEvent {
+                log_time_ns: 0,
+                end_ns: 1,
+                train_id: "T",
+                direction: Direction::Down,
+                speed_mps: 1.0,
+                axles: 1,
+            })
+            .expect("one call");
+        drop(threaded);
+        assert!(dropped.load(Ordering::Acquire));
+        // What was not handed over is not delivered: the run failed anyway.
+        assert!(lines.lock().unwrap().len() <= 1);
+    }
+}
