@@ -7,7 +7,7 @@
 
 use proptest::prelude::*;
 
-use tortwin_engine::sink::{FieldSnapshot, Sink};
+use tortwin_engine::sink::{FieldSnapshot, Sink, WheelContacts};
 use tortwin_engine::{Engine, EngineOptions};
 use tortwin_model::config::ModelConfig;
 use tortwin_recording::{
@@ -258,16 +258,30 @@ fn rolled_bits(
         .build()
         .map_err(|e| e.to_string())?;
     pool.install(|| {
-        struct Discard;
-        impl Sink for Discard {}
+        /// Every wheel's contacts, as bits, in the order they come.
+        struct Wheels(Vec<u64>);
+        impl Sink for Wheels {
+            fn wheel_contacts(
+                &mut self,
+                w: &WheelContacts<'_>,
+            ) -> tortwin_engine::sink::SinkResult {
+                self.0
+                    .extend([w.track as u64, w.rail as u64, w.axle as u64]);
+                self.0.extend(w.seen_mass_kg.iter().map(|x| x.to_bits()));
+                self.0
+                    .extend(w.mu.into_iter().flatten().map(|x| x.to_bits()));
+                Ok(())
+            }
+        }
+        let mut wheels = Wheels(Vec::new());
         let mut engine = Engine::new(section.clone(), cfg.clone(), opts, 0);
         for e in events {
             engine
-                .push(e.clone(), &mut Discard)
+                .push(e.clone(), &mut wheels)
                 .map_err(|e| format!("{e:#}"))?;
         }
         let b = engine
-            .finish(&mut Discard, 0)
+            .finish(&mut wheels, 0)
             .map_err(|e| format!("{e:#}"))?
             .mass_balance;
         let mut bits: Vec<u64> = [
@@ -287,6 +301,7 @@ fn rolled_bits(
                 bits.extend(v.iter().map(|x| x.to_bits()));
             }
         }
+        bits.extend(wheels.0);
         Ok(bits)
     })
 }
@@ -314,16 +329,24 @@ proptest! {
             })
             .collect();
         let events = events_on(&trains, section.length_m);
-        // One wheel at a time in the serial order (what a sink that wants
-        // every wheel gets), as the engine rolled before the wavefront.
-        let serial = EngineOptions { every_wheel_contacts: true, ..EngineOptions::default() };
+        // One wheel at a time in the serial order (what a sink that wants a
+        // field snapshot after every wheel gets), as the engine rolled
+        // before the wavefront; every wheel's contacts are compared too.
+        let serial = EngineOptions { snapshot_every_wheel: true, every_wheel_contacts: true };
+        let contacts = EngineOptions { every_wheel_contacts: true, ..EngineOptions::default() };
         let run = |opts, threads| {
             rolled_bits(&cfg, &section, &events, opts, threads).map_err(TestCaseError::fail)
         };
         let reference = run(serial, 1)?;
-        let one_thread = run(EngineOptions::default(), 1)?;
-        let two_threads = run(EngineOptions::default(), 2)?;
-        prop_assert!(reference == one_thread, "the wavefront on one thread differs");
-        prop_assert!(reference == two_threads, "the tracks on two threads differ");
+        for threads in [1, 2] {
+            let wavefront = run(contacts, threads)?;
+            prop_assert!(reference == wavefront, "the wavefront on {} thread(s) differs", threads);
+        }
+        // Without the per-wheel calls: the same state and balance.
+        let plain_reference = run(EngineOptions { every_wheel_contacts: false, ..serial }, 1)?;
+        for threads in [1, 2] {
+            let plain = run(EngineOptions::default(), threads)?;
+            prop_assert!(plain_reference == plain, "the plain wavefront on {} thread(s) differs", threads);
+        }
     }
 }

@@ -312,6 +312,8 @@ pub struct Engine {
     ledger: Vec<roll::Addend>,
     /// Per track: the axle that rolled over it last in the current train.
     last_axle: Vec<usize>,
+    /// Per track: the next row of its wheels' contacts to hand out.
+    last_row: Vec<usize>,
     /// Per track and point: whether an applicator or a measurement site is
     /// there. Pulses land and readings are taken only there.
     special: Vec<Vec<bool>>,
@@ -410,6 +412,7 @@ impl Engine {
             work: vec![roll::TrackWork::new(points, section.applicators.len()); n_tracks],
             ledger: Vec::new(),
             last_axle: vec![usize::MAX; n_tracks],
+            last_row: vec![0; n_tracks],
             special: (0..n_tracks)
                 .map(|t| {
                     (0..points)

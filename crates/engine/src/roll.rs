@@ -334,6 +334,11 @@ pub(crate) struct TrackWork {
     readings: Vec<(usize, f64)>,
     /// Contacts at measurement sites.
     sites: Vec<SiteValue>,
+    /// When a sink wants every wheel's contacts: the step-2 mass of every
+    /// contact of this train's wheels on this track, a row of points per
+    /// wheel in axle order (handed to the sink in the serial order after
+    /// the roll).
+    wheel_seen: Vec<f64>,
 }
 
 impl TrackWork {
@@ -347,6 +352,7 @@ impl TrackWork {
             ledger: Vec::new(),
             readings: Vec::new(),
             sites: Vec::new(),
+            wheel_seen: Vec::new(),
         }
     }
 }
@@ -444,6 +450,8 @@ pub(crate) struct RollContext<'a> {
     sites_at: &'a [Vec<usize>],
     last_axle: &'a [usize],
     observe_every_wheel: bool,
+    /// Keep every wheel's step-2 masses in [`TrackWork::wheel_seen`].
+    keep_seen: bool,
     origin_ns: i64,
 }
 
@@ -451,6 +459,9 @@ pub(crate) struct RollContext<'a> {
 #[derive(Clone)]
 struct Lane {
     axle: usize,
+    /// Its row in [`TrackWork::wheel_seen`]: its place among the train's
+    /// wheels on this track.
+    row: usize,
     /// Its place in the serial order: axle * rails + rail.
     serial: u64,
     /// Pulses landed during its roll so far.
@@ -478,8 +489,8 @@ impl Engine {
                 special: &self.special,
                 sites_at: &self.sites_at,
                 last_axle: &self.last_axle,
-                observe_every_wheel: self.opts.snapshot_every_wheel
-                    || self.opts.every_wheel_contacts,
+                observe_every_wheel: self.opts.snapshot_every_wheel,
+                keep_seen: self.opts.every_wheel_contacts && !self.opts.snapshot_every_wheel,
                 origin_ns: self.origin_ns,
             },
             &mut self.tracks,
@@ -511,8 +522,14 @@ impl Engine {
                 self.work[track].axles.push(a);
             }
         }
-        if !(self.opts.snapshot_every_wheel || self.opts.every_wheel_contacts) {
+        if !self.opts.snapshot_every_wheel {
             let points = self.grid.d_m.len();
+            if self.opts.every_wheel_contacts {
+                for work in &mut self.work {
+                    work.wheel_seen.clear();
+                    work.wheel_seen.resize(work.axles.len() * points, 0.0);
+                }
+            }
             let (ctx, states, works) = self.split();
             let record_ref: &TrainRecord = record;
             let parallel = states.len() > 1
@@ -537,6 +554,9 @@ impl Engine {
                 }
             }
             self.settle(record);
+            if self.opts.every_wheel_contacts {
+                self.every_wheel_contacts(record, sink)?;
+            }
             return Ok(());
         }
         for a in 0..axles {
@@ -544,26 +564,20 @@ impl Engine {
                 let track = record.wheels[a * rails + r].track;
                 {
                     let (ctx, states, works) = self.split();
-                    ctx.roll_group(record, track, &mut states[track], &mut works[track], &[a]);
+                    ctx.roll_group(
+                        record,
+                        track,
+                        &mut states[track],
+                        &mut works[track],
+                        &[a],
+                        0,
+                    );
                 }
                 self.settle(record);
                 if self.opts.every_wheel_contacts {
-                    // With friction terms mu is not eq. (4) of the mass alone.
-                    let mut mu = std::mem::take(&mut self.snapshot.contact_mu);
-                    let with_terms = self.generic.any_friction();
-                    if with_terms {
-                        self.fill_mu(record, track, a, &mut mu);
-                    }
-                    let result = sink.wheel_contacts(&WheelContacts {
-                        track,
-                        rail: r,
-                        direction: record.passage.direction,
-                        train_seq: record.passage.train_seq,
-                        axle: a,
-                        seen_mass_kg: &self.work[track].observed.mass_kg,
-                        mu: with_terms.then_some(mu.as_slice()),
-                    });
-                    self.snapshot.contact_mu = mu;
+                    let seen = std::mem::take(&mut self.work[track].observed.mass_kg);
+                    let result = self.wheel_contacts(record, track, r, a, &seen, sink);
+                    self.work[track].observed.mass_kg = seen;
                     result?;
                 }
                 if self.opts.snapshot_every_wheel {
@@ -573,6 +587,72 @@ impl Engine {
             }
         }
         Ok(())
+    }
+
+    /// Every wheel's contacts to the sink, in the serial order (axle by
+    /// axle, rail by rail), from the rows the wavefront kept.
+    fn every_wheel_contacts(
+        &mut self,
+        record: &TrainRecord,
+        sink: &mut dyn Sink,
+    ) -> Result<(), EngineError> {
+        let rails = self.section.rails.len();
+        let points = self.grid.d_m.len();
+        let mut rows = std::mem::take(&mut self.last_row);
+        rows.clear();
+        rows.resize(self.work.len(), 0);
+        let mut result = Ok(());
+        'wheels: for a in 0..record.passage.axles.len() {
+            for r in 0..rails {
+                let track = record.wheels[a * rails + r].track;
+                let row = rows[track];
+                rows[track] += 1;
+                let seen = std::mem::take(&mut self.work[track].wheel_seen);
+                result = self.wheel_contacts(
+                    record,
+                    track,
+                    r,
+                    a,
+                    &seen[row * points..(row + 1) * points],
+                    sink,
+                );
+                self.work[track].wheel_seen = seen;
+                if result.is_err() {
+                    break 'wheels;
+                }
+            }
+        }
+        self.last_row = rows;
+        result
+    }
+
+    /// One wheel's contacts (`seen`: its step-2 masses) to the sink. With
+    /// friction terms mu is not eq. (4) of the mass alone: it goes along.
+    fn wheel_contacts(
+        &mut self,
+        record: &TrainRecord,
+        track: usize,
+        r: usize,
+        a: usize,
+        seen: &[f64],
+        sink: &mut dyn Sink,
+    ) -> Result<(), EngineError> {
+        let mut mu = std::mem::take(&mut self.snapshot.contact_mu);
+        let with_terms = self.generic.any_friction();
+        if with_terms {
+            self.fill_mu(record, track, a, seen, &mut mu);
+        }
+        let result = sink.wheel_contacts(&WheelContacts {
+            track,
+            rail: r,
+            direction: record.passage.direction,
+            train_seq: record.passage.train_seq,
+            axle: a,
+            seen_mass_kg: seen,
+            mu: with_terms.then_some(mu.as_slice()),
+        });
+        self.snapshot.contact_mu = mu;
+        Ok(result?)
     }
 
     /// Takes in what the tracks' rolls (or point events) reported: the
@@ -630,8 +710,8 @@ impl RollContext<'_> {
         work: &mut TrackWork,
     ) {
         let axles = std::mem::take(&mut work.axles);
-        for group in axles.chunks(LANES) {
-            self.roll_group(record, track, state, work, group);
+        for (g, group) in axles.chunks(LANES).enumerate() {
+            self.roll_group(record, track, state, work, group, g * LANES);
         }
         work.axles = axles;
     }
@@ -650,14 +730,17 @@ impl RollContext<'_> {
         state: &mut TrackState,
         work: &mut TrackWork,
         group: &[usize],
+        first_row: usize,
     ) {
         #[cfg(target_arch = "x86_64")]
         if exp4_is_vectorised() {
             // SAFETY: the CPU has AVX2 and FMA.
-            unsafe { self.roll_group_fma(record, track, state, work, group) };
+            unsafe { self.roll_group_fma(record, track, state, work, group, first_row) };
             return;
         }
-        self.roll_group_with(record, track, state, work, group, |x| x.map(f64::exp));
+        self.roll_group_with(record, track, state, work, group, first_row, |x| {
+            x.map(f64::exp)
+        });
     }
 
     /// [`RollContext::roll_group`] compiled for AVX2 and FMA, the four
@@ -672,13 +755,15 @@ impl RollContext<'_> {
         state: &mut TrackState,
         work: &mut TrackWork,
         group: &[usize],
+        first_row: usize,
     ) {
         // SAFETY: this function runs only on a CPU with AVX2 and FMA.
-        self.roll_group_with(record, track, state, work, group, |x| unsafe {
+        self.roll_group_with(record, track, state, work, group, first_row, |x| unsafe {
             exp4_inline(x)
         });
     }
 
+    #[allow(clippy::too_many_arguments)]
     #[inline(always)]
     fn roll_group_with(
         &self,
@@ -687,15 +772,19 @@ impl RollContext<'_> {
         state: &mut TrackState,
         work: &mut TrackWork,
         group: &[usize],
+        first_row: usize,
         exp4: impl Fn([f64; LANES]) -> [f64; LANES] + Copy,
     ) {
         let n = group.len();
         debug_assert!((1..=LANES).contains(&n));
         let points = self.d_m.len();
         let up = enters_at_zero(record.passage.direction);
-        // Unused lanes repeat the last wheel and are never stepped.
-        let mut lanes: [Lane; LANES] =
-            std::array::from_fn(|j| self.lane(record, track, group[j.min(n - 1)]));
+        // Unused lanes repeat the first wheel and are never stepped.
+        let first = self.lane(record, track, group[0], first_row);
+        let mut lanes: [Lane; LANES] = std::array::from_fn(|j| match group.get(j) {
+            Some(&a) if j > 0 => self.lane(record, track, a, first_row + j),
+            _ => first.clone(),
+        });
         let special = &self.special[track];
         for s in 0..points + n - 1 {
             let lo = s.saturating_sub(points - 1);
@@ -704,7 +793,12 @@ impl RollContext<'_> {
                 let is: [usize; LANES] =
                     std::array::from_fn(|j| if up { s - j } else { points - 1 - (s - j) });
                 if !is.iter().any(|&i| special[i]) {
-                    self.contacts4(&mut lanes, state, &mut work.observed, is, exp4);
+                    let seen = self.contacts4(&mut lanes, state, &mut work.observed, is, exp4);
+                    if self.keep_seen {
+                        for (lane, (&i, &m)) in lanes.iter().zip(is.iter().zip(&seen)) {
+                            work.wheel_seen[lane.row * points + i] = m;
+                        }
+                    }
                     if s + 1 >= points {
                         self.finish_lane(&lanes[s + 1 - points], state, work, points);
                     }
@@ -714,8 +808,8 @@ impl RollContext<'_> {
             for (j, lane) in lanes.iter_mut().enumerate().take(hi).skip(lo) {
                 let step = s - j;
                 let i = if up { step } else { points - 1 - step };
-                if special[i] {
-                    self.special_contact(record, track, state, work, lane, i);
+                let m_kg = if special[i] {
+                    self.special_contact(record, track, state, work, lane, i)
                 } else {
                     lane.roller.contact(
                         &mut lane.st,
@@ -725,7 +819,10 @@ impl RollContext<'_> {
                         self.revolution,
                         self.timeline,
                         i,
-                    );
+                    )
+                };
+                if self.keep_seen {
+                    work.wheel_seen[lane.row * points + i] = m_kg;
                 }
             }
             // The lane that took its last step now.
@@ -769,7 +866,7 @@ impl RollContext<'_> {
         observed: &mut Observed,
         is: [usize; LANES],
         exp4: impl Fn([f64; LANES]) -> [f64; LANES],
-    ) {
+    ) -> [f64; LANES] {
         let mut touches: [Touch<'_>; LANES] =
             std::array::from_fn(|j| lanes[j].roller.touch(state, self.d_m, self.timeline, is[j]));
         if touches.iter().any(|t| t.aged) {
@@ -808,8 +905,9 @@ impl RollContext<'_> {
         });
         let transfer = exp4(args.map(|a| a[0]));
         let consumption = exp4(args.map(|a| a[1]));
+        let mut seen = [0.0; LANES];
         for (j, lane) in lanes.iter_mut().enumerate() {
-            lane.roller.finish(
+            seen[j] = lane.roller.finish(
                 &mut lane.st,
                 state,
                 observed,
@@ -819,6 +917,7 @@ impl RollContext<'_> {
                 is[j],
             );
         }
+        seen
     }
 
     /// A contact at a special point (an applicator or a measurement site):
@@ -831,7 +930,7 @@ impl RollContext<'_> {
         work: &mut TrackWork,
         lane: &mut Lane,
         i: usize,
-    ) {
+    ) -> f64 {
         let t = lane.roller.time_at(self.d_m, i);
         if work.pending_at[i] > 0 {
             for k in 0..work.events.len() {
@@ -873,7 +972,7 @@ impl RollContext<'_> {
         );
         let sites_here = &self.sites_at[i];
         if sites_here.is_empty() {
-            return;
+            return m_kg;
         }
         let rail = self.track_info[track].rail;
         let levels = (!record.site_levels.is_empty()).then(|| {
@@ -895,11 +994,12 @@ impl RollContext<'_> {
                 levels,
             });
         }
+        m_kg
     }
 
     /// A wheel (axle `a` on `track`'s rail) ready to roll: everything that
     /// depends only on the wheel, computed once.
-    fn lane(&self, record: &TrainRecord, track: usize, a: usize) -> Lane {
+    fn lane(&self, record: &TrainRecord, track: usize, a: usize, row: usize) -> Lane {
         let rails = self.section.rails.len();
         let r = self.track_info[track].rail;
         let wheel = record.wheels[a * rails + r];
@@ -973,6 +1073,7 @@ impl RollContext<'_> {
         };
         Lane {
             axle: a,
+            row,
             serial: (a * rails + r) as u64,
             pulses: 0,
             st,
@@ -1127,13 +1228,18 @@ impl Engine {
     /// mu of every contact axle `a` made on `track` (its step-2 masses in
     /// `observed`): eq. (4), with muD and muC as the friction terms make
     /// them at each contact's time and weather.
-    fn fill_mu(&self, record: &TrainRecord, track: usize, a: usize, out: &mut Vec<f64>) {
+    fn fill_mu(
+        &self,
+        record: &TrainRecord,
+        track: usize,
+        a: usize,
+        seen_mass_kg: &[f64],
+        out: &mut Vec<f64>,
+    ) {
         out.clear();
-        let observed = &self.work[track].observed;
         if !self.generic.any_friction() {
             out.extend(
-                observed
-                    .mass_kg
+                seen_mass_kg
                     .iter()
                     .map(|&m| product::friction(&self.cfg.product, m)),
             );
@@ -1147,7 +1253,7 @@ impl Engine {
         let t_passage_s = self.time_s(record.log_time_ns);
         let offset_m = record.passage.axles.get(a).map_or(0.0, |x| x.offset_m);
         let p = &self.cfg.product;
-        for (&d_m, &m) in self.grid.d_m.iter().zip(&observed.mass_kg) {
+        for (&d_m, &m) in self.grid.d_m.iter().zip(seen_mass_kg) {
             let t = wheel_time_s(
                 t_passage_s,
                 d_m,
@@ -1182,7 +1288,9 @@ impl Engine {
         let mut buf = std::mem::take(&mut self.snapshot);
         buf.adhesion.clear();
         buf.wheel_mass_kg.clear();
-        self.fill_mu(record, track, a, &mut buf.mu);
+        let seen = std::mem::take(&mut self.work[track].observed.mass_kg);
+        self.fill_mu(record, track, a, &seen, &mut buf.mu);
+        self.work[track].observed.mass_kg = seen;
         let observed = &self.work[track].observed;
         for (&mu, &wheel_mass_kg) in buf.mu.iter().zip(&observed.wheel_mass_kg) {
             buf.adhesion

@@ -177,7 +177,26 @@ pub fn replay_from(
         },
         None => ReaderContext::default(),
     };
-    let reader = RecordingReader::open(&args.recording, ctx)?;
+    // The inputs' sha256 (for the outputs' provenance) is read on a thread
+    // of its own while the reader's layout pass reads the recording: both
+    // take a few tenths of a second on a year's recording. A recording that
+    // cannot be read is reported first, as if one came after the other.
+    let provenance_inputs = {
+        let mut inputs = vec![args.recording.as_path()];
+        inputs.extend(args.config.as_ref().and_then(super::ConfigSource::path));
+        inputs.extend(start.as_ref().and_then(|s| s.file));
+        inputs
+    };
+    let wants_provenance = args.out_mcap.is_some() || args.out_rrd.is_some();
+    let (reader, provenance) = std::thread::scope(|scope| {
+        let hashing =
+            wants_provenance.then(|| scope.spawn(|| Provenance::of_run(&provenance_inputs, &cfg)));
+        let reader = RecordingReader::open(&args.recording, ctx);
+        let provenance = hashing.map(|h| h.join().unwrap_or_else(|p| std::panic::resume_unwind(p)));
+        (reader, provenance)
+    });
+    let reader = reader?;
+    let provenance = provenance.transpose()?;
     let opts = EngineOptions {
         snapshot_every_wheel: args.every_wheel,
         every_wheel_contacts: args.per_train,
@@ -192,14 +211,6 @@ pub fn replay_from(
         .per_train
         .then(|| PerTrain::new(&section, &cfg, &Target::default()))
         .transpose()?;
-    let provenance = if args.out_mcap.is_some() || args.out_rrd.is_some() {
-        let mut inputs = vec![args.recording.as_path()];
-        inputs.extend(args.config.as_ref().and_then(super::ConfigSource::path));
-        inputs.extend(start.as_ref().and_then(|s| s.file));
-        Some(Provenance::of_run(&inputs, &cfg)?)
-    } else {
-        None
-    };
     let mut engine = match &start {
         Some(s) => Engine::from_state(section, cfg, opts, s.state)
             .map_err(|e| InputError::file(Path::new(&s.name), e.to_string()))?,
