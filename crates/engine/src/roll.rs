@@ -455,6 +455,16 @@ pub(crate) struct RollContext<'a> {
     origin_ns: i64,
 }
 
+/// Consecutive wheels of one track (at most [`LANES`]), rolled together.
+#[derive(Clone, Copy)]
+struct Group<'a> {
+    record: &'a TrainRecord,
+    track: usize,
+    axles: &'a [usize],
+    /// The first wheel's row in [`TrackWork::wheel_seen`].
+    first_row: usize,
+}
+
 /// A wheel in the wavefront.
 #[derive(Clone)]
 struct Lane {
@@ -564,14 +574,13 @@ impl Engine {
                 let track = record.wheels[a * rails + r].track;
                 {
                     let (ctx, states, works) = self.split();
-                    ctx.roll_group(
+                    let group = Group {
                         record,
                         track,
-                        &mut states[track],
-                        &mut works[track],
-                        &[a],
-                        0,
-                    );
+                        axles: &[a],
+                        first_row: 0,
+                    };
+                    ctx.roll_group(&group, &mut states[track], &mut works[track]);
                 }
                 self.settle(record);
                 if self.opts.every_wheel_contacts {
@@ -711,7 +720,13 @@ impl RollContext<'_> {
     ) {
         let axles = std::mem::take(&mut work.axles);
         for (g, group) in axles.chunks(LANES).enumerate() {
-            self.roll_group(record, track, state, work, group, g * LANES);
+            let group = Group {
+                record,
+                track,
+                axles: group,
+                first_row: g * LANES,
+            };
+            self.roll_group(&group, state, work);
         }
         work.axles = axles;
     }
@@ -723,24 +738,14 @@ impl RollContext<'_> {
     /// in their order; the pulses and readings at a special point run when
     /// the first wheel after them arrives, as in the serial order. Nothing
     /// else is shared between the wheels of a track.
-    fn roll_group(
-        &self,
-        record: &TrainRecord,
-        track: usize,
-        state: &mut TrackState,
-        work: &mut TrackWork,
-        group: &[usize],
-        first_row: usize,
-    ) {
+    fn roll_group(&self, group: &Group<'_>, state: &mut TrackState, work: &mut TrackWork) {
         #[cfg(target_arch = "x86_64")]
         if exp4_is_vectorised() {
             // SAFETY: the CPU has AVX2 and FMA.
-            unsafe { self.roll_group_fma(record, track, state, work, group, first_row) };
+            unsafe { self.roll_group_fma(group, state, work) };
             return;
         }
-        self.roll_group_with(record, track, state, work, group, first_row, |x| {
-            x.map(f64::exp)
-        });
+        self.roll_group_with(group, state, work, |x| x.map(f64::exp));
     }
 
     /// [`RollContext::roll_group`] compiled for AVX2 and FMA, the four
@@ -748,33 +753,25 @@ impl RollContext<'_> {
     /// fused that the source does not ask for: Rust never contracts.)
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,fma")]
-    fn roll_group_fma(
-        &self,
-        record: &TrainRecord,
-        track: usize,
-        state: &mut TrackState,
-        work: &mut TrackWork,
-        group: &[usize],
-        first_row: usize,
-    ) {
+    fn roll_group_fma(&self, group: &Group<'_>, state: &mut TrackState, work: &mut TrackWork) {
         // SAFETY: this function runs only on a CPU with AVX2 and FMA.
-        self.roll_group_with(record, track, state, work, group, first_row, |x| unsafe {
-            exp4_inline(x)
-        });
+        self.roll_group_with(group, state, work, |x| unsafe { exp4_inline(x) });
     }
 
-    #[allow(clippy::too_many_arguments)]
     #[inline(always)]
     fn roll_group_with(
         &self,
-        record: &TrainRecord,
-        track: usize,
+        group: &Group<'_>,
         state: &mut TrackState,
         work: &mut TrackWork,
-        group: &[usize],
-        first_row: usize,
         exp4: impl Fn([f64; LANES]) -> [f64; LANES] + Copy,
     ) {
+        let Group {
+            record,
+            track,
+            axles: group,
+            first_row,
+        } = *group;
         let n = group.len();
         debug_assert!((1..=LANES).contains(&n));
         let points = self.d_m.len();
