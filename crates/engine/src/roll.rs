@@ -449,6 +449,8 @@ pub(crate) struct RollContext<'a> {
     special: &'a [Vec<bool>],
     sites_at: &'a [Vec<usize>],
     last_axle: &'a [usize],
+    /// Every wheel fills the track's [`Observed`] (a snapshot after every
+    /// wheel), not only the train's last on it.
     observe_every_wheel: bool,
     /// Keep every wheel's step-2 masses in [`TrackWork::wheel_seen`].
     keep_seen: bool,
@@ -512,8 +514,10 @@ impl Engine {
     /// within a train: each track's wheels roll in axle order, the tracks on
     /// as many threads as rayon offers, and what they add to the totals is
     /// settled in the serial order (axle by axle, rail by rail), so that
-    /// the result does not depend on the threads. When a sink asks for
-    /// every wheel, the wheels roll one at a time in the serial order.
+    /// the result does not depend on the threads. Every wheel's contacts,
+    /// when a sink asks for them, are kept per track and handed over after
+    /// the roll in the serial order; a field snapshot after every wheel
+    /// makes the wheels roll one at a time in the serial order.
     pub(super) fn roll_train(
         &mut self,
         record: &mut TrainRecord,
