@@ -812,15 +812,7 @@ impl RollContext<'_> {
                 let m_kg = if special[i] {
                     self.special_contact(record, track, state, work, lane, i)
                 } else {
-                    lane.roller.contact(
-                        &mut lane.st,
-                        state,
-                        &mut work.observed,
-                        self.d_m,
-                        self.revolution,
-                        self.timeline,
-                        i,
-                    )
+                    self.contact(lane, state, &mut work.observed, i)
                 };
                 if self.keep_seen {
                     work.wheel_seen[lane.row * points + i] = m_kg;
@@ -831,6 +823,27 @@ impl RollContext<'_> {
                 self.finish_lane(&lanes[s + 1 - points], state, work, points);
             }
         }
+    }
+
+    /// One contact of `lane`'s wheel at point `i`, its exponentials taken
+    /// one by one ([`Roller::contact`]); returns the step-2 mass.
+    #[inline(always)]
+    fn contact(
+        &self,
+        lane: &mut Lane,
+        state: &mut TrackState,
+        observed: &mut Observed,
+        i: usize,
+    ) -> f64 {
+        lane.roller.contact(
+            &mut lane.st,
+            state,
+            observed,
+            self.d_m,
+            self.revolution,
+            self.timeline,
+            i,
+        )
     }
 
     /// A wheel that has left the track: its totals for the ledger.
@@ -962,15 +975,7 @@ impl RollContext<'_> {
                 latest
             };
         }
-        let m_kg = lane.roller.contact(
-            &mut lane.st,
-            state,
-            &mut work.observed,
-            self.d_m,
-            self.revolution,
-            self.timeline,
-            i,
-        );
+        let m_kg = self.contact(lane, state, &mut work.observed, i);
         let sites_here = &self.sites_at[i];
         if sites_here.is_empty() {
             return m_kg;
