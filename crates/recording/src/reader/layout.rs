@@ -6,8 +6,10 @@
 //! holds; the chunk is decompressed to count them (and to check its CRC and
 //! that every log_time lies inside the header's range), and its records are
 //! dropped again. A Message record outside any chunk keeps only its replay
-//! key and file offset. Channel records are kept (a handful). Memory: one
-//! chunk at a time plus a few words per chunk.
+//! key and file offset. Channel records are kept (a handful). Chunks are
+//! decompressed a few at a time on rayon's threads and added in file order.
+//! Memory: up to four compressed chunk records (32 MiB), one decompressed
+//! chunk per thread, plus a few words per chunk.
 //!
 //! This pass plays the part of the summary's chunk indexes, built from the
 //! data section itself rather than trusted from the summary: file order *is*
@@ -145,8 +147,86 @@ pub(super) fn scan_layout(path: &Path, file: &mut BufReader<File>) -> Result<Lay
     }
 
     let mut layout = Layout::default();
-    let mut message_count: u64 = 0;
-    let mut offset = magic_len;
+    let mut chunks = PendingChunks::default();
+    let walked = walk(path, file, file_len, &mut layout, &mut chunks);
+    // A chunk earlier in the file than the record that failed fails first.
+    chunks.settle(path, &mut layout)?;
+    walked?;
+    Ok(layout)
+}
+
+/// Chunk records read but not yet scanned: they are decompressed and
+/// checked on rayon's threads a few at a time, and what they hold is added
+/// to the layout in file order ([`PendingChunks::settle`]) before any record
+/// after them, so the layout, the message numbers and the first error are
+/// those of a scan one record at a time.
+#[derive(Default)]
+struct PendingChunks {
+    /// (file offset, body length, the record whole).
+    records: Vec<(u64, u64, Vec<u8>)>,
+    message_count: u64,
+}
+
+impl PendingChunks {
+    /// Chunks read ahead at most, and their compressed bytes: the records
+    /// are held, and one decompressed chunk per thread.
+    const MAX: usize = 4;
+    const MAX_BYTES: usize = 32 << 20;
+
+    fn push(
+        &mut self,
+        path: &Path,
+        layout: &mut Layout,
+        record: (u64, u64, Vec<u8>),
+    ) -> Result<(), InputError> {
+        self.records.push(record);
+        let bytes: usize = self.records.iter().map(|(_, _, r)| r.len()).sum();
+        if self.records.len() >= Self::MAX || bytes >= Self::MAX_BYTES {
+            self.settle(path, layout)?;
+        }
+        Ok(())
+    }
+
+    /// Scans the pending chunks (in parallel) and adds them to the layout
+    /// in file order; the first chunk that fails is the error.
+    fn settle(&mut self, path: &Path, layout: &mut Layout) -> Result<(), InputError> {
+        use rayon::prelude::*;
+        let records = std::mem::take(&mut self.records);
+        let contents: Vec<Result<ChunkContents, String>> = if records.len() > 1 {
+            records.par_iter().map(|(_, _, r)| read_chunk(r)).collect()
+        } else {
+            records.iter().map(|(_, _, r)| read_chunk(r)).collect()
+        };
+        for ((offset, body_len, _), contents) in records.into_iter().zip(contents) {
+            let first_index = self.message_count;
+            let message_start_time = contents
+                .and_then(|c| add_chunk(c, layout, &mut self.message_count))
+                .map_err(|e| {
+                    InputError::file(path, format!("unreadable chunk at byte {offset}: {e}"))
+                })?;
+            layout.chunks.push(ChunkInfo {
+                record_offset: offset,
+                body_len,
+                message_start_time,
+                first_index,
+                message_count: self.message_count - first_index,
+            });
+        }
+        Ok(())
+    }
+}
+
+/// The data section record by record, up to its DataEnd (or Footer).
+fn walk(
+    path: &Path,
+    file: &mut BufReader<File>,
+    file_len: u64,
+    layout: &mut Layout,
+    chunks: &mut PendingChunks,
+) -> Result<(), InputError> {
+    let corrupt = |what: String| InputError::file(path, what);
+    let io_error = |e: std::io::Error| InputError::file(path, format!("cannot read: {e}"));
+    let mut offset = mcap::MAGIC.len() as u64;
     // Whether a message outside chunks may extend the last run (no chunk
     // since it).
     let mut run_open = false;
@@ -180,18 +260,12 @@ pub(super) fn scan_layout(path: &Path, file: &mut BufReader<File>) -> Result<Lay
                 file.seek(SeekFrom::Start(offset)).map_err(io_error)?;
                 let record =
                     read_exact_vec(file, RECORD_HEADER_BYTES + body_len).map_err(io_error)?;
-                let first_index = message_count;
-                let message_start_time = scan_chunk(&record, &mut layout, &mut message_count)
-                    .map_err(|e| corrupt(format!("unreadable chunk at byte {offset}: {e}")))?;
-                layout.chunks.push(ChunkInfo {
-                    record_offset: offset,
-                    body_len,
-                    message_start_time,
-                    first_index,
-                    message_count: message_count - first_index,
-                });
+                chunks.push(path, layout, (offset, body_len, record))?;
             }
             op::CHANNEL => {
+                // Channels and messages outside chunks come after the
+                // chunks before them.
+                chunks.settle(path, layout)?;
                 if body_len > MAX_SMALL_RECORD_BYTES {
                     return Err(corrupt(format!(
                         "the Channel record at byte {offset} claims {body_len} bytes (at most \
@@ -200,13 +274,15 @@ pub(super) fn scan_layout(path: &Path, file: &mut BufReader<File>) -> Result<Lay
                 }
                 let body = read_exact_vec(file, body_len).map_err(io_error)?;
                 match record::parse(opcode, &body) {
-                    Ok(Record::Channel(channel)) => add_channel(&mut layout, channel)
+                    Ok(Record::Channel(channel)) => add_channel(layout, channel)
                         .map_err(|e| corrupt(format!("record at byte {offset}: {e}")))?,
                     Ok(_) => {}
                     Err(e) => return Err(corrupt(format!("corrupt record at byte {offset}: {e}"))),
                 }
             }
             op::MESSAGE => {
+                chunks.settle(path, layout)?;
+                let message_count = chunks.message_count;
                 if body_len < MESSAGE_HEADER_BYTES {
                     return Err(corrupt(format!(
                         "corrupt record at byte {offset}: a Message record of {body_len} bytes \
@@ -215,7 +291,7 @@ pub(super) fn scan_layout(path: &Path, file: &mut BufReader<File>) -> Result<Lay
                 }
                 let head = read_exact_vec(file, MESSAGE_HEADER_BYTES).map_err(io_error)?;
                 let header = message_header(&head);
-                let key = message_key(&mut layout, &header, message_count)
+                let key = message_key(layout, &header, message_count)
                     .and_then(|key| {
                         check_message_size(key, body_len - MESSAGE_HEADER_BYTES).map(|()| key)
                     })
@@ -233,7 +309,7 @@ pub(super) fn scan_layout(path: &Path, file: &mut BufReader<File>) -> Result<Lay
                     }),
                 }
                 run_open = true;
-                message_count += 1;
+                chunks.message_count += 1;
                 file.seek_relative((body_len - MESSAGE_HEADER_BYTES) as i64)
                     .map_err(io_error)?;
             }
@@ -245,12 +321,29 @@ pub(super) fn scan_layout(path: &Path, file: &mut BufReader<File>) -> Result<Lay
         }
         offset = end;
     }
-    Ok(layout)
+    Ok(())
 }
 
-/// Counts a chunk's messages (checking each against the header's time range)
-/// and collects its channels. Returns the chunk's `message_start_time`.
-fn scan_chunk(record: &[u8], layout: &mut Layout, message_count: &mut u64) -> Result<u64, String> {
+/// A chunk's Channel and Message records in file order (a message by its
+/// header and data length), decompressed and CRC-checked; the record's
+/// header's time range.
+struct ChunkContents {
+    message_start_time: u64,
+    message_end_time: u64,
+    records: Vec<ChunkEntry>,
+}
+
+enum ChunkEntry {
+    Channel(mcap::records::Channel),
+    Message {
+        header: mcap::records::MessageHeader,
+        data_len: u64,
+    },
+}
+
+/// Reads a chunk record (given whole): what fails here fails whatever came
+/// before the chunk.
+fn read_chunk(record: &[u8]) -> Result<ChunkContents, String> {
     let header = chunk_header(record)?;
     if header.uncompressed_size > MAX_CHUNK_BYTES {
         return Err(format!(
@@ -258,16 +351,42 @@ fn scan_chunk(record: &[u8], layout: &mut Layout, message_count: &mut u64) -> Re
             header.uncompressed_size
         ));
     }
-    let (start, end) = (header.message_start_time, header.message_end_time);
-    let mut failure: Option<String> = None;
+    let mut records = Vec::new();
     for_each_chunk_record(record, &header, |opcode, body| {
         match record::parse(opcode, body)? {
-            Record::Channel(channel) => {
+            Record::Channel(channel) => records.push(ChunkEntry::Channel(channel)),
+            Record::Message { header, data } => records.push(ChunkEntry::Message {
+                header,
+                data_len: data.len() as u64,
+            }),
+            _ => {}
+        }
+        Ok(())
+    })?;
+    Ok(ChunkContents {
+        message_start_time: header.message_start_time,
+        message_end_time: header.message_end_time,
+        records,
+    })
+}
+
+/// Counts a chunk's messages (checking each against the header's time range)
+/// and collects its channels. Returns the chunk's `message_start_time`.
+fn add_chunk(
+    contents: ChunkContents,
+    layout: &mut Layout,
+    message_count: &mut u64,
+) -> Result<u64, String> {
+    let (start, end) = (contents.message_start_time, contents.message_end_time);
+    let mut failure: Option<String> = None;
+    for entry in contents.records {
+        match entry {
+            ChunkEntry::Channel(channel) => {
                 if let Err(e) = add_channel(layout, channel) {
                     failure.get_or_insert(e);
                 }
             }
-            Record::Message { header, data } => {
+            ChunkEntry::Message { header, data_len } => {
                 if header.log_time < start || header.log_time > end {
                     failure.get_or_insert(format!(
                         "message {} has log_time {} ns, outside the chunk's \
@@ -276,16 +395,14 @@ fn scan_chunk(record: &[u8], layout: &mut Layout, message_count: &mut u64) -> Re
                     ));
                 }
                 let checked = message_key(layout, &header, *message_count)
-                    .and_then(|key| check_message_size(key, data.len() as u64));
+                    .and_then(|key| check_message_size(key, data_len));
                 if let Err(e) = checked {
                     failure.get_or_insert(e);
                 }
                 *message_count += 1;
             }
-            _ => {}
         }
-        Ok(())
-    })?;
+    }
     match failure {
         Some(e) => Err(e),
         None => Ok(start),
