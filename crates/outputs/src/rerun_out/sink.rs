@@ -1,7 +1,7 @@
 //! The sink: the recording stream and its file, the time of each log, and
 //! what each of the engine's events becomes.
 
-use std::collections::{BTreeMap, BTreeSet, HashSet};
+use std::collections::{BTreeMap, BTreeSet, HashMap, HashSet};
 use std::path::Path;
 use std::time::Duration;
 
@@ -14,7 +14,7 @@ use tortwin_engine::sink::{
     FieldSnapshot, MeasurementOutput, PulseEvent, RunSummary, SectionInfo, Sink, SinkResult,
     SnapshotKind, TrainEvent,
 };
-use tortwin_recording::Direction;
+use tortwin_recording::{Direction, Quantity};
 
 use super::batch::{block_path, log_block, send_rows, send_series, Series, TrackState};
 use super::blueprint::{blueprint, send_blueprint, Layout, Measured, Run};
@@ -49,6 +49,10 @@ pub struct RerunSink {
     wheel_pass: u64,
     /// Series entities whose static style has been logged.
     styled: HashSet<EntityPath>,
+    /// Each (site, rail, quantity) measured so far: its entity, styled and
+    /// entered in `measured` when first seen (a measurement is then one
+    /// lookup, not a path to intern and a style to build).
+    measurement_paths: HashMap<(usize, usize, Quantity), EntityPath>,
     /// Per site index, per quantity (in [`QUANTITIES`] order): the
     /// quantity and the rails it was measured on.
     measured: Measured,
@@ -118,6 +122,7 @@ impl RerunSink {
             profile_chunk_rows: 1,
             wheel_pass: 0,
             styled: HashSet::new(),
+            measurement_paths: HashMap::new(),
             measured: BTreeMap::new(),
             pulsed: BTreeSet::new(),
             series: BTreeMap::new(),
@@ -240,6 +245,37 @@ impl RerunSink {
     }
 
     /// Logs a time series style once per entity, statically.
+    /// The first measurement of its site, rail and quantity: the entity,
+    /// its style, and the blueprint's note that it was measured.
+    fn first_measurement(&mut self, m: &MeasurementOutput<'_>) -> Result<EntityPath, RerunError> {
+        let path = entity(&["sites", m.site_id, m.rail_name, m.quantity.as_str()]);
+        let color = rail_color(m.rail);
+        let pale = lighten(color, 0.45);
+        // Measured and simulated share a row (and its time): the measured
+        // value as a dot in the rail's colour, the twin's as a smaller pale
+        // one beside it.
+        self.style_once(
+            &path,
+            &[&rerun::SeriesPoints::new()
+                .with_names(["measured", "simulated (twin)"])
+                .with_colors([color, pale])
+                .with_markers([MarkerShape::Circle, MarkerShape::Circle])
+                .with_marker_sizes([2.5, 1.5])],
+        )?;
+        let rank = QUANTITIES
+            .iter()
+            .position(|&q| q == m.quantity)
+            .unwrap_or(QUANTITIES.len());
+        self.measured
+            .entry(m.site)
+            .or_default()
+            .entry(rank)
+            .or_insert_with(|| (m.quantity, BTreeSet::new()))
+            .1
+            .insert(m.rail);
+        Ok(path)
+    }
+
     fn style_once(
         &mut self,
         path: &EntityPath,
@@ -425,31 +461,15 @@ impl Sink for RerunSink {
     }
 
     fn measurement(&mut self, m: &MeasurementOutput<'_>) -> SinkResult {
-        let path = entity(&["sites", m.site_id, m.rail_name, m.quantity.as_str()]);
-        let color = rail_color(m.rail);
-        let pale = lighten(color, 0.45);
-        // Measured and simulated share a row (and its time): the measured
-        // value as a dot in the rail's colour, the twin's as a smaller pale
-        // one beside it.
-        self.style_once(
-            &path,
-            &[&rerun::SeriesPoints::new()
-                .with_names(["measured", "simulated (twin)"])
-                .with_colors([color, pale])
-                .with_markers([MarkerShape::Circle, MarkerShape::Circle])
-                .with_marker_sizes([2.5, 1.5])],
-        )?;
-        let rank = QUANTITIES
-            .iter()
-            .position(|&q| q == m.quantity)
-            .unwrap_or(QUANTITIES.len());
-        self.measured
-            .entry(m.site)
-            .or_default()
-            .entry(rank)
-            .or_insert_with(|| (m.quantity, BTreeSet::new()))
-            .1
-            .insert(m.rail);
+        let key = (m.site, m.rail, m.quantity);
+        let path = match self.measurement_paths.get(&key) {
+            Some(path) => path.clone(),
+            None => {
+                let path = self.first_measurement(m)?;
+                self.measurement_paths.insert(key, path.clone());
+                path
+            }
+        };
         let what = || format!("measurement {} at site {}", m.index_in_file, m.site_id);
         self.push_series(path, m.log_time_ns, &[m.measured, m.simulated], what)?;
         Ok(())
