@@ -59,7 +59,7 @@ pub struct RerunSink {
     /// Applicator entities that received a pulse.
     pulsed: BTreeSet<EntityPath>,
     /// Pulse and measurement values not sent yet, per entity.
-    series: BTreeMap<EntityPath, Series>,
+    series: HashMap<EntityPath, Series>,
     /// Product of each applicator entity's pulses since the last snapshot (g).
     pulse_totals: BTreeMap<EntityPath, f64>,
     /// The views' coordinates, from [`Sink::begin`].
@@ -125,7 +125,7 @@ impl RerunSink {
             measurement_paths: HashMap::new(),
             measured: BTreeMap::new(),
             pulsed: BTreeSet::new(),
-            series: BTreeMap::new(),
+            series: HashMap::new(),
             pulse_totals: BTreeMap::new(),
             frames: None,
             grid_d_m: Vec::new(),
@@ -233,7 +233,10 @@ impl RerunSink {
         let rec = self.rec.as_ref().ok_or_else(|| RerunError::Finished {
             path: self.file.final_path().to_path_buf(),
         })?;
-        for (path, series) in std::mem::take(&mut self.series) {
+        // In the entities' order, whatever the map's.
+        let mut all: Vec<_> = std::mem::take(&mut self.series).into_iter().collect();
+        all.sort_by(|a, b| a.0.cmp(&b.0));
+        for (path, series) in all {
             if !series.values.is_empty() {
                 send_series(rec, path, series)
                     .map_err(sdk_error(self.file.final_path(), || {
@@ -244,7 +247,6 @@ impl RerunSink {
         Ok(())
     }
 
-    /// Logs a time series style once per entity, statically.
     /// The first measurement of its site, rail and quantity: the entity,
     /// its style, and the blueprint's note that it was measured.
     fn first_measurement(&mut self, m: &MeasurementOutput<'_>) -> Result<EntityPath, RerunError> {
@@ -276,6 +278,7 @@ impl RerunSink {
         Ok(path)
     }
 
+    /// Logs a time series style once per entity, statically.
     fn style_once(
         &mut self,
         path: &EntityPath,
