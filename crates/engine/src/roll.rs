@@ -138,7 +138,20 @@ impl Roller {
     ) -> Touch<'w> {
         let t = self.time_at(d_m, i);
         let weather = timeline.at(t);
-        let precip_mm = weather.precip_mm_at(t);
+        self.touch_at(track, t, weather, weather.precip_mm_at(t), i)
+    }
+
+    /// Step 1's reads at point i, given the wheel's time there, the weather
+    /// in effect and the precipitation accumulated by then.
+    #[inline(always)]
+    fn touch_at<'w>(
+        &self,
+        track: &TrackState,
+        t: f64,
+        weather: &'w super::weather::WeatherState,
+        precip_mm: f64,
+        i: usize,
+    ) -> Touch<'w> {
         let last = track.last_touch_s[i];
         Touch {
             t,
@@ -280,6 +293,39 @@ impl Roller {
             },
         )
     }
+}
+
+/// Four lanes' exponentials (bit for bit `f64::exp`).
+trait Exp4: Fn([f64; LANES]) -> [f64; LANES] + Copy {}
+impl<F: Fn([f64; LANES]) -> [f64; LANES] + Copy> Exp4 for F {}
+
+/// Four lanes' quotients `a / b`.
+trait Div4: Fn([f64; LANES], [f64; LANES]) -> [f64; LANES] + Copy {}
+impl<F: Fn([f64; LANES], [f64; LANES]) -> [f64; LANES] + Copy> Div4 for F {}
+
+/// What the wavefront computes four lanes at once.
+#[derive(Clone, Copy)]
+struct Vector<E, D> {
+    exp: E,
+    div: D,
+}
+
+/// Four quotients in one AVX register.
+///
+/// # Safety
+/// The CPU must have AVX.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx")]
+#[inline]
+unsafe fn div4_avx(a: [f64; LANES], b: [f64; LANES]) -> [f64; LANES] {
+    use std::arch::x86_64::{_mm256_div_pd, _mm256_loadu_pd, _mm256_storeu_pd};
+    let mut q = [0.0; LANES];
+    // SAFETY: four f64 read from and written to arrays of four.
+    unsafe {
+        let v = _mm256_div_pd(_mm256_loadu_pd(a.as_ptr()), _mm256_loadu_pd(b.as_ptr()));
+        _mm256_storeu_pd(q.as_mut_ptr(), v);
+    }
+    q
 }
 
 /// A wheel's time at a point: `t_passage + (|d - d_entry| + offset) / v`
@@ -749,7 +795,11 @@ impl RollContext<'_> {
             unsafe { self.roll_group_fma(group, state, work) };
             return;
         }
-        self.roll_group_with(group, state, work, |x| x.map(f64::exp));
+        let v = Vector {
+            exp: |x: [f64; LANES]| x.map(f64::exp),
+            div: |a: [f64; LANES], b: [f64; LANES]| std::array::from_fn(|j| a[j] / b[j]),
+        };
+        self.roll_group_with(group, state, work, v);
     }
 
     /// [`RollContext::roll_group`] compiled for AVX2 and FMA, the four
@@ -758,8 +808,13 @@ impl RollContext<'_> {
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,fma")]
     fn roll_group_fma(&self, group: &Group<'_>, state: &mut TrackState, work: &mut TrackWork) {
-        // SAFETY: this function runs only on a CPU with AVX2 and FMA.
-        self.roll_group_with(group, state, work, |x| unsafe { exp4_inline(x) });
+        let v = Vector {
+            // SAFETY: this function runs only on a CPU with AVX2 and FMA.
+            exp: |x| unsafe { exp4_inline(x) },
+            // SAFETY: as above.
+            div: |a, b| unsafe { div4_avx(a, b) },
+        };
+        self.roll_group_with(group, state, work, v);
     }
 
     #[inline(always)]
@@ -768,7 +823,7 @@ impl RollContext<'_> {
         group: &Group<'_>,
         state: &mut TrackState,
         work: &mut TrackWork,
-        exp4: impl Fn([f64; LANES]) -> [f64; LANES] + Copy,
+        v: Vector<impl Exp4, impl Div4>,
     ) {
         let Group {
             record,
@@ -794,7 +849,7 @@ impl RollContext<'_> {
                 let is: [usize; LANES] =
                     std::array::from_fn(|j| if up { s - j } else { points - 1 - (s - j) });
                 if !is.iter().any(|&i| special[i]) {
-                    let seen = self.contacts4(&mut lanes, state, &mut work.observed, is, exp4);
+                    let seen = self.contacts4(&mut lanes, state, &mut work.observed, is, v);
                     if self.keep_seen {
                         for (lane, (&i, &m)) in lanes.iter().zip(is.iter().zip(&seen)) {
                             work.wheel_seen[lane.row * points + i] = m;
@@ -868,6 +923,45 @@ impl RollContext<'_> {
         state.wheel_pass += 1;
     }
 
+    /// Step 1's reads for four lanes at the distinct points `is`:
+    /// [`Roller::touch`] lane by lane, with its two divisions (the wheel's
+    /// time, the precipitation since the weather message) taken for the
+    /// four lanes at once. Division is correctly rounded in a vector as in
+    /// a scalar register: the same quotients, the same bits.
+    #[inline(always)]
+    fn touches4(
+        &self,
+        lanes: &[Lane; LANES],
+        state: &TrackState,
+        is: [usize; LANES],
+        div4: impl Div4,
+    ) -> [Touch<'_>; LANES] {
+        use std::array::from_fn;
+        let r = |j: usize| &lanes[j].roller;
+        // wheel_time_s: t_passage + (|d - d_entry| + offset) / v.
+        let path: [f64; LANES] =
+            from_fn(|j| (self.d_m[is[j]] - r(j).d_entry_m).abs() + r(j).offset_m);
+        let q = div4(path, from_fn(|j| r(j).speed_mps));
+        let t: [f64; LANES] = from_fn(|j| r(j).t_passage_s + q[j]);
+        let weather: [&super::weather::WeatherState; LANES] = from_fn(|j| self.timeline.at(t[j]));
+        // WeatherState::precip_mm_at: P + rate (t - t_k) / 3600, or 0
+        // before the first message.
+        let accrued = div4(
+            from_fn(|j| match weather[j].since_s {
+                Some(t_k) => weather[j].current.precipitation_mm_h * (t[j] - t_k),
+                None => 0.0,
+            }),
+            [3600.0; LANES],
+        );
+        from_fn(|j| {
+            let precip_mm = match weather[j].since_s {
+                Some(_) => weather[j].precip_at_since_mm + accrued[j],
+                None => 0.0,
+            };
+            r(j).touch_at(state, t[j], weather[j], precip_mm, is[j])
+        })
+    }
+
     /// Four ordinary contacts (no special point), one per lane, at the
     /// distinct points `is`: the phases of [`Roller::contact`] lane by
     /// lane, with each phase's exponentials taken for the four lanes at
@@ -879,10 +973,10 @@ impl RollContext<'_> {
         state: &mut TrackState,
         observed: &mut Observed,
         is: [usize; LANES],
-        exp4: impl Fn([f64; LANES]) -> [f64; LANES],
+        v: Vector<impl Exp4, impl Div4>,
     ) -> [f64; LANES] {
-        let mut touches: [Touch<'_>; LANES] =
-            std::array::from_fn(|j| lanes[j].roller.touch(state, self.d_m, self.timeline, is[j]));
+        let exp4 = v.exp;
+        let mut touches = self.touches4(lanes, state, is, v.div);
         if touches.iter().any(|t| t.aged) {
             let args: [[f64; 2]; LANES] = std::array::from_fn(|j| {
                 self.time_effects
