@@ -33,7 +33,7 @@ use crate::sink::{
 };
 use tortwin_model::config::ModelConfig;
 use tortwin_model::contact::{
-    self, HertzContact, HertzShape, KalkerCoefficients, PolachInput, Steel,
+    self, HertzContact, HertzShape, KalkerCoefficients, PolachContact, PolachInput, Steel,
 };
 use tortwin_model::effects::{Named, TimeEffects};
 use tortwin_model::error::{ConfigError, UsageError};
@@ -948,7 +948,12 @@ impl Engine {
 
     /// T/N by Polach with mu0 = mu (contact.md).
     pub(crate) fn adhesion(&self, wheel: &WheelOnRail, speed_mps: f64, mu: f64) -> f64 {
-        contact::polach(
+        self.adhesion_contact(wheel, speed_mps).forces(mu).t_over_q
+    }
+
+    /// The wheel's contact for Polach, to take T/N at many mu.
+    pub(crate) fn adhesion_contact(&self, wheel: &WheelOnRail, speed_mps: f64) -> PolachContact {
+        PolachContact::new(
             &PolachInput {
                 q_n: wheel.q_n,
                 a_m: wheel.hertz.a_m,
@@ -959,11 +964,10 @@ impl Engine {
                 sy: wheel.creepage.cy,
                 psi_per_m: wheel.creepage.spin_per_m,
                 speed_mps,
-                mu0: mu,
+                mu0: f64::NAN,
             },
             &self.cfg.polach.params(),
         )
-        .t_over_q
     }
 
     fn emit_pulse(

@@ -1392,9 +1392,9 @@ impl Engine {
         self.fill_mu(record, track, a, &seen, &mut buf.mu);
         self.work[track].observed.mass_kg = seen;
         let observed = &self.work[track].observed;
+        let contact = self.adhesion_contact(&wheel, record.passage.speed_mps);
         for (&mu, &wheel_mass_kg) in buf.mu.iter().zip(&observed.wheel_mass_kg) {
-            buf.adhesion
-                .push(self.adhesion(&wheel, record.passage.speed_mps, mu));
+            buf.adhesion.push(contact.forces(mu).t_over_q);
             buf.wheel_mass_kg.push(wheel_mass_kg);
         }
         let info = &self.track_info[track];

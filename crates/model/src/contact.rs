@@ -478,85 +478,158 @@ pub struct PolachForces {
 /// finite. A contact without friction (`mu_w = 0`) transmits no force and is
 /// returned as such instead of dividing by zero.
 pub fn polach(input: &PolachInput, params: &PolachParams) -> PolachForces {
-    let PolachInput {
-        q_n,
-        a_m,
-        b_m,
-        g_pa,
-        kalker,
-        sx,
-        sy,
-        psi_per_m,
-        speed_mps,
-        mu0,
-    } = *input;
+    PolachContact::new(input, params).forces(input.mu0)
+}
 
-    // Step 1: the sliding creepage, with spin where it adds to sy.
-    let s = sx.hypot(sy);
-    let sy_spin = sy + psi_per_m * a_m;
-    let s_yc = if sy_spin.abs() > sy.abs() {
-        sy_spin
-    } else {
-        sy
-    };
-    let s_c = sx.hypot(s_yc);
+/// [`polach`] for one contact whose `mu0` varies: what does not depend on
+/// `mu0` computed once (the engine takes a wheel's adhesion at every grid
+/// point of a snapshot, each point with its own mu). [`PolachContact::forces`]
+/// runs the same operations in the same order as the steps above, so the
+/// forces are those of [`polach`] bit for bit ([`polach`] is this).
+#[derive(Debug, Clone, Copy)]
+pub struct PolachContact {
+    q_n: f64,
+    sx: f64,
+    sy: f64,
+    psi_per_m: f64,
+    s_c: f64,
+    /// Step 2: `(1 - pA) exp(-pB w) + pA`, mu_w over mu0.
+    slip_factor: f64,
+    /// Step 3: `G pi a b c_jj s_C` and `4 Q`.
+    eps_numerator: f64,
+    four_q: f64,
+    /// Step 4: `2 Q`, kA and kS.
+    two_q: f64,
+    k_a: f64,
+    k_s: f64,
+    /// Step 5: `k_spin`, `(8/3) G b sqrt(a b) c23 |s_yC|` and `-(9/16) a Q`.
+    k_spin: f64,
+    eps_m_numerator: f64,
+    spin_force_factor: f64,
+}
 
-    // Step 2: friction at the slip velocity.
-    let w_mps = speed_mps * s_c;
-    let mu_slip = mu0 * ((1.0 - params.p_a) * (-params.p_b_s_per_m * w_mps).exp() + params.p_a);
+impl PolachContact {
+    /// Steps 1 to 5 as far as they do not need `mu0` (`input.mu0` unused).
+    pub fn new(input: &PolachInput, params: &PolachParams) -> Self {
+        let PolachInput {
+            q_n,
+            a_m,
+            b_m,
+            g_pa,
+            kalker,
+            sx,
+            sy,
+            psi_per_m,
+            speed_mps,
+            mu0: _,
+        } = *input;
 
-    if s_c == 0.0 || mu_slip == 0.0 {
-        return PolachForces {
-            mu_slip,
-            eps: 0.0,
-            eps_m: 0.0,
-            fx_n: 0.0,
-            fy_n: 0.0,
-            t_over_q: 0.0,
+        // Step 1: the sliding creepage, with spin where it adds to sy.
+        let s = sx.hypot(sy);
+        let sy_spin = sy + psi_per_m * a_m;
+        let s_yc = if sy_spin.abs() > sy.abs() {
+            sy_spin
+        } else {
+            sy
         };
+        let s_c = sx.hypot(s_yc);
+
+        // Step 2: friction at the slip velocity, over mu0.
+        let w_mps = speed_mps * s_c;
+        let slip_factor = (1.0 - params.p_a) * (-params.p_b_s_per_m * w_mps).exp() + params.p_a;
+
+        // Step 3: the gradient of tangential stress in the area of adhesion.
+        let c_jj = if s == 0.0 {
+            0.0
+        } else {
+            (kalker.c11 * sx / s).hypot(kalker.c22 * sy / s)
+        };
+
+        Self {
+            q_n,
+            sx,
+            sy,
+            psi_per_m,
+            s_c,
+            slip_factor,
+            eps_numerator: g_pa * PI * a_m * b_m * c_jj * s_c,
+            four_q: 4.0 * q_n,
+            two_q: 2.0 * q_n,
+            k_a: params.k_a,
+            k_s: params.k_s,
+            k_spin: 1.0 + 6.3 * (1.0 - (-a_m / b_m).exp()),
+            eps_m_numerator: 8.0 / 3.0 * g_pa * b_m * (a_m * b_m).sqrt() * kalker.c23 * s_yc.abs(),
+            spin_force_factor: -9.0 / 16.0 * a_m * q_n,
+        }
     }
 
-    // Step 3: the gradient of tangential stress in the area of adhesion.
-    let c_jj = if s == 0.0 {
-        0.0
-    } else {
-        (kalker.c11 * sx / s).hypot(kalker.c22 * sy / s)
-    };
-    let eps = g_pa * PI * a_m * b_m * c_jj * s_c / (4.0 * q_n * mu_slip);
+    /// The forces at `mu0`: steps 2 to 6.
+    pub fn forces(&self, mu0: f64) -> PolachForces {
+        let Self {
+            q_n,
+            sx,
+            sy,
+            psi_per_m,
+            s_c,
+            slip_factor,
+            eps_numerator,
+            four_q,
+            two_q,
+            k_a,
+            k_s,
+            k_spin,
+            eps_m_numerator,
+            spin_force_factor,
+        } = *self;
 
-    // Step 4: the creep force of longitudinal and lateral creepage.
-    let ka_eps = params.k_a * eps;
-    let f_n =
-        2.0 * q_n * mu_slip / PI * (ka_eps / (1.0 + ka_eps * ka_eps) + (params.k_s * eps).atan());
-    let fx_n = f_n * sx / s_c;
-    let fy_n = f_n * sy / s_c;
+        // Step 2.
+        let mu_slip = mu0 * slip_factor;
 
-    // Step 5: the lateral force of spin.
-    let k_spin = 1.0 + 6.3 * (1.0 - (-a_m / b_m).exp());
-    let eps_m = 8.0 / 3.0 * g_pa * b_m * (a_m * b_m).sqrt() * kalker.c23 * s_yc.abs()
-        / (q_n * mu_slip * k_spin);
-    // delta = (eps_M^2 - 1)/(eps_M^2 + 1) enters K_M only through 1 - delta
-    // and 1 + delta, and the cubic factors as
-    //   delta^3/3 - delta^2/2 + 1/6 = (1 - delta)^2 (1 + 2 delta) / 6,
-    // so K_M is evaluated in that form: identical to step 5, but it keeps
-    // its precision as delta -> 1 (large spin) instead of cancelling, and
-    // eps_M^2 overflowing to infinity gives the limit K_M = 0, not NaN.
-    let one_minus_delta = 2.0 / (eps_m * eps_m + 1.0);
-    let one_plus_delta = 2.0 - one_minus_delta;
-    let one_plus_two_delta = 3.0 - 2.0 * one_minus_delta;
-    let k_m = eps_m.abs() * one_minus_delta * one_minus_delta * one_plus_two_delta / 6.0
-        - (one_minus_delta * one_plus_delta).powi(3).sqrt() / 3.0;
-    let fy_spin_n = -9.0 / 16.0 * a_m * q_n * mu_slip * k_m * k_spin * psi_per_m / s_c;
-    let fy_total_n = fy_n + fy_spin_n;
+        if s_c == 0.0 || mu_slip == 0.0 {
+            return PolachForces {
+                mu_slip,
+                eps: 0.0,
+                eps_m: 0.0,
+                fx_n: 0.0,
+                fy_n: 0.0,
+                t_over_q: 0.0,
+            };
+        }
 
-    // Step 6: the coefficient of adhesion.
-    PolachForces {
-        mu_slip,
-        eps,
-        eps_m,
-        fx_n,
-        fy_n: fy_total_n,
-        t_over_q: fx_n.hypot(fy_total_n) / q_n,
+        // Step 3.
+        let eps = eps_numerator / (four_q * mu_slip);
+
+        // Step 4: the creep force of longitudinal and lateral creepage.
+        let ka_eps = k_a * eps;
+        let f_n = two_q * mu_slip / PI * (ka_eps / (1.0 + ka_eps * ka_eps) + (k_s * eps).atan());
+        let fx_n = f_n * sx / s_c;
+        let fy_n = f_n * sy / s_c;
+
+        // Step 5: the lateral force of spin.
+        let eps_m = eps_m_numerator / (q_n * mu_slip * k_spin);
+        // delta = (eps_M^2 - 1)/(eps_M^2 + 1) enters K_M only through 1 - delta
+        // and 1 + delta, and the cubic factors as
+        //   delta^3/3 - delta^2/2 + 1/6 = (1 - delta)^2 (1 + 2 delta) / 6,
+        // so K_M is evaluated in that form: identical to step 5, but it keeps
+        // its precision as delta -> 1 (large spin) instead of cancelling, and
+        // eps_M^2 overflowing to infinity gives the limit K_M = 0, not NaN.
+        let one_minus_delta = 2.0 / (eps_m * eps_m + 1.0);
+        let one_plus_delta = 2.0 - one_minus_delta;
+        let one_plus_two_delta = 3.0 - 2.0 * one_minus_delta;
+        let k_m = eps_m.abs() * one_minus_delta * one_minus_delta * one_plus_two_delta / 6.0
+            - (one_minus_delta * one_plus_delta).powi(3).sqrt() / 3.0;
+        let fy_spin_n = spin_force_factor * mu_slip * k_m * k_spin * psi_per_m / s_c;
+        let fy_total_n = fy_n + fy_spin_n;
+
+        // Step 6: the coefficient of adhesion.
+        PolachForces {
+            mu_slip,
+            eps,
+            eps_m,
+            fx_n,
+            fy_n: fy_total_n,
+            t_over_q: fx_n.hypot(fy_total_n) / q_n,
+        }
     }
 }
 
