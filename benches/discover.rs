@@ -59,6 +59,8 @@ fn case(dir: &std::path::Path, name: &str, hidden: &str) -> DiscoverArgs {
 }
 
 fn discover_3_days(c: &mut Criterion) {
+    // As the command line: this thread is one of rayon's.
+    tortwin_studies::jobs::join_rayon_pool();
     let dir = tempfile::tempdir().expect("a temporary directory");
     let ageing = case(dir.path(), "ageing", "rail_ageing:tau_s=7200");
     let nozzle = case(

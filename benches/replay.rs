@@ -22,6 +22,8 @@ fn args(recording: PathBuf, out: &std::path::Path) -> ReplayArgs {
 }
 
 fn replay_with_outputs(c: &mut Criterion) {
+    // As the command line: this thread is one of rayon's.
+    tortwin_studies::jobs::join_rayon_pool();
     let mut group = c.benchmark_group("replay");
     group.sample_size(10);
     let out = tempfile::tempdir().expect("a temporary directory");

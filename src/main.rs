@@ -60,14 +60,7 @@ enum Command {
 }
 
 fn main() -> ExitCode {
-    // The engine runs on this thread and hands a train's tracks to rayon:
-    // as one of the pool's threads it rolls a track itself and takes the
-    // other too when no worker is free (both cores are busy with the
-    // outputs), instead of waiting for a worker to wake up and be
-    // scheduled. If a pool exists already, rayon's default serves.
-    let _ = rayon::ThreadPoolBuilder::new()
-        .use_current_thread()
-        .build_global();
+    tortwin_studies::jobs::join_rayon_pool();
     match run(Cli::parse().command) {
         Ok(()) => ExitCode::SUCCESS,
         Err(err) => {

@@ -20,6 +20,20 @@ use tortwin_model::error::ConfigError;
 
 use crate::{Error, Result};
 
+/// Makes the calling thread one of the threads of rayon's global pool (if
+/// no pool has been made yet), as the command line does first thing. The
+/// engine runs on the calling thread and hands a train's tracks to rayon:
+/// as one of the pool's threads it rolls a track itself and takes the
+/// other too when no worker is free (both cores busy with the outputs),
+/// instead of waiting for a worker to wake and be scheduled. Call it from
+/// the thread that will run the jobs, before any other use of rayon.
+pub fn join_rayon_pool() {
+    // An existing pool (made by the application) is kept as it is.
+    let _ = rayon::ThreadPoolBuilder::new()
+        .use_current_thread()
+        .build_global();
+}
+
 /// Where a job's model configuration comes from: the keys it changes are
 /// overlaid on the built-in defaults.
 #[derive(Debug, Clone, PartialEq, Eq)]
