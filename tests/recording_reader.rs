@@ -947,3 +947,69 @@ fn corrupt_chunk() {
         }
     }
 }
+
+/// The layout pass reads chunks a few at a time in parallel: the error is
+/// still the first bad chunk's in file order, and a bad chunk comes before a
+/// cut-short record after it.
+#[test]
+fn the_first_bad_chunk_in_file_order_is_the_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("recording.mcap");
+    write_recording(&path, &base(), Layout::ChunkPerMessage);
+    let bytes = std::fs::read(&path).unwrap();
+    let chunks: Vec<(usize, usize)> = top_level_records(&bytes)
+        .iter()
+        .filter(|(opcode, _, _)| *opcode == 0x06)
+        .map(|&(_, offset, len)| (offset, len))
+        .collect();
+    assert!(chunks.len() >= 9, "{} chunks", chunks.len());
+    // A chunk's CRC is bytes 24..28 of its body.
+    let break_crc = |bytes: &mut Vec<u8>, k: usize| bytes[chunks[k].0 + 9 + 24] ^= 0xff;
+    let bad = dir.path().join("bad.mcap");
+    // Four chunks are read ahead at most: (4, 5) and (5, 6) are both still
+    // waiting when the overlong record is met.
+    for (first, later) in [(1, 6), (2, 3), (4, 5), (5, 6), (0, 7)] {
+        let mut broken = bytes.clone();
+        break_crc(&mut broken, first);
+        break_crc(&mut broken, later);
+        std::fs::write(&bad, &broken).unwrap();
+        let err = RecordingReader::open(&bad, ReaderContext::default())
+            .err()
+            .expect("a broken chunk is refused");
+        let text = err.to_string();
+        assert!(
+            text.contains(&format!("unreadable chunk at byte {}:", chunks[first].0)),
+            "chunks {first} and {later} broken: {text}"
+        );
+        // A record after the later chunk claiming more bytes than the file
+        // has: the broken chunk is still the error.
+        std::fs::write(&bad, overlong_record_after(&broken, chunks[later])).unwrap();
+        let err = RecordingReader::open(&bad, ReaderContext::default())
+            .err()
+            .expect("a broken chunk is refused");
+        assert!(
+            err.to_string()
+                .contains(&format!("unreadable chunk at byte {}:", chunks[first].0)),
+            "{err}"
+        );
+    }
+    // Only the overlong record: it is the error.
+    std::fs::write(&bad, overlong_record_after(&bytes, chunks[6])).unwrap();
+    let err = RecordingReader::open(&bad, ReaderContext::default())
+        .err()
+        .expect("a corrupt record is refused");
+    assert!(
+        err.to_string().contains("past the end of the file"),
+        "{err}"
+    );
+}
+
+/// The file up to the end of the chunk at (offset, body length), then a
+/// Message Index record claiming a megabyte, then the closing magic.
+fn overlong_record_after(bytes: &[u8], (offset, len): (usize, usize)) -> Vec<u8> {
+    let mut out = bytes[..offset + 9 + len].to_vec();
+    out.push(0x07);
+    out.extend_from_slice(&(1u64 << 20).to_le_bytes());
+    out.extend_from_slice(&bytes[bytes.len() - 8..]);
+    out
+}
