@@ -7,6 +7,7 @@ use std::sync::Arc;
 use super::generic::{GenericSet, When, Which};
 use super::weather::WeatherState;
 use super::weather::WeatherTimeline;
+use super::weather::SECONDS_PER_HOUR;
 use super::{
     enters_at_zero, Engine, EngineError, PointEvent, PointEventKind, SnapshotKind, Totals,
     TrackState, TrainRecord, NO_APPLICATOR,
@@ -332,7 +333,13 @@ unsafe fn div4_avx(a: [f64; LANES], b: [f64; LANES]) -> [f64; LANES] {
 /// (model.md, computed in that form).
 #[inline(always)]
 fn wheel_time_s(t_passage_s: f64, d_m: f64, d_entry_m: f64, offset_m: f64, speed_mps: f64) -> f64 {
-    t_passage_s + ((d_m - d_entry_m).abs() + offset_m) / speed_mps
+    t_passage_s + wheel_path_m(d_m, d_entry_m, offset_m) / speed_mps
+}
+
+/// How far a wheel has come to reach a point: `|d - d_entry| + offset`.
+#[inline(always)]
+fn wheel_path_m(d_m: f64, d_entry_m: f64, offset_m: f64) -> f64 {
+    (d_m - d_entry_m).abs() + offset_m
 }
 
 /// Reused buffers for the field snapshots.
@@ -938,26 +945,19 @@ impl RollContext<'_> {
     ) -> [Touch<'_>; LANES] {
         use std::array::from_fn;
         let r = |j: usize| &lanes[j].roller;
-        // wheel_time_s: t_passage + (|d - d_entry| + offset) / v.
-        let path: [f64; LANES] =
-            from_fn(|j| (self.d_m[is[j]] - r(j).d_entry_m).abs() + r(j).offset_m);
+        // wheel_time_s, the division four at once.
+        let path = from_fn(|j| wheel_path_m(self.d_m[is[j]], r(j).d_entry_m, r(j).offset_m));
         let q = div4(path, from_fn(|j| r(j).speed_mps));
         let t: [f64; LANES] = from_fn(|j| r(j).t_passage_s + q[j]);
-        let weather: [&super::weather::WeatherState; LANES] = from_fn(|j| self.timeline.at(t[j]));
-        // WeatherState::precip_mm_at: P + rate (t - t_k) / 3600, or 0
-        // before the first message.
-        let accrued = div4(
-            from_fn(|j| match weather[j].since_s {
-                Some(t_k) => weather[j].current.precipitation_mm_h * (t[j] - t_k),
-                None => 0.0,
-            }),
-            [3600.0; LANES],
+        let weather: [&WeatherState; LANES] = from_fn(|j| self.timeline.at(t[j]));
+        // WeatherState::precip_mm_at, likewise.
+        let parts = from_fn(|j| weather[j].precip_parts(t[j]));
+        let rises = div4(
+            parts.map(|p| p.map_or(0.0, |(_, rise)| rise)),
+            [SECONDS_PER_HOUR; LANES],
         );
         from_fn(|j| {
-            let precip_mm = match weather[j].since_s {
-                Some(_) => weather[j].precip_at_since_mm + accrued[j],
-                None => 0.0,
-            };
+            let precip_mm = parts[j].map_or(0.0, |(at_since, _)| at_since + rises[j]);
             r(j).touch_at(state, t[j], weather[j], precip_mm, is[j])
         })
     }

@@ -10,6 +10,9 @@ use serde::{Deserialize, Serialize};
 
 use tortwin_recording::Weather;
 
+/// Precipitation rates are per hour, times in seconds.
+pub(crate) const SECONDS_PER_HOUR: f64 = 3600.0;
+
 /// The weather state carried from message to message (and day to day).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct WeatherState {
@@ -37,12 +40,21 @@ impl WeatherState {
     /// message P is 0 and the rate is the default 0.
     #[inline]
     pub fn precip_mm_at(&self, t_s: f64) -> f64 {
-        match self.since_s {
-            Some(t_k) => {
-                self.precip_at_since_mm + self.current.precipitation_mm_h * (t_s - t_k) / 3600.0
-            }
-            None => 0.0,
-        }
+        self.precip_parts(t_s)
+            .map_or(0.0, |(at_since, rise)| at_since + rise / SECONDS_PER_HOUR)
+    }
+
+    /// `P(t_k)` and `rate_k * (t - t_k)` (mm s/h), from which
+    /// [`WeatherState::precip_mm_at`] makes `P(t)`; `None` before the first
+    /// message. (The wavefront divides four lanes' rises at once.)
+    #[inline]
+    pub(crate) fn precip_parts(&self, t_s: f64) -> Option<(f64, f64)> {
+        self.since_s.map(|t_k| {
+            (
+                self.precip_at_since_mm,
+                self.current.precipitation_mm_h * (t_s - t_k),
+            )
+        })
     }
 
     /// The state after a message at `t_s` (message by message accumulation).
