@@ -133,7 +133,8 @@ impl RecordingReader {
             )));
         }
         queue.check_json(&first)?;
-        let msg: SectionMsg = decode::parse(&first.data).map_err(|e| at_first(e.message))?;
+        let msg: SectionMsg =
+            decode::parse(first.data.as_slice()).map_err(|e| at_first(e.message))?;
         if let Some(second) = layout.sections.get(1) {
             return Err(InputError::at(
                 path,
@@ -458,7 +459,7 @@ impl Iterator for RawMessages {
             log_time_ns: message.key.log_time_ns,
             publish_time_ns: message.publish_time_ns,
             index_in_file: message.key.index_in_file,
-            data: message.data,
+            data: message.data.as_slice().to_vec(),
         }))
     }
 }

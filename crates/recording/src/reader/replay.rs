@@ -3,10 +3,13 @@
 //!
 //! Chunks wait in order of `message_start_time`. A chunk is decompressed
 //! only when the frontier reaches it (its start time is not later than the
-//! earliest message already in hand), and its messages go into a heap keyed
-//! by (log_time, topic, index in file); the index of a chunk's k-th message
-//! is the number of messages before the chunk plus k. Only chunks whose time
-//! ranges overlap the frontier are in memory at once.
+//! earliest message already in hand); its messages, keyed by (log_time,
+//! topic, index in file), are put in that order (most writers write them so
+//! already) and the chunk is merged with the others in hand as a run: a
+//! heap of runs, not of messages. The index of a chunk's k-th message is
+//! the number of messages before the chunk plus k. A chunk's messages keep
+//! their bytes in one buffer, shared by the messages handed out. Only chunks
+//! whose time ranges overlap the frontier are in memory at once.
 //!
 //! Messages outside chunks (an unchunked file) come in runs (see
 //! [`LooseRun`]): the runs wait in order of their first message and are
@@ -19,7 +22,9 @@ use std::cmp::{Ordering, Reverse};
 use std::collections::{BinaryHeap, HashMap};
 use std::fs::File;
 use std::io::BufReader;
+use std::ops::Range;
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
 use mcap::records::{op, Record};
 
@@ -38,7 +43,29 @@ pub(super) struct PendingMessage {
     pub channel_id: u16,
     pub sequence: u32,
     pub publish_time_ns: u64,
-    pub data: Vec<u8>,
+    pub data: MessageData,
+}
+
+/// A message's bytes: a range of its chunk's buffer (or of a buffer of its
+/// own), shared rather than copied.
+#[derive(Debug, Clone)]
+pub(super) struct MessageData {
+    buffer: Arc<Vec<u8>>,
+    range: Range<usize>,
+}
+
+impl MessageData {
+    fn whole(bytes: Vec<u8>) -> Self {
+        let range = 0..bytes.len();
+        Self {
+            buffer: Arc::new(bytes),
+            range,
+        }
+    }
+
+    pub(super) fn as_slice(&self) -> &[u8] {
+        &self.buffer[self.range.clone()]
+    }
 }
 
 impl PartialEq for PendingMessage {
@@ -69,11 +96,70 @@ pub(super) struct ReplayQueue {
     waiting_runs: Vec<LooseRun>,
     /// Runs started: each with its next message in hand.
     active_runs: BinaryHeap<Reverse<RunHead>>,
-    /// Messages of decompressed chunks not yet replayed.
-    ready: BinaryHeap<Reverse<PendingMessage>>,
+    /// Decompressed chunks with messages not yet replayed.
+    ready: BinaryHeap<Reverse<ChunkRun>>,
     /// Whether messages on topics tortwin does not read keep their data
     /// (outside chunks they are otherwise not read at all).
     keep_unknown: bool,
+}
+
+/// A decompressed chunk: its messages in replay order, the next one at
+/// `next` (there is always one: a chunk leaves the heap with its last).
+#[derive(Debug)]
+struct ChunkRun {
+    buffer: Arc<Vec<u8>>,
+    messages: Vec<ChunkMessage>,
+    next: usize,
+}
+
+/// A message of a [`ChunkRun`]: its bytes are `range` of the chunk's buffer.
+#[derive(Debug)]
+struct ChunkMessage {
+    key: ReplayKey,
+    channel_id: u16,
+    sequence: u32,
+    publish_time_ns: u64,
+    range: Range<usize>,
+}
+
+impl ChunkRun {
+    fn head(&self) -> ReplayKey {
+        self.messages[self.next].key
+    }
+
+    /// Hands out the next message; `false` once it was the last.
+    fn take(&mut self) -> (PendingMessage, bool) {
+        let m = &self.messages[self.next];
+        let message = PendingMessage {
+            key: m.key,
+            channel_id: m.channel_id,
+            sequence: m.sequence,
+            publish_time_ns: m.publish_time_ns,
+            data: MessageData {
+                buffer: Arc::clone(&self.buffer),
+                range: m.range.clone(),
+            },
+        };
+        self.next += 1;
+        (message, self.next < self.messages.len())
+    }
+}
+
+impl PartialEq for ChunkRun {
+    fn eq(&self, other: &Self) -> bool {
+        self.head() == other.head()
+    }
+}
+impl Eq for ChunkRun {}
+impl PartialOrd for ChunkRun {
+    fn partial_cmp(&self, other: &Self) -> Option<Ordering> {
+        Some(self.cmp(other))
+    }
+}
+impl Ord for ChunkRun {
+    fn cmp(&self, other: &Self) -> Ordering {
+        self.head().cmp(&other.head())
+    }
 }
 
 /// A started run: its next message, and where the one after it is.
@@ -123,7 +209,7 @@ impl ReplayQueue {
 
     /// The earliest message in hand.
     fn in_hand(&self) -> Option<ReplayKey> {
-        let chunked = self.ready.peek().map(|Reverse(m)| m.key);
+        let chunked = self.ready.peek().map(|Reverse(c)| c.head());
         let loose = self.active_runs.peek().map(|Reverse(r)| r.message.key);
         match (chunked, loose) {
             (Some(a), Some(b)) => Some(a.min(b)),
@@ -167,12 +253,19 @@ impl ReplayQueue {
             break;
         }
         let take_loose = match (self.ready.peek(), self.active_runs.peek()) {
-            (Some(Reverse(m)), Some(Reverse(r))) => r.message.key < m.key,
+            (Some(Reverse(c)), Some(Reverse(r))) => r.message.key < c.head(),
             (None, Some(_)) => true,
             (_, None) => false,
         };
         if !take_loose {
-            return Ok(self.ready.pop().map(|Reverse(m)| m));
+            let Some(mut chunk) = self.ready.peek_mut() else {
+                return Ok(None);
+            };
+            let (message, more) = chunk.0.take();
+            if !more {
+                std::collections::binary_heap::PeekMut::pop(chunk);
+            }
+            return Ok(Some(message));
         }
         let Some(Reverse(head)) = self.active_runs.pop() else {
             return Ok(None);
@@ -201,9 +294,12 @@ impl ReplayQueue {
             ))
         })?;
         let mut next_index = chunk.first_index;
-        let mut messages = Vec::new();
+        let mut messages = Vec::with_capacity(usize::try_from(chunk.message_count).unwrap_or(0));
+        let mut buffer = Vec::new();
         let channels = &self.channels;
         let counted = chunk_header(&record).and_then(|header| {
+            // The messages' bytes are most of the chunk.
+            buffer.reserve(usize::try_from(header.uncompressed_size).unwrap_or(0));
             for_each_chunk_record(&record, &header, |opcode, body| {
                 let Record::Message { header, data } = record::parse(opcode, body)? else {
                     return Ok(());
@@ -211,7 +307,9 @@ impl ReplayQueue {
                 let topic = channels
                     .get(&header.channel_id)
                     .map_or(TopicRank::Unknown, |c| TopicRank::of(&c.topic));
-                messages.push(PendingMessage {
+                let start = buffer.len();
+                buffer.extend_from_slice(&data);
+                messages.push(ChunkMessage {
                     key: ReplayKey {
                         log_time_ns: header.log_time,
                         topic,
@@ -220,7 +318,7 @@ impl ReplayQueue {
                     channel_id: header.channel_id,
                     sequence: header.sequence,
                     publish_time_ns: header.publish_time,
-                    data: data.into_owned(),
+                    range: start..buffer.len(),
                 });
                 next_index += 1;
                 Ok(())
@@ -240,7 +338,18 @@ impl ReplayQueue {
                 next_index - chunk.first_index
             )));
         }
-        self.ready.extend(messages.into_iter().map(Reverse));
+        if messages.is_empty() {
+            return Ok(());
+        }
+        // Keys are unique (the index is): any sort gives the one order.
+        if !messages.is_sorted_by_key(|m| m.key) {
+            messages.sort_unstable_by_key(|m| m.key);
+        }
+        self.ready.push(Reverse(ChunkRun {
+            buffer: Arc::new(buffer),
+            messages,
+            next: 0,
+        }));
         Ok(())
     }
 
@@ -296,7 +405,7 @@ impl ReplayQueue {
                     channel_id: header.channel_id,
                     sequence: header.sequence,
                     publish_time_ns: header.publish_time,
-                    data,
+                    data: MessageData::whole(data),
                 },
                 next_offset,
                 remaining: count - 1,
