@@ -9,7 +9,9 @@
 //! key and file offset. Channel records are kept (a handful). Chunks are
 //! decompressed a few at a time on rayon's threads and added in file order.
 //! Memory: up to four compressed chunk records (32 MiB), one decompressed
-//! chunk per thread, plus a few words per chunk.
+//! chunk per thread, plus a few words per chunk. The first chunks' messages,
+//! up to [`KEPT_CHUNK_BYTES`], are kept for the replay, which would
+//! otherwise decompress them again straight away (all of a short recording).
 //!
 //! This pass plays the part of the summary's chunk indexes, built from the
 //! data section itself rather than trusted from the summary: file order *is*
@@ -27,6 +29,7 @@
 use std::collections::HashMap;
 use std::fs::File;
 use std::io::{BufReader, Read, Seek, SeekFrom};
+use std::ops::Range;
 use std::path::Path;
 
 use mcap::records::{op, Record};
@@ -41,6 +44,10 @@ use crate::topic::Topic;
 /// corrupt size field must not exhaust memory. Documented in
 /// docs/spec/recording-format.md "Limits".
 pub const MAX_CHUNK_BYTES: u64 = 256 << 20;
+
+/// The layout pass keeps the messages of the file's first chunks, while
+/// their uncompressed sizes add up to at most this, for the replay.
+pub const KEPT_CHUNK_BYTES: u64 = 16 << 20;
 
 /// A message of the format (a topic tortwin reads) larger than this is
 /// refused before it is parsed: a `/train/passage` of 10 000 axles is about
@@ -96,6 +103,24 @@ pub(super) struct ChunkInfo {
     /// Index in the file of the chunk's first message.
     pub first_index: u64,
     pub message_count: u64,
+    /// The chunk's messages, if the layout pass kept them.
+    pub kept: Option<ChunkMessages>,
+}
+
+/// A chunk's messages in file order: each one's header and the range of
+/// `bytes` its data is.
+#[derive(Debug, Clone, Default)]
+pub(super) struct ChunkMessages {
+    pub bytes: Vec<u8>,
+    pub messages: Vec<(mcap::records::MessageHeader, Range<usize>)>,
+}
+
+impl ChunkMessages {
+    fn push(&mut self, header: mcap::records::MessageHeader, data: &[u8]) {
+        let start = self.bytes.len();
+        self.bytes.extend_from_slice(data);
+        self.messages.push((header, start..self.bytes.len()));
+    }
 }
 
 /// Messages outside chunks that follow one another in the file (with no
@@ -147,7 +172,7 @@ pub(super) fn scan_layout(path: &Path, file: &mut BufReader<File>) -> Result<Lay
     }
 
     let mut layout = Layout::default();
-    let mut chunks = PendingChunks::default();
+    let mut chunks = PendingChunks::new();
     let walked = walk(path, file, file_len, &mut layout, &mut chunks);
     // A chunk earlier in the file than the record that failed fails first.
     chunks.settle(path, &mut layout)?;
@@ -160,11 +185,13 @@ pub(super) fn scan_layout(path: &Path, file: &mut BufReader<File>) -> Result<Lay
 /// to the layout in file order ([`PendingChunks::settle`]) before any record
 /// after them, so the layout, the message numbers and the first error are
 /// those of a scan one record at a time.
-#[derive(Default)]
 struct PendingChunks {
     /// (file offset, body length, the record whole).
     records: Vec<(u64, u64, Vec<u8>)>,
     message_count: u64,
+    /// Uncompressed bytes still to keep for the replay; 0 from the first
+    /// chunk that does not fit on.
+    keep_left: u64,
 }
 
 impl PendingChunks {
@@ -172,6 +199,14 @@ impl PendingChunks {
     /// are held, and one decompressed chunk per thread.
     const MAX: usize = 4;
     const MAX_BYTES: usize = 32 << 20;
+
+    fn new() -> Self {
+        Self {
+            records: Vec::new(),
+            message_count: 0,
+            keep_left: KEPT_CHUNK_BYTES,
+        }
+    }
 
     fn push(
         &mut self,
@@ -192,14 +227,33 @@ impl PendingChunks {
     fn settle(&mut self, path: &Path, layout: &mut Layout) -> Result<(), InputError> {
         use rayon::prelude::*;
         let records = std::mem::take(&mut self.records);
+        // Which chunks to keep, in file order (a chunk whose header does not
+        // parse fails in read_chunk).
+        let keep: Vec<bool> = records
+            .iter()
+            .map(|(_, _, r)| {
+                let size = chunk_header(r).map_or(u64::MAX, |h| h.uncompressed_size);
+                let fits = size <= self.keep_left;
+                self.keep_left = if fits { self.keep_left - size } else { 0 };
+                fits
+            })
+            .collect();
         let contents: Vec<Result<ChunkContents, String>> = if records.len() > 1 {
-            records.par_iter().map(|(_, _, r)| read_chunk(r)).collect()
+            records
+                .par_iter()
+                .zip(&keep)
+                .map(|((_, _, r), &keep)| read_chunk(r, keep))
+                .collect()
         } else {
-            records.iter().map(|(_, _, r)| read_chunk(r)).collect()
+            records
+                .iter()
+                .zip(&keep)
+                .map(|((_, _, r), &keep)| read_chunk(r, keep))
+                .collect()
         };
         for ((offset, body_len, _), contents) in records.into_iter().zip(contents) {
             let first_index = self.message_count;
-            let message_start_time = contents
+            let (message_start_time, kept) = contents
                 .and_then(|c| add_chunk(c, layout, &mut self.message_count))
                 .map_err(|e| {
                     InputError::file(path, format!("unreadable chunk at byte {offset}: {e}"))
@@ -210,6 +264,7 @@ impl PendingChunks {
                 message_start_time,
                 first_index,
                 message_count: self.message_count - first_index,
+                kept,
             });
         }
         Ok(())
@@ -331,6 +386,7 @@ struct ChunkContents {
     message_start_time: u64,
     message_end_time: u64,
     records: Vec<ChunkEntry>,
+    kept: Option<ChunkMessages>,
 }
 
 enum ChunkEntry {
@@ -341,9 +397,9 @@ enum ChunkEntry {
     },
 }
 
-/// Reads a chunk record (given whole): what fails here fails whatever came
-/// before the chunk.
-fn read_chunk(record: &[u8]) -> Result<ChunkContents, String> {
+/// Reads a chunk record (given whole), keeping its messages if `keep`:
+/// what fails here fails whatever came before the chunk.
+fn read_chunk(record: &[u8], keep: bool) -> Result<ChunkContents, String> {
     let header = chunk_header(record)?;
     if header.uncompressed_size > MAX_CHUNK_BYTES {
         return Err(format!(
@@ -352,13 +408,19 @@ fn read_chunk(record: &[u8]) -> Result<ChunkContents, String> {
         ));
     }
     let mut records = Vec::new();
+    let mut kept = keep.then(ChunkMessages::default);
     for_each_chunk_record(record, &header, |opcode, body| {
         match record::parse(opcode, body)? {
             Record::Channel(channel) => records.push(ChunkEntry::Channel(channel)),
-            Record::Message { header, data } => records.push(ChunkEntry::Message {
-                header,
-                data_len: data.len() as u64,
-            }),
+            Record::Message { header, data } => {
+                if let Some(kept) = &mut kept {
+                    kept.push(header, &data);
+                }
+                records.push(ChunkEntry::Message {
+                    header,
+                    data_len: data.len() as u64,
+                });
+            }
             _ => {}
         }
         Ok(())
@@ -367,16 +429,34 @@ fn read_chunk(record: &[u8]) -> Result<ChunkContents, String> {
         message_start_time: header.message_start_time,
         message_end_time: header.message_end_time,
         records,
+        kept,
     })
 }
 
+/// The messages of a chunk record (given whole), decompressed.
+pub(super) fn chunk_messages(record: &[u8]) -> Result<ChunkMessages, String> {
+    let header = chunk_header(record)?;
+    let mut kept = ChunkMessages::default();
+    // The messages' bytes are most of the chunk.
+    kept.bytes
+        .reserve(usize::try_from(header.uncompressed_size.min(MAX_CHUNK_BYTES)).unwrap_or(0));
+    for_each_chunk_record(record, &header, |opcode, body| {
+        if let Record::Message { header, data } = record::parse(opcode, body)? {
+            kept.push(header, &data);
+        }
+        Ok(())
+    })?;
+    Ok(kept)
+}
+
 /// Counts a chunk's messages (checking each against the header's time range)
-/// and collects its channels. Returns the chunk's `message_start_time`.
+/// and collects its channels. Returns the chunk's `message_start_time` and
+/// the messages kept.
 fn add_chunk(
     contents: ChunkContents,
     layout: &mut Layout,
     message_count: &mut u64,
-) -> Result<u64, String> {
+) -> Result<(u64, Option<ChunkMessages>), String> {
     let (start, end) = (contents.message_start_time, contents.message_end_time);
     let mut failure: Option<String> = None;
     for entry in contents.records {
@@ -405,7 +485,7 @@ fn add_chunk(
     }
     match failure {
         Some(e) => Err(e),
-        None => Ok(start),
+        None => Ok((start, contents.kept)),
     }
 }
 

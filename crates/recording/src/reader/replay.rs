@@ -26,14 +26,12 @@ use std::ops::Range;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
-use mcap::records::{op, Record};
+use mcap::records::op;
 
 use super::layout::{
-    chunk_header, for_each_chunk_record, message_header, read_at, read_exact_vec, record_frame,
-    ChannelInfo, ChunkInfo, LooseRun, ReplayKey, TopicRank, MAX_MESSAGE_BYTES,
-    MESSAGE_HEADER_BYTES, RECORD_HEADER_BYTES,
+    chunk_messages, message_header, read_at, read_exact_vec, record_frame, ChannelInfo, ChunkInfo,
+    LooseRun, ReplayKey, TopicRank, MAX_MESSAGE_BYTES, MESSAGE_HEADER_BYTES, RECORD_HEADER_BYTES,
 };
-use super::record;
 use crate::error::{InputError, MessageLocation};
 
 /// A message taken out of its record, waiting for its turn.
@@ -230,7 +228,7 @@ impl ReplayQueue {
                 .is_some_and(|c| in_hand.is_none_or(|key| c.message_start_time <= key.log_time_ns));
             if chunk_due {
                 if let Some(chunk) = self.waiting_chunks.pop() {
-                    self.load_chunk(&chunk)?;
+                    self.load_chunk(chunk)?;
                 }
                 continue;
             }
@@ -281,63 +279,54 @@ impl ReplayQueue {
         Ok(Some(head.message))
     }
 
-    fn load_chunk(&mut self, chunk: &ChunkInfo) -> Result<(), InputError> {
-        let record = read_at(
-            &mut self.file,
-            chunk.record_offset,
-            RECORD_HEADER_BYTES + chunk.body_len,
-        )
-        .map_err(|e| {
-            self.corrupt(format!(
-                "cannot read the chunk at byte {}: {e}",
-                chunk.record_offset
-            ))
-        })?;
-        let mut next_index = chunk.first_index;
-        let mut messages = Vec::with_capacity(usize::try_from(chunk.message_count).unwrap_or(0));
-        let mut buffer = Vec::new();
-        let channels = &self.channels;
-        let counted = chunk_header(&record).and_then(|header| {
-            // The messages' bytes are most of the chunk.
-            buffer.reserve(usize::try_from(header.uncompressed_size).unwrap_or(0));
-            for_each_chunk_record(&record, &header, |opcode, body| {
-                let Record::Message { header, data } = record::parse(opcode, body)? else {
-                    return Ok(());
-                };
-                let topic = channels
-                    .get(&header.channel_id)
-                    .map_or(TopicRank::Unknown, |c| TopicRank::of(&c.topic));
-                let start = buffer.len();
-                buffer.extend_from_slice(&data);
-                messages.push(ChunkMessage {
-                    key: ReplayKey {
-                        log_time_ns: header.log_time,
-                        topic,
-                        index_in_file: next_index,
-                    },
-                    channel_id: header.channel_id,
-                    sequence: header.sequence,
-                    publish_time_ns: header.publish_time,
-                    range: start..buffer.len(),
-                });
-                next_index += 1;
-                Ok(())
-            })
-        });
-        counted.map_err(|e| {
-            self.corrupt(format!(
-                "unreadable chunk at byte {}: {e}",
-                chunk.record_offset
-            ))
-        })?;
-        if next_index - chunk.first_index != chunk.message_count {
+    fn load_chunk(&mut self, chunk: ChunkInfo) -> Result<(), InputError> {
+        let kept = match chunk.kept {
+            Some(kept) => kept,
+            None => {
+                let record = read_at(
+                    &mut self.file,
+                    chunk.record_offset,
+                    RECORD_HEADER_BYTES + chunk.body_len,
+                )
+                .map_err(|e| {
+                    self.corrupt(format!(
+                        "cannot read the chunk at byte {}: {e}",
+                        chunk.record_offset
+                    ))
+                })?;
+                chunk_messages(&record).map_err(|e| {
+                    self.corrupt(format!(
+                        "unreadable chunk at byte {}: {e}",
+                        chunk.record_offset
+                    ))
+                })?
+            }
+        };
+        if kept.messages.len() as u64 != chunk.message_count {
             return Err(self.corrupt(format!(
                 "the chunk at byte {} changed while it was read ({} messages, then {})",
                 chunk.record_offset,
                 chunk.message_count,
-                next_index - chunk.first_index
+                kept.messages.len()
             )));
         }
+        let channels = &self.channels;
+        let mut messages: Vec<ChunkMessage> = (chunk.first_index..)
+            .zip(kept.messages)
+            .map(|(index_in_file, (header, range))| ChunkMessage {
+                key: ReplayKey {
+                    log_time_ns: header.log_time,
+                    topic: channels
+                        .get(&header.channel_id)
+                        .map_or(TopicRank::Unknown, |c| TopicRank::of(&c.topic)),
+                    index_in_file,
+                },
+                channel_id: header.channel_id,
+                sequence: header.sequence,
+                publish_time_ns: header.publish_time,
+                range,
+            })
+            .collect();
         if messages.is_empty() {
             return Ok(());
         }
@@ -346,7 +335,7 @@ impl ReplayQueue {
             messages.sort_unstable_by_key(|m| m.key);
         }
         self.ready.push(Reverse(ChunkRun {
-            buffer: Arc::new(buffer),
+            buffer: Arc::new(kept.bytes),
             messages,
             next: 0,
         }));
