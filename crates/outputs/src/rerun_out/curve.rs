@@ -500,10 +500,11 @@ pub(super) fn simplify(d_m: &[f64], values: &[f64], tolerance: f64) -> Vec<usize
     let mut stack = vec![(0, n - 1)];
     while let Some((a, b)) = stack.pop() {
         let (da, va, db, vb) = (d_m[a], values[a], d_m[b], values[b]);
+        // The line's slope once per segment, not a division per point.
+        let slope = (vb - va) / (db - da);
         let mut worst = (0.0, a);
         for i in a + 1..b {
-            let t = (d_m[i] - da) / (db - da);
-            let off = (values[i] - (va + t * (vb - va))).abs();
+            let off = (values[i] - (va + (d_m[i] - da) * slope)).abs();
             if off > worst.0 || off.is_nan() {
                 worst = (if off.is_nan() { f64::INFINITY } else { off }, i);
             }
