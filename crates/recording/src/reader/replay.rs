@@ -66,20 +66,29 @@ impl MessageData {
     }
 }
 
-impl PartialEq for PendingMessage {
+/// A run in a heap of runs, by the key of its next message: the heap's
+/// top is the run whose next message goes first.
+#[derive(Debug)]
+struct Next<T> {
+    key: ReplayKey,
+    run: T,
+}
+
+impl<T> PartialEq for Next<T> {
     fn eq(&self, other: &Self) -> bool {
         self.key == other.key
     }
 }
-impl Eq for PendingMessage {}
-impl PartialOrd for PendingMessage {
+impl<T> Eq for Next<T> {}
+impl<T> PartialOrd for Next<T> {
     fn partial_cmp(&self, other: &Self) -> Option<Ordering> {
         Some(self.cmp(other))
     }
 }
-impl Ord for PendingMessage {
+impl<T> Ord for Next<T> {
+    /// Reversed: `BinaryHeap` keeps its greatest on top.
     fn cmp(&self, other: &Self) -> Ordering {
-        self.key.cmp(&other.key)
+        other.key.cmp(&self.key)
     }
 }
 
@@ -93,9 +102,9 @@ pub(super) struct ReplayQueue {
     /// Runs of messages outside chunks not yet started, the next one last.
     waiting_runs: Vec<LooseRun>,
     /// Runs started: each with its next message in hand.
-    active_runs: BinaryHeap<Reverse<RunHead>>,
+    active_runs: BinaryHeap<Next<RunHead>>,
     /// Decompressed chunks with messages not yet replayed.
-    ready: BinaryHeap<Reverse<ChunkRun>>,
+    ready: BinaryHeap<Next<ChunkRun>>,
     /// Whether messages on topics tortwin does not read keep their data
     /// (outside chunks they are otherwise not read at all).
     keep_unknown: bool,
@@ -143,25 +152,8 @@ impl ChunkRun {
     }
 }
 
-impl PartialEq for ChunkRun {
-    fn eq(&self, other: &Self) -> bool {
-        self.head() == other.head()
-    }
-}
-impl Eq for ChunkRun {}
-impl PartialOrd for ChunkRun {
-    fn partial_cmp(&self, other: &Self) -> Option<Ordering> {
-        Some(self.cmp(other))
-    }
-}
-impl Ord for ChunkRun {
-    fn cmp(&self, other: &Self) -> Ordering {
-        self.head().cmp(&other.head())
-    }
-}
-
 /// A started run: its next message, and where the one after it is.
-#[derive(Debug, PartialEq, Eq, PartialOrd, Ord)]
+#[derive(Debug)]
 struct RunHead {
     message: PendingMessage,
     /// File offset of the record after `message`'s.
@@ -207,8 +199,8 @@ impl ReplayQueue {
 
     /// The earliest message in hand.
     fn in_hand(&self) -> Option<ReplayKey> {
-        let chunked = self.ready.peek().map(|Reverse(c)| c.head());
-        let loose = self.active_runs.peek().map(|Reverse(r)| r.message.key);
+        let chunked = self.ready.peek().map(|c| c.key);
+        let loose = self.active_runs.peek().map(|r| r.key);
         match (chunked, loose) {
             (Some(a), Some(b)) => Some(a.min(b)),
             (a, b) => a.or(b),
@@ -244,14 +236,17 @@ impl ReplayQueue {
                         run.first.index_in_file,
                         run.message_count,
                     )?;
-                    self.active_runs.push(Reverse(head));
+                    self.active_runs.push(Next {
+                        key: head.message.key,
+                        run: head,
+                    });
                 }
                 continue;
             }
             break;
         }
         let take_loose = match (self.ready.peek(), self.active_runs.peek()) {
-            (Some(Reverse(c)), Some(Reverse(r))) => r.message.key < c.head(),
+            (Some(c), Some(r)) => r.key < c.key,
             (None, Some(_)) => true,
             (_, None) => false,
         };
@@ -259,13 +254,16 @@ impl ReplayQueue {
             let Some(mut chunk) = self.ready.peek_mut() else {
                 return Ok(None);
             };
-            let (message, more) = chunk.0.take();
-            if !more {
+            let (message, more) = chunk.run.take();
+            if more {
+                // The heap puts the chunk back in place when `chunk` drops.
+                chunk.key = chunk.run.head();
+            } else {
                 std::collections::binary_heap::PeekMut::pop(chunk);
             }
             return Ok(Some(message));
         }
-        let Some(Reverse(head)) = self.active_runs.pop() else {
+        let Some(Next { run: head, .. }) = self.active_runs.pop() else {
             return Ok(None);
         };
         if head.remaining > 0 {
@@ -274,7 +272,10 @@ impl ReplayQueue {
                 head.message.key.index_in_file + 1,
                 head.remaining,
             )?;
-            self.active_runs.push(Reverse(next));
+            self.active_runs.push(Next {
+                key: next.message.key,
+                run: next,
+            });
         }
         Ok(Some(head.message))
     }
@@ -334,11 +335,15 @@ impl ReplayQueue {
         if !messages.is_sorted_by_key(|m| m.key) {
             messages.sort_unstable_by_key(|m| m.key);
         }
-        self.ready.push(Reverse(ChunkRun {
+        let run = ChunkRun {
             buffer: Arc::new(kept.bytes),
             messages,
             next: 0,
-        }));
+        };
+        self.ready.push(Next {
+            key: run.head(),
+            run,
+        });
         Ok(())
     }
 
