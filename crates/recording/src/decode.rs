@@ -166,16 +166,22 @@ fn resolve_rail(rails: &[String], name: &str, field: &str) -> Result<usize, Deco
     })
 }
 
-/// A per-rail map as one value per rail of the section, in rail order: it
-/// must name every rail once and no other.
-fn per_rail<T: Copy>(
+/// A per-rail map as one value per rail of the section, in rail order, each
+/// made by `each` from the map's value and the rail's name: the map must
+/// name every rail once and no other (`name()` is the map's field, for the
+/// errors). Allocates only the result.
+fn per_rail<T: Copy, U>(
     map: &PerRail<T>,
     rails: &[String],
-    name: &str,
-) -> Result<Vec<T>, DecodeError> {
-    let mut values: Vec<Option<T>> = vec![None; rails.len()];
-    for (rail, value) in &map.0 {
-        let Some(index) = rails.iter().position(|r| r == rail) else {
+    name: impl Fn() -> String,
+    mut each: impl FnMut(T, &str) -> Result<U, DecodeError>,
+) -> Result<Vec<U>, DecodeError> {
+    // In the map's order: a rail the section lacks, or one named again. A
+    // map of known rails repeats one by its (rails + 1)-th entry at the
+    // latest, so this looks at no more than rails^2 pairs.
+    for (j, (rail, _)) in map.0.iter().enumerate() {
+        if !rails.contains(rail) {
+            let name = name();
             return Err(DecodeError::at(
                 format!("{name}.{rail}"),
                 format!(
@@ -183,27 +189,31 @@ fn per_rail<T: Copy>(
                     rails.join(", ")
                 ),
             ));
-        };
-        if let Some(slot) = values.get_mut(index) {
-            if slot.replace(*value).is_some() {
-                return Err(DecodeError::at(
-                    format!("{name}.{rail}"),
-                    format!("`{name}` names rail `{rail}` twice"),
-                ));
-            }
+        }
+        if map.0[..j].iter().any(|(earlier, _)| earlier == rail) {
+            let name = name();
+            return Err(DecodeError::at(
+                format!("{name}.{rail}"),
+                format!("`{name}` names rail `{rail}` twice"),
+            ));
         }
     }
-    values
-        .into_iter()
-        .zip(rails)
-        .map(|(value, rail)| {
-            value.ok_or_else(|| {
-                DecodeError::at(
-                    format!("{name}.{rail}"),
-                    format!("`{name}` lacks rail `{rail}`"),
-                )
-            })
-        })
+    let value = |rail: &String| map.0.iter().find(|(r, _)| r == rail).map(|(_, v)| *v);
+    let lacks = |rail: &String| {
+        let name = name();
+        DecodeError::at(
+            format!("{name}.{rail}"),
+            format!("`{name}` lacks rail `{rail}`"),
+        )
+    };
+    // Then, in the section's order, a rail the map lacks; only then the
+    // values.
+    if let Some(rail) = rails.iter().find(|rail| value(rail).is_none()) {
+        return Err(lacks(rail));
+    }
+    rails
+        .iter()
+        .map(|rail| value(rail).map_or_else(|| Err(lacks(rail)), |v| each(v, rail)))
         .collect()
 }
 
@@ -409,24 +419,24 @@ impl Decoder {
                     ));
                 }
             }
-            let loads_kn = per_rail(
+            let wheel_load_n = per_rail(
                 &a.wheel_load_kn,
                 rails,
-                &format!("axles[{i}].wheel_load_kN"),
+                || format!("axles[{i}].wheel_load_kN"),
+                |kn, rail| Ok(positive(|| format!("axles[{i}].wheel_load_kN.{rail}"), kn)? * 1e3),
             )?;
-            let mut wheel_load_n = Vec::with_capacity(loads_kn.len());
-            for (kn, rail) in loads_kn.into_iter().zip(rails) {
-                wheel_load_n
-                    .push(positive(|| format!("axles[{i}].wheel_load_kN.{rail}"), kn)? * 1e3);
-            }
-            let creepage = per_rail(&a.creepage, rails, &format!("axles[{i}].creepage"))?
-                .into_iter()
-                .map(|c| Creepage {
-                    cx: c.cx,
-                    cy: c.cy,
-                    spin_per_m: c.spin_per_m,
-                })
-                .collect();
+            let creepage = per_rail(
+                &a.creepage,
+                rails,
+                || format!("axles[{i}].creepage"),
+                |c, _| {
+                    Ok(Creepage {
+                        cx: c.cx,
+                        cy: c.cy,
+                        spin_per_m: c.spin_per_m,
+                    })
+                },
+            )?;
             axles.push(Axle {
                 offset_m,
                 bogie_position: a.bogie_position,
