@@ -116,6 +116,15 @@ pub(super) struct ChunkMessages {
 }
 
 impl ChunkMessages {
+    /// Room for a chunk's messages: their bytes are most of the chunk.
+    fn with_capacity(header: &mcap::records::ChunkHeader) -> Self {
+        let size = header.uncompressed_size.min(MAX_CHUNK_BYTES);
+        Self {
+            bytes: Vec::with_capacity(usize::try_from(size).unwrap_or(0)),
+            messages: Vec::new(),
+        }
+    }
+
     fn push(&mut self, header: mcap::records::MessageHeader, data: &[u8]) {
         let start = self.bytes.len();
         self.bytes.extend_from_slice(data);
@@ -408,7 +417,7 @@ fn read_chunk(record: &[u8], keep: bool) -> Result<ChunkContents, String> {
         ));
     }
     let mut records = Vec::new();
-    let mut kept = keep.then(ChunkMessages::default);
+    let mut kept = keep.then(|| ChunkMessages::with_capacity(&header));
     for_each_chunk_record(record, &header, |opcode, body| {
         match record::parse(opcode, body)? {
             Record::Channel(channel) => records.push(ChunkEntry::Channel(channel)),
@@ -436,10 +445,7 @@ fn read_chunk(record: &[u8], keep: bool) -> Result<ChunkContents, String> {
 /// The messages of a chunk record (given whole), decompressed.
 pub(super) fn chunk_messages(record: &[u8]) -> Result<ChunkMessages, String> {
     let header = chunk_header(record)?;
-    let mut kept = ChunkMessages::default();
-    // The messages' bytes are most of the chunk.
-    kept.bytes
-        .reserve(usize::try_from(header.uncompressed_size.min(MAX_CHUNK_BYTES)).unwrap_or(0));
+    let mut kept = ChunkMessages::with_capacity(&header);
     for_each_chunk_record(record, &header, |opcode, body| {
         if let Record::Message { header, data } = record::parse(opcode, body)? {
             kept.push(header, &data);
