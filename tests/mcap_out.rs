@@ -13,7 +13,7 @@ use tortwin_engine::sink::{
     FieldSnapshot, MeasurementOutput, PulseEvent, RunSummary, SectionInfo, Sink, SnapshotKind,
     TrackInfo, TrainEvent,
 };
-use tortwin_outputs::mcap_out::{McapSink, NonFiniteValue};
+use tortwin_outputs::mcap_out::{McapCompression, McapSink, NonFiniteValue};
 use tortwin_recording::{Applicator, Direction, Quantity, Section, Site};
 
 const ORIGIN_NS: u64 = 1_700_000_000_000_000_000;
@@ -223,7 +223,7 @@ fn run_checker(path: &Path, extra: &[&str]) -> std::process::Output {
 fn writes_every_topic_and_reads_back() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("twin.mcap");
-    let mut sink = McapSink::create(&path, None).unwrap();
+    let mut sink = McapSink::create(&path, None, McapCompression::Small).unwrap();
     write_synthetic(&mut sink).unwrap();
     assert!(!path.exists(), "nothing under the final name before finish");
     sink.finish(&RunSummary::default()).unwrap();
@@ -494,11 +494,74 @@ fn checker_rejects_messages_that_break_their_schema() {
     assert!(stderr.contains("FAIL /twin/field"), "{stderr}");
 }
 
+/// The two compressions write the same messages; `Small` in fewer bytes
+/// (the series is long enough for zstd's levels to differ: 20 000
+/// measurements, 3 MB of JSON).
+#[test]
+fn compressions_write_the_same_messages_in_different_sizes() {
+    let dir = tempfile::tempdir().unwrap();
+    let write = |compression: McapCompression| {
+        let path = dir.path().join(format!("{compression:?}.mcap"));
+        let mut sink = McapSink::create(&path, None, compression).unwrap();
+        write_synthetic(&mut sink).unwrap();
+        // A slowly drifting simulated mu with measurement noise, as a
+        // site's series is.
+        let mut noise = 12345_u64;
+        for i in 0..20_000_u64 {
+            noise = noise
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            let simulated = 0.35 + 0.1 * (i as f64 * 1e-3).sin();
+            let measured = simulated + ((noise >> 11) as f64 / (1u64 << 53) as f64 - 0.5) * 0.02;
+            let log_time_ns = TRAIN_END_NS + 1_000_000 * i;
+            let quantity = Quantity::Mu;
+            sink.measurement(&measurement(
+                log_time_ns,
+                quantity,
+                Some(7),
+                measured,
+                simulated,
+            ))
+            .unwrap();
+        }
+        sink.finish(&RunSummary::default()).unwrap();
+        std::fs::read(&path).unwrap()
+    };
+    let messages = |bytes: &[u8]| -> Vec<(String, u64, Vec<u8>)> {
+        mcap::MessageStream::new(bytes)
+            .unwrap()
+            .map(|m| {
+                let m = m.unwrap();
+                (m.channel.topic.clone(), m.log_time, m.data.into_owned())
+            })
+            .collect()
+    };
+    let fast = write(McapCompression::Fast);
+    let small = write(McapCompression::Small);
+    let (fast_messages, small_messages) = (messages(&fast), messages(&small));
+    assert!(fast_messages.len() > 20_000, "{}", fast_messages.len());
+    assert!(fast_messages == small_messages, "the same messages");
+    assert!(
+        small.len() < fast.len(),
+        "level 8 ({} bytes) is smaller than level 3 ({} bytes)",
+        small.len(),
+        fast.len()
+    );
+    assert_eq!(
+        McapCompression::for_recording(McapCompression::SMALL_FROM_MESSAGES - 1),
+        McapCompression::Fast
+    );
+    assert_eq!(
+        McapCompression::for_recording(McapCompression::SMALL_FROM_MESSAGES),
+        McapCompression::Small
+    );
+}
+
 #[test]
 fn dropped_sink_leaves_no_file() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("twin.mcap");
-    let mut sink = McapSink::create(&path, None).unwrap();
+    let mut sink = McapSink::create(&path, None, McapCompression::Small).unwrap();
     write_synthetic(&mut sink).unwrap();
     assert_eq!(files_in(dir.path()).len(), 1, "the temporary file exists");
     drop(sink);
@@ -514,7 +577,7 @@ fn dropped_sink_leaves_no_file() {
 fn non_finite_values_are_errors() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("twin.mcap");
-    let mut sink = McapSink::create(&path, None).unwrap();
+    let mut sink = McapSink::create(&path, None, McapCompression::Small).unwrap();
     write_synthetic(&mut sink).unwrap();
 
     let err = sink

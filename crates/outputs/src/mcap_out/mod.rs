@@ -163,8 +163,13 @@ struct PulseTally {
 impl McapSink {
     /// Opens `.NAME.partial-XXXXXX` next to `path` and registers every
     /// channel; with `provenance`, writes it as the metadata record
-    /// `provenance` and the configuration as the attachment `model.toml`.
-    pub fn create(path: &Path, provenance: Option<&Provenance>) -> Result<McapSink, McapError> {
+    /// `provenance` and the configuration as the attachment `model.toml`;
+    /// the chunks are compressed as `compression` says.
+    pub fn create(
+        path: &Path,
+        provenance: Option<&Provenance>,
+        compression: McapCompression,
+    ) -> Result<McapSink, McapError> {
         let temp = PartialFile::beside(path)?;
         let file = File::create(temp.temp_path()).map_err(|source| McapError::Io {
             path: path.to_path_buf(),
@@ -190,7 +195,7 @@ impl McapSink {
         let options = mcap::WriteOptions::new()
             .compression(Some(mcap::Compression::Zstd))
             .chunk_size(Some(CHUNK_BYTES))
-            .compression_level(COMPRESSION_LEVEL)
+            .compression_level(compression.zstd_level())
             .compression_threads(0)
             .library(format!("tortwin {version} (mcap-rs)"));
         let mut writer = options
@@ -692,13 +697,49 @@ const MG_PER_KG: f64 = 1e6;
 /// chunk: 8 MiB writes a month of a 1.5 km section in 8 % less than the
 /// mcap crate's 1 MiB, for 8 MiB of memory.
 const CHUNK_BYTES: u64 = 8 * 1024 * 1024;
-/// zstd's level for the chunks: 9 writes a month of a 1.5 km section in
-/// 12.1 MB where the default 3 writes 14.4 MB (issue 12 asks for at most
-/// 150 MB a year). 8 writes the same size as 9 in 12 % less time (a week's
-/// chunks, 15.7 MB: 1.86 MB both, 99 and 113 ms); 6 would take 38 % less
-/// time for 6.5 % more bytes, and a year would not fit. Compression runs
-/// on the writer thread beside the engine.
-const COMPRESSION_LEVEL: u32 = 8;
+/// How hard the chunks are compressed: a trade of the writer thread's time
+/// against the file's size, which matters for long recordings only.
+///
+/// zstd at level 8 writes a month of a 1.5 km section in 11.7 MB where its
+/// default level 3 writes 14.1 MB, and a year (issue 12: at most 150 MB)
+/// in 146.6 MB where levels 3 to 7 write 155-176 MB; level 9 writes the
+/// same size as 8 in 12 % more time (a week's chunks). But level 8 costs
+/// three to four times level 3's time (the 3-day benchmark's 9 MB: 64
+/// against 18 ms on one thread), and on two cores that time is taken from
+/// the engine: the 3-day replay runs a tenth to a fifth faster at level 3,
+/// for a file of 1.84 instead of 1.60 MB.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum McapCompression {
+    /// zstd's default level 3 (the mcap crate's default too: level 0).
+    Fast,
+    /// zstd level 8: about 13 % smaller than [`McapCompression::Fast`].
+    Small,
+}
+
+impl McapCompression {
+    /// Recordings of at least this many messages (about three months of the
+    /// year benchmark's 1.5 km section, an output of 40 MB) are written
+    /// [`McapCompression::Small`], shorter ones [`McapCompression::Fast`].
+    pub const SMALL_FROM_MESSAGES: u64 = 1_000_000;
+
+    /// The compression for the output of a replay of `messages` input
+    /// messages (its length, known from the reader's layout pass before the
+    /// first is stepped).
+    pub fn for_recording(messages: u64) -> Self {
+        if messages >= Self::SMALL_FROM_MESSAGES {
+            McapCompression::Small
+        } else {
+            McapCompression::Fast
+        }
+    }
+
+    fn zstd_level(self) -> u32 {
+        match self {
+            McapCompression::Fast => 3,
+            McapCompression::Small => 8,
+        }
+    }
+}
 
 fn finite(
     topic: Topic,

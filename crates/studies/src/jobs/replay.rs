@@ -8,7 +8,7 @@ use tortwin_engine::sink::{
 };
 use tortwin_engine::{Engine, EngineOptions, EngineState};
 use tortwin_model::error::UsageError;
-use tortwin_outputs::mcap_out::McapSink;
+use tortwin_outputs::mcap_out::{McapCompression, McapSink};
 use tortwin_outputs::provenance::Provenance;
 use tortwin_outputs::rerun_out::{RerunOptions, RerunSink};
 use tortwin_recording::error::InputError;
@@ -220,7 +220,10 @@ pub fn replay_from(
     let mcap = args
         .out_mcap
         .as_deref()
-        .map(|p| McapSink::create(p, provenance.as_ref()))
+        .map(|p| {
+            let compression = McapCompression::for_recording(reader.message_count());
+            McapSink::create(p, provenance.as_ref(), compression)
+        })
         .transpose()?;
     let rrd = args
         .out_rrd
