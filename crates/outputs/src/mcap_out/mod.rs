@@ -701,18 +701,19 @@ const CHUNK_BYTES: u64 = 8 * 1024 * 1024;
 /// against the file's size, which matters for long recordings only.
 ///
 /// zstd at level 8 writes a month of a 1.5 km section in 11.7 MB where its
-/// default level 3 writes 14.1 MB, and a year (issue 12: at most 150 MB)
-/// in 146.6 MB where levels 3 to 7 write 155-176 MB; level 9 writes the
-/// same size as 8 in 12 % more time (a week's chunks). But level 8 costs
-/// three to four times level 3's time (the 3-day benchmark's 9 MB: 64
-/// against 18 ms on one thread), and on two cores that time is taken from
-/// the engine: the 3-day replay runs a tenth to a fifth faster at level 3,
-/// for a file of 1.84 instead of 1.60 MB.
+/// default level 3 writes 14.1 MB and level 1 14.6 MB, and a year (issue
+/// 12: at most 150 MB) in 146.6 MB where levels 3 to 7 write 155-176 MB;
+/// level 9 writes the same size as 8 in 12 % more time (a week's chunks).
+/// But level 8 costs about five times level 1's time (the 3-day
+/// benchmark's 9 MB on one thread: 64-75 ms at level 8, 18 ms at level 3,
+/// 13 ms at level 1), and on two cores that time is taken from the engine:
+/// the 3-day replay runs about a sixth faster at level 1, for a file of
+/// 1.87 instead of 1.60 MB (level 3: 1.85 MB, 4 % slower than level 1).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum McapCompression {
-    /// zstd's default level 3 (the mcap crate's default too: level 0).
+    /// zstd level 1, the fastest of its regular levels.
     Fast,
-    /// zstd level 8: about 13 % smaller than [`McapCompression::Fast`].
+    /// zstd level 8: about a sixth smaller than [`McapCompression::Fast`].
     Small,
 }
 
@@ -735,7 +736,7 @@ impl McapCompression {
 
     fn zstd_level(self) -> u32 {
         match self {
-            McapCompression::Fast => 3,
+            McapCompression::Fast => 1,
             McapCompression::Small => 8,
         }
     }
