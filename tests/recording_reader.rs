@@ -260,6 +260,21 @@ fn base_recording_replays_in_order_with_si_units_in_every_layout() {
     }
 }
 
+/// recording-format.md: `curve_radius_m` may be absent on tangent track
+/// (readers accept it absent and `null`); a number is a curve.
+#[test]
+fn curve_radius_may_be_absent_null_or_a_number() {
+    let absent = with(base(), 0, |v| remove(v, "", "curve_radius_m"));
+    let curve = with(base(), 0, |v| v["curve_radius_m"] = json!(400.0));
+    for layout in LAYOUTS {
+        let (reader, events) = read_msgs(&absent, layout).unwrap();
+        assert_eq!(reader.section().curve_radius_m, None, "{layout:?}");
+        assert_eq!(events.len(), read_msgs(&base(), layout).unwrap().1.len());
+        let (reader, _) = read_msgs(&curve, layout).unwrap();
+        assert_eq!(reader.section().curve_radius_m, Some(400.0), "{layout:?}");
+    }
+}
+
 #[test]
 fn an_lz4_chunk_reads_as_a_zstd_one() {
     let (_, zstd) = read_msgs(&base(), Layout::OneChunk).unwrap();

@@ -14,13 +14,13 @@ pub const SECTION_SCHEMA: &str = r##"{
   "title": "section",
   "description": "The track section: geometry, rails, applicators and measurement sites. Exactly one, first in time.",
   "type": "object",
-  "required": ["section_id", "length_m", "rails", "curve_radius_m", "rail_head_radius_m",
+  "required": ["section_id", "length_m", "rails", "rail_head_radius_m",
                "nominal_wheel_diameter_m", "applicators", "measurement_sites"],
   "properties": {
     "section_id": {"type": "string"},
     "length_m": {"type": "number", "exclusiveMinimum": 0},
     "rails": {"type": "array", "minItems": 1, "uniqueItems": true, "items": {"type": "string"}},
-    "curve_radius_m": {"type": ["number", "null"], "description": "null on tangent track"},
+    "curve_radius_m": {"type": "number", "exclusiveMinimum": 0, "description": "absent on tangent track"},
     "rail_head_radius_m": {"type": "number", "exclusiveMinimum": 0},
     "nominal_wheel_diameter_m": {"type": "number", "exclusiveMinimum": 0},
     "applicators": {
@@ -59,9 +59,9 @@ pub const PASSAGE_SCHEMA: &str = r##"{
   "required": ["train_id", "direction", "speed_mps", "axles"],
   "properties": {
     "train_id": {"type": "string"},
-    "direction": {"enum": ["up", "down"]},
+    "direction": {"type": "string", "enum": ["up", "down"]},
     "speed_mps": {"type": "number", "exclusiveMinimum": 0},
-    "consist": {"enum": ["freight", "passenger"], "description": "informative; not part of the format"},
+    "consist": {"type": "string", "enum": ["freight", "passenger"], "description": "informative; not part of the format"},
     "axles": {
       "type": "array",
       "minItems": 1,
@@ -70,7 +70,7 @@ pub const PASSAGE_SCHEMA: &str = r##"{
         "required": ["offset_m", "bogie_position", "wheel_diameter_m", "wheel_load_kN", "creepage"],
         "properties": {
           "offset_m": {"type": "number", "minimum": 0, "description": "distance behind the train front, m"},
-          "bogie_position": {"enum": ["leading", "trailing"]},
+          "bogie_position": {"type": "string", "enum": ["leading", "trailing"]},
           "wheel_diameter_m": {"type": "number", "exclusiveMinimum": 0},
           "wheel_load_kN": {
             "type": "object",
@@ -118,7 +118,7 @@ pub const MEASUREMENT_SCHEMA: &str = r##"{
   "properties": {
     "site_id": {"type": "string"},
     "rail": {"type": "string"},
-    "quantity": {"enum": ["mu", "adhesion", "rail_mu"]},
+    "quantity": {"type": "string", "enum": ["mu", "adhesion", "rail_mu"]},
     "train_id": {"type": "string"},
     "axle_index": {"type": "integer", "minimum": 0},
     "value": {"type": "number"}

@@ -36,8 +36,12 @@ pub struct SectionMsg {
     pub length_m: f64,
     #[serde(deserialize_with = "json::array")]
     pub rails: Vec<String>,
-    /// `null` on tangent track; the field itself is required.
-    #[serde(deserialize_with = "json::nullable_number")]
+    /// Absent (or `null`) on tangent track; written only when present.
+    #[serde(
+        default,
+        deserialize_with = "json::nullable_number",
+        skip_serializing_if = "Option::is_none"
+    )]
     pub curve_radius_m: Option<f64>,
     #[serde(deserialize_with = "json::number")]
     pub rail_head_radius_m: f64,

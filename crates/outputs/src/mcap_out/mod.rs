@@ -856,6 +856,8 @@ struct SectionMsg<'a> {
     section_id: &'a str,
     length_m: f64,
     rails: &'a [String],
+    /// Left out on tangent track.
+    #[serde(skip_serializing_if = "Option::is_none")]
     curve_radius_m: Option<f64>,
     rail_head_radius_m: f64,
     nominal_wheel_diameter_m: f64,
@@ -1003,13 +1005,13 @@ const SECTION_SCHEMA: &str = r##"{
   "title": "tortwin.Section",
   "description": "The track section and the twin's calculation grid, at the recording's origin.",
   "type": "object",
-  "required": ["section_id", "length_m", "rails", "curve_radius_m", "rail_head_radius_m",
+  "required": ["section_id", "length_m", "rails", "rail_head_radius_m",
                "nominal_wheel_diameter_m", "grid_d_m", "tracks", "applicators", "sites"],
   "properties": {
     "section_id": {"type": "string"},
     "length_m": {"type": "number", "exclusiveMinimum": 0},
     "rails": {"type": "array", "minItems": 1, "items": {"type": "string"}},
-    "curve_radius_m": {"type": ["number", "null"], "description": "null on tangent track"},
+    "curve_radius_m": {"type": "number", "exclusiveMinimum": 0, "description": "absent on tangent track"},
     "rail_head_radius_m": {"type": "number", "exclusiveMinimum": 0},
     "nominal_wheel_diameter_m": {"type": "number", "exclusiveMinimum": 0},
     "grid_d_m": {"type": "array", "items": {"type": "number"},
@@ -1066,7 +1068,7 @@ const TRAIN_SCHEMA: &str = r##"{
   "required": ["train_id", "direction", "speed_mps", "axles", "end_time_ns", "duration_s"],
   "properties": {
     "train_id": {"type": "string"},
-    "direction": {"enum": ["up", "down"]},
+    "direction": {"type": "string", "enum": ["up", "down"]},
     "speed_mps": {"type": "number", "exclusiveMinimum": 0},
     "axles": {"type": "integer", "minimum": 1},
     "end_time_ns": {"type": "integer", "minimum": 0,
@@ -1100,7 +1102,7 @@ const MEASUREMENT_SCHEMA: &str = r##"{
   "properties": {
     "site_id": {"type": "string"},
     "rail": {"type": "string"},
-    "quantity": {"enum": ["mu", "adhesion", "rail_mu"]},
+    "quantity": {"type": "string", "enum": ["mu", "adhesion", "rail_mu"]},
     "train_id": {"type": "string"},
     "axle_index": {"type": "integer", "minimum": 0},
     "measured": {"type": "number"},
