@@ -1,7 +1,9 @@
 //! Golden files: replaying each bundled recording (`recordings/*.mcap`) with
 //! the default model gives the `/twin/measurement` values and the digest of
 //! the `/twin/field` messages in `tests/golden/`. The golden files were
-//! reviewed once; they guard behaviour from then on.
+//! reviewed once; they guard behaviour from then on. Last blessed on
+//! 2026-11-26, when m0 of eq. (1) became a constant of the product and the
+//! bundled recordings were made again (recordings/README.md).
 //!
 //! Regenerating them is a deliberate act: `TORTWIN_BLESS=1 cargo test
 //! --release --test golden`, with the reason in the commit message.

@@ -273,3 +273,37 @@ fn a_state_from_another_section_or_version_is_refused() {
     let msg = replay_err(&d);
     assert!(msg.contains("/train/passage"), "{msg}");
 }
+
+/// A state written before m0 became a constant of the product (2026-11-26)
+/// holds the latest pulse of every applicator on every track. It is still
+/// read, the entry ignored: the second part replays from it exactly as
+/// from the state written today, which no longer holds the entry.
+#[test]
+fn a_state_with_the_former_latest_pulses_is_still_read() {
+    let whole = reference("curve_2day.mcap");
+    let dir = tempfile::tempdir().unwrap();
+    let first = replay_outputs(&args(&whole));
+    let cut = (first.trains[9].1 + first.trains[10].0) / 2;
+    let (part1, part2) = (dir.path().join("p1.mcap"), dir.path().join("p2.mcap"));
+    rewrite(&whole, &part1, None, |_, t| t < cut);
+    rewrite(&whole, &part2, Some(cut), |_, t| t >= cut);
+    let state = dir.path().join("today.state.json");
+    let mut a1 = args(&part1);
+    a1.state_out = Some(state.clone());
+    replay(&a1, &mut []).unwrap();
+    let mut doc: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&state).unwrap()).unwrap();
+    assert!(doc.get("latest_pulse_kg").is_none(), "written again");
+    // One applicator, two tracks (high, low), as tortwin wrote them.
+    doc["latest_pulse_kg"] = serde_json::json!([[0.000212, null]]);
+    let former = dir.path().join("former.state.json");
+    std::fs::write(&former, serde_json::to_string(&doc).unwrap()).unwrap();
+    let from = |s: &Path| {
+        let mut a = args(&part2);
+        a.state_in = Some(s.to_path_buf());
+        replay_outputs(&a)
+    };
+    let (today, before) = (from(&state), from(&former));
+    assert!(!today.measurements.is_empty());
+    assert!(today == before, "the former entry changed the replay");
+}

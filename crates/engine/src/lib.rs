@@ -236,8 +236,8 @@ pub(crate) struct PointEvent {
 pub(crate) enum PointEventKind {
     Pulse {
         applicator: usize,
+        /// The mass that lands on this track (half the pulse on each band).
         mass_kg: f64,
-        pulse_mass_kg: f64,
     },
     Reading,
 }
@@ -409,7 +409,7 @@ impl Engine {
                 nu: cfg.contact.nu,
             },
             tracks: (0..n_tracks).map(|_| TrackState::new(points)).collect(),
-            work: vec![roll::TrackWork::new(points, section.applicators.len()); n_tracks],
+            work: vec![roll::TrackWork::new(points); n_tracks],
             ledger: Vec::new(),
             last_axle: vec![usize::MAX; n_tracks],
             last_row: vec![0; n_tracks],
@@ -591,22 +591,19 @@ impl Engine {
         let time_s = self.time_s(event.log_time_ns);
         match &event.kind {
             EventKind::Pulse(pulse) => {
-                let pulse_mass = pulse.mass_kg;
                 for k in 0..self.pulse_tracks[pulse.rail].len() {
                     let track = self.pulse_tracks[pulse.rail][k];
-                    let share = pulse_mass / self.pulse_tracks[pulse.rail].len() as f64;
+                    let share = pulse.mass_kg / self.pulse_tracks[pulse.rail].len() as f64;
                     let point = self.applicator_points[pulse.applicator];
                     let weather = self.weather;
-                    let (ctx, states, works) = self.split();
+                    let (ctx, states, _) = self.split();
                     let added = ctx.land_pulse(
                         track,
                         &mut states[track],
-                        &mut works[track],
                         point,
                         time_s,
                         pulse.applicator,
                         share,
-                        pulse_mass,
                         &weather,
                     );
                     self.totals.add_pulse(&added);
@@ -817,7 +814,6 @@ impl Engine {
                             kind: PointEventKind::Pulse {
                                 applicator: p.applicator,
                                 mass_kg: p.mass_kg / tracks.len() as f64,
-                                pulse_mass_kg: p.mass_kg,
                             },
                             done: false,
                         });

@@ -46,7 +46,6 @@ struct WheelRoll {
     wheel_kg: f64,
     /// The wheel_edge_reservoir effect's m_e.
     edge_kg: f64,
-    m0_kg: f64,
     /// Grid point of the applicator passed last (N = 1 there).
     applicator_point: Option<usize>,
     consumed_kg: f64,
@@ -209,7 +208,6 @@ impl Roller {
             consumption_factor *= self.event_factor(ActsOn::Consumption, t, weather);
         }
         ContactConditions {
-            m0_kg: st.m0_kg,
             fp_fc: self.fp_fc,
             transfer_revolution: st
                 .applicator_point
@@ -364,7 +362,7 @@ const LANES: usize = 4;
 const PARALLEL_MIN_CONTACTS: usize = 4096;
 
 /// What one track's roll changes besides its [`TrackState`]: the track's
-/// point events and latest pulses, and what the roll reports back to the
+/// point events, and what the roll reports back to the
 /// engine (settled in the serial order by [`Engine::settle`]). Each track
 /// owns one, so that tracks can be rolled at once.
 #[derive(Debug, Clone)]
@@ -375,9 +373,6 @@ pub(crate) struct TrackWork {
     pub(crate) pending_at: Vec<u32>,
     /// What the last wheel (or every wheel) saw.
     pub(crate) observed: Observed,
-    /// Per applicator: the latest pulse's mass on this track (m0), NaN
-    /// before one.
-    pub(crate) latest_pulse_kg: Vec<f64>,
     /// This train's axles whose wheel runs on this track, in order.
     axles: Vec<usize>,
     /// The roll's contributions to the run totals, to be added in the
@@ -395,12 +390,11 @@ pub(crate) struct TrackWork {
 }
 
 impl TrackWork {
-    pub(crate) fn new(points: usize, applicators: usize) -> Self {
+    pub(crate) fn new(points: usize) -> Self {
         Self {
             events: Vec::new(),
             pending_at: vec![0; points],
             observed: Observed::new(points),
-            latest_pulse_kg: vec![f64::NAN; applicators],
             axles: Vec::new(),
             ledger: Vec::new(),
             readings: Vec::new(),
@@ -1004,12 +998,7 @@ impl RollContext<'_> {
                 .conditions(&lanes[j].st, &touches[j], self.revolution, is[j])
         });
         let args: [[f64; 2]; LANES] = std::array::from_fn(|j| {
-            product::roll_exp_args(
-                self.product,
-                lanes[j].st.wheel_kg,
-                touches[j].rail_kg,
-                &conditions[j],
-            )
+            product::roll_exp_args(self.product, lanes[j].st.wheel_kg, touches[j].rail_kg)
         });
         let transfer = exp4(args.map(|a| a[0]));
         let consumption = exp4(args.map(|a| a[1]));
@@ -1057,17 +1046,9 @@ impl RollContext<'_> {
                 }
             }
         }
-        let app = self.applicator_at[track][i];
-        if app != NO_APPLICATOR {
-            // The wheel passes this applicator: N counts from here and m0
-            // is its latest pulse that landed before this wheel.
+        if self.applicator_at[track][i] != NO_APPLICATOR {
+            // The wheel passes this applicator: N counts from here.
             lane.st.applicator_point = Some(i);
-            let latest = work.latest_pulse_kg[app as usize];
-            lane.st.m0_kg = if latest.is_nan() {
-                self.section.applicators[app as usize].nominal_pulse_kg
-            } else {
-                latest
-            };
         }
         let m_kg = self.contact(lane, state, &mut work.observed, i);
         let sites_here = &self.sites_at[i];
@@ -1105,16 +1086,11 @@ impl RollContext<'_> {
         let wheel = record.wheels[a * rails + r];
         let speed_mps = record.passage.speed_mps;
         let up = enters_at_zero(record.passage.direction);
-        // Every wheel enters clean; before it passes an applicator, m0 is the
-        // first listed applicator's nominal pulse and there is no transfer.
+        // Every wheel enters clean; before it passes an applicator there is
+        // no transfer.
         let st = WheelRoll {
             wheel_kg: 0.0,
             edge_kg: 0.0,
-            m0_kg: self
-                .section
-                .applicators
-                .first()
-                .map_or(0.0, |x| x.nominal_pulse_kg),
             applicator_point: None,
             consumed_kg: 0.0,
             capped_kg: 0.0,
@@ -1183,21 +1159,20 @@ impl RollContext<'_> {
 
     /// A pulse landing at `point` of `track` at `time_s` (model.md, "A pulse
     /// landing"): time effects up to now, add, cap, touch. Returns what it
-    /// adds to the totals.
+    /// adds to the totals. The pulse changes only the rail's mass: m0 of
+    /// eq. (1) is a constant of the product.
     #[allow(clippy::too_many_arguments)]
     pub(crate) fn land_pulse(
         &self,
         track: usize,
         state: &mut TrackState,
-        work: &mut TrackWork,
         point: usize,
         time_s: f64,
         applicator: usize,
         mass_kg: f64,
-        pulse_mass_kg: f64,
         weather: &WeatherState,
     ) -> PulseTotals {
-        let (mut mass_kg, mut pulse_mass_kg) = (mass_kg, pulse_mass_kg);
+        let mut mass_kg = mass_kg;
         if self.generic.any(ActsOn::PulseMass) {
             let g = self.generic.factor(
                 ActsOn::PulseMass,
@@ -1211,7 +1186,6 @@ impl RollContext<'_> {
                 },
             );
             mass_kg *= g;
-            pulse_mass_kg *= g;
         }
         let effects = self.time_effects;
         let precip = weather.precip_mm_at(time_s);
@@ -1228,7 +1202,6 @@ impl RollContext<'_> {
         state.rail_mass_kg[point] = m;
         state.last_touch_s[point] = time_s;
         state.precip_at_touch_mm[point] = precip;
-        work.latest_pulse_kg[applicator] = pulse_mass_kg;
         PulseTotals {
             lost_kg,
             applied_kg: mass_kg,
@@ -1281,17 +1254,8 @@ impl RollContext<'_> {
             PointEventKind::Pulse {
                 applicator,
                 mass_kg,
-                pulse_mass_kg,
             } => Ran::Pulse(self.land_pulse(
-                track,
-                state,
-                work,
-                ev.point,
-                ev.time_s,
-                applicator,
-                mass_kg,
-                pulse_mass_kg,
-                weather,
+                track, state, ev.point, ev.time_s, applicator, mass_kg, weather,
             )),
             PointEventKind::Reading => {
                 let value = self.read_rail(track, state, ev.point, ev.time_s, weather);

@@ -26,8 +26,12 @@ pub struct EngineState {
     /// The time origin: log_time of the first recording's `/section`.
     pub origin_ns: i64,
     pub tracks: Vec<SavedTrack>,
-    /// Per applicator, per track (as in `tracks`): the latest pulse (m0), kg.
-    pub latest_pulse_kg: Vec<Vec<Option<f64>>>,
+    /// Written by tortwin before m0 became a constant of the product
+    /// (2026-11-26): the latest pulse of every applicator on every track.
+    /// Such a state is still read; the entries are no longer needed and
+    /// are not written.
+    #[serde(default, skip_serializing)]
+    pub latest_pulse_kg: Option<serde::de::IgnoredAny>,
     /// The weather in effect and the rain accumulated so far.
     pub weather: WeatherState,
     /// End of the last train's occupation, time_s.
@@ -91,16 +95,7 @@ pub(super) fn capture(engine: &Engine) -> EngineState {
                 precip_at_touch_mm: t.precip_at_touch_mm.clone(),
             })
             .collect(),
-        latest_pulse_kg: (0..engine.section.applicators.len())
-            .map(|a| {
-                engine
-                    .work
-                    .iter()
-                    .map(|w| w.latest_pulse_kg[a])
-                    .map(|x| (!x.is_nan()).then_some(x))
-                    .collect()
-            })
-            .collect(),
+        latest_pulse_kg: None,
         weather: engine.weather,
         occupied_until_s: engine
             .occupied_until_s
@@ -188,19 +183,6 @@ pub(super) fn restore(
             .collect();
         track.precip_at_touch_mm.clone_from(&s.precip_at_touch_mm);
         track.wheel_pass = s.wheel_pass;
-    }
-    let n_tracks = engine.tracks.len();
-    if saved.latest_pulse_kg.len() != engine.section.applicators.len()
-        || saved.latest_pulse_kg.iter().any(|v| v.len() != n_tracks)
-    {
-        return Err(StateError::Inconsistent(
-            "latest_pulse_kg does not match the applicators and tracks".into(),
-        ));
-    }
-    for (a, per_track) in saved.latest_pulse_kg.iter().enumerate() {
-        for (t, m) in per_track.iter().enumerate() {
-            engine.work[t].latest_pulse_kg[a] = m.unwrap_or(f64::NAN);
-        }
     }
     engine.weather = saved.weather;
     engine.occupied_until_s = saved.occupied_until_s.unwrap_or(f64::NEG_INFINITY);

@@ -14,7 +14,7 @@ use serde::{Deserialize, Serialize};
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum ActsOn {
-    /// The mass that lands and the m0 the pulse sets (pulse landing).
+    /// The mass that lands (pulse landing); m0 of eq. (1) is a constant.
     PulseMass,
     /// The transfer fraction `t` of eq. (6), before its clamp at 0.5 (step 3).
     Transfer,

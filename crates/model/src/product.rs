@@ -27,6 +27,10 @@ pub struct ProductParams {
     pub km1_kg: f64,
     /// km2, eq. (1): the mass (in units of m0) below which consumption slows.
     pub km2: f64,
+    /// m0, eq. (1): the product mass applied at the application site, a
+    /// constant of the product and the site (model.md; not in Table 2). It
+    /// does not follow the recorded pulses. 0 makes the saturation term 1.
+    pub m0_kg: f64,
     /// kp, eq. (2).
     pub kp: f64,
     /// kc, eq. (3).
@@ -68,23 +72,24 @@ pub fn creepage_factor(params: &ProductParams, cx: f64, cy: f64) -> f64 {
 /// `c = k0 + km1 (1 - exp(-m / (m0 km2))) fp fc`, never more than `m`.
 ///
 /// - `m_kg`: the total mass in the contact, wheel plus rail (model.md).
-/// - `m0_kg`: the applied pulse mass the wheel's applicator last delivered;
-///   with `m0 = 0` the saturation term is 1.
+/// - `m0` is `params.m0_kg`, the same for every contact; with `m0 = 0` the
+///   saturation term is 1.
 /// - `fp_fc`: eq. (2) times eq. (3) for this wheel on this rail.
 /// - `factor`: an effect's multiplier of the whole `c` (1 without one),
 ///   applied before the limit `c <= m` (effects.md, temperature_consumption).
 #[inline]
-pub fn consumption(params: &ProductParams, m_kg: f64, m0_kg: f64, fp_fc: f64, factor: f64) -> f64 {
-    consumption_given(params, m_kg, m0_kg, fp_fc, factor, |arg| arg.exp())
+pub fn consumption(params: &ProductParams, m_kg: f64, fp_fc: f64, factor: f64) -> f64 {
+    consumption_given(params, m_kg, fp_fc, factor, |arg| arg.exp())
 }
 
 /// The argument of eq. (1)'s exponential, `-m / (m0 km2)`. Multiplying by
 /// the reciprocal keeps the division off the wheel mass's dependency chain
-/// in the stepping loop (it depends only on m0); the result differs from
-/// the literal quotient by at most an ulp.
+/// in the stepping loop (it depends only on the constants m0 and km2, so
+/// the compiler hoists it); the result differs from the literal quotient
+/// by at most an ulp.
 #[inline(always)]
-fn saturation_arg(params: &ProductParams, m_kg: f64, m0_kg: f64) -> f64 {
-    -m_kg * (1.0 / (m0_kg * params.km2))
+fn saturation_arg(params: &ProductParams, m_kg: f64) -> f64 {
+    -m_kg * (1.0 / (params.m0_kg * params.km2))
 }
 
 /// [`consumption`] with its exponential taken by `exp` (of
@@ -93,13 +98,12 @@ fn saturation_arg(params: &ProductParams, m_kg: f64, m0_kg: f64) -> f64 {
 fn consumption_given(
     params: &ProductParams,
     m_kg: f64,
-    m0_kg: f64,
     fp_fc: f64,
     factor: f64,
     exp: impl FnOnce(f64) -> f64,
 ) -> f64 {
-    let saturation = if m0_kg > 0.0 {
-        1.0 - exp(saturation_arg(params, m_kg, m0_kg))
+    let saturation = if params.m0_kg > 0.0 {
+        1.0 - exp(saturation_arg(params, m_kg))
     } else {
         1.0
     };
@@ -180,8 +184,6 @@ pub(crate) fn transfer(
 /// depends on the wheel, its applicator and the grid point, not on the masses.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ContactConditions {
-    /// m0 of eq. (1) in kg.
-    pub m0_kg: f64,
     /// fp · fc of eq. (2) and (3).
     pub fp_fc: f64,
     /// `exp(-(N - 1) / cN)` times any effect factor of the transfer, or
@@ -225,15 +227,10 @@ pub fn roll(
 /// and eq. (1)'s `-m / (m0 km2)`. For a caller that takes the exponentials
 /// of several contacts at once and hands them to [`roll_given`].
 #[inline(always)]
-pub fn roll_exp_args(
-    params: &ProductParams,
-    wheel_kg: f64,
-    rail_kg: f64,
-    conditions: &ContactConditions,
-) -> [f64; 2] {
+pub fn roll_exp_args(params: &ProductParams, wheel_kg: f64, rail_kg: f64) -> [f64; 2] {
     [
         transfer_arg(params, wheel_kg.max(rail_kg)),
-        saturation_arg(params, wheel_kg + rail_kg, conditions.m0_kg),
+        saturation_arg(params, wheel_kg + rail_kg),
     ]
 }
 
@@ -287,7 +284,6 @@ fn roll_core(
         let c = consumption_given(
             params,
             m,
-            conditions.m0_kg,
             conditions.fp_fc,
             conditions.consumption_factor,
             consumption_exp,
@@ -343,17 +339,19 @@ mod tests {
     fn consumption_by_hand() {
         let p = table2();
         // Abundant product: k0 + km1 (eq. 1 with m >> m0 km2).
-        let c = consumption(&p, 1.0, 1e-4, 1.0, 1.0);
+        assert_eq!(p.m0_kg, 1e-4);
+        let c = consumption(&p, 1.0, 1.0, 1.0);
         assert!((c - (1.0449e-9 + 1.1617e-6)).abs() < 1e-21);
         // m = m0 km2: the saturation term is 1 - 1/e.
-        let c = consumption(&p, 0.53e-4, 1e-4, 1.0, 1.0);
+        let c = consumption(&p, 0.53e-4, 1.0, 1.0);
         let expect = 1.0449e-9 + 1.1617e-6 * (1.0 - (-1.0f64).exp());
         assert!((c - expect).abs() < 1e-21);
         // Never more than there is.
-        assert_eq!(consumption(&p, 1e-12, 1e-4, 1.0, 1.0), 1e-12);
+        assert_eq!(consumption(&p, 1e-12, 1.0, 1.0), 1e-12);
         // m0 = 0: the saturation term is 1.
+        let p0 = ProductParams { m0_kg: 0.0, ..p };
         assert_eq!(
-            consumption(&p, 1e-5, 0.0, 2.0, 1.0),
+            consumption(&p0, 1e-5, 2.0, 1.0),
             1.0449e-9 + 1.1617e-6 * 2.0
         );
     }
@@ -387,7 +385,6 @@ mod tests {
         let p = table2();
         let (mut w, mut r) = (0.0, 0.0);
         let cond = ContactConditions {
-            m0_kg: 1e-4,
             fp_fc: 1.0,
             transfer_revolution: Some(1.0),
             consumption_factor: 1.0,
@@ -429,9 +426,9 @@ mod tests {
             fp_fc in 0.0..5.0f64, rev in prop_oneof![Just(None), (0.0..1.0f64).prop_map(Some)],
             tf in 0.1..10.0f64,
         ) {
-            let p = table2();
+            let p = ProductParams { m0_kg: m0, ..table2() };
             let (mut w2, mut r2) = (w, r);
-            let cond = ContactConditions { m0_kg: m0, fp_fc, transfer_revolution: rev, consumption_factor: tf };
+            let cond = ContactConditions { fp_fc, transfer_revolution: rev, consumption_factor: tf };
             let losses = roll(&p, &mut w2, &mut r2, &cond);
             prop_assert!(w2 >= 0.0 && r2 >= 0.0);
             prop_assert!(w2 <= p.m_max_kg && r2 <= p.m_max_kg);
@@ -461,16 +458,15 @@ mod tests {
             revolution in prop_oneof![Just(None), (0.0..1.0f64).prop_map(Some)],
             factor in 0.1..3.0f64,
         ) {
-            let p = table2();
+            let p = ProductParams { m0_kg: m0, ..table2() };
             let conditions = ContactConditions {
-                m0_kg: m0,
                 fp_fc,
                 transfer_revolution: revolution,
                 consumption_factor: factor,
             };
             let (mut w1, mut r1) = (wheel, rail);
             let l1 = roll(&p, &mut w1, &mut r1, &conditions);
-            let exps = roll_exp_args(&p, wheel, rail, &conditions).map(f64::exp);
+            let exps = roll_exp_args(&p, wheel, rail).map(f64::exp);
             let (mut w2, mut r2) = (wheel, rail);
             let l2 = roll_given(&p, &mut w2, &mut r2, &conditions, exps);
             prop_assert_eq!(w1.to_bits(), w2.to_bits());

@@ -20,14 +20,18 @@ use tortwin_recording::{
 };
 
 /// Figure 7: mu before each revolution's consumption in a twin disc, mass
-/// starting at `m0_kg`, fp = fc = 1, no cap, no transfer (model.md).
+/// starting at `m0_kg`, which is also the curve's m0 of eq. (1) (model.md:
+/// each curve's applied mass is its m0), fp = fc = 1, no cap, no transfer.
 pub fn twin_disc(cfg: &ModelConfig, m0_kg: f64, revolutions: usize) -> Vec<f64> {
-    let p = &cfg.product;
+    let p = &product::ProductParams {
+        m0_kg,
+        ..cfg.product
+    };
     let mut m = m0_kg;
     (0..revolutions)
         .map(|_| {
             let mu = product::friction(p, m);
-            m -= product::consumption(p, m, m0_kg, 1.0, 1.0);
+            m -= product::consumption(p, m, 1.0, 1.0);
             mu
         })
         .collect()

@@ -302,7 +302,7 @@ macro_rules! overlay {
 }
 
 overlay!(ProductOverlay => ProductParams {
-    k0_kg, km1_kg, km2, kp, kc, mu_d, mu_c, km_kg, kt, cm_kg, cn, m_max_kg,
+    k0_kg, km1_kg, km2, m0_kg, kp, kc, mu_d, mu_c, km_kg, kt, cm_kg, cn, m_max_kg,
 });
 overlay!(ContactOverlay => ContactParams { e_pa, nu, wheel_profile_radius_m });
 overlay!(PolachOverlay => PolachConfig { p_a, p_b_s_per_m, k_a, k_s });
@@ -412,6 +412,12 @@ impl ModelConfig {
             p.km2,
             fin(p.km2) && p.km2 > 0.0,
             "finite and > 0",
+        )?;
+        check(
+            "product.m0_kg",
+            p.m0_kg,
+            fin(p.m0_kg) && p.m0_kg >= 0.0,
+            "finite and >= 0",
         )?;
         check("product.kp", p.kp, fin(p.kp), "finite")?;
         check("product.kc", p.kc, fin(p.kc), "finite")?;
@@ -566,6 +572,7 @@ mod tests {
         assert_eq!(c.product.k0_kg, 1.0449e-9);
         assert_eq!(c.product.km1_kg, 1.1617e-6);
         assert_eq!(c.product.km2, 0.53);
+        assert_eq!(c.product.m0_kg, 1.0e-4); // model.md, not Table 2
         assert_eq!(c.product.kp, 1.84);
         assert_eq!(c.product.kc, 0.57);
         assert_eq!(c.product.mu_d, 0.58);
@@ -613,6 +620,9 @@ mod tests {
         assert_eq!(e.key, "product.cn", "{e}");
         let e = err("[product]\ncm_kg = -1.0\n");
         assert_eq!(e.key, "product.cm_kg", "{e}");
+        let e = err("[product]\nm0_kg = -1e-4\n");
+        assert_eq!(e.key, "product.m0_kg", "{e}");
+        assert!(ModelConfig::from_overlay_str("[product]\nm0_kg = 0\n", "t").is_ok());
         let e = err("[effects.rail_ageing]\ntau_s = -5.0\n");
         assert_eq!(e.key, "effects.rail_ageing.tau_s", "{e}");
         let e = err("[effects.rail_ageing]\n");

@@ -210,8 +210,7 @@ impl Strategy {
     }
 
     /// The section with this strategy's applicators (`S1`, `S2`) in place of
-    /// the recorded ones; the nominal pulse (eq. 1's m0 before a first
-    /// pulse) is the strategy's pulse.
+    /// the recorded ones, their nominal pulse the strategy's pulse.
     pub fn section(&self, recorded: &Section) -> Section {
         Section {
             applicators: self
