@@ -50,6 +50,11 @@ const TOP_OFFSETS: usize = 2;
 const EPS_REACH: f64 = 0.05;
 /// A time step's screening factor.
 const EPS_STEP: f64 = 1.05;
+/// A pulse step's: pulses land on a rail near its cap (m0 of eq. (1) no
+/// longer follows them), where a larger pulse is squeezed out at once and
+/// a slightly smaller one too; only a clearly smaller one shows, as a
+/// clogged nozzle does.
+const EPS_PULSE_STEP: f64 = 0.7;
 /// A change point keeps at least this share of the rows on each side.
 const MIN_SIDE: f64 = 0.04;
 /// The same for the step form of a direction already found in another
@@ -423,7 +428,11 @@ pub(super) fn propose(
                         Some(x0),
                         Reach::STEP,
                     ),
-                    EPS_STEP,
+                    if acts_on == ActsOn::PulseMass {
+                        EPS_PULSE_STEP
+                    } else {
+                        EPS_STEP
+                    },
                 ),
                 None => {
                     let (lo, hi) = drivers.range(driver);
