@@ -149,3 +149,85 @@ fn the_checker_rejects_a_broken_foxglove_message_and_a_layout_naming_a_missing_t
         "{stderr}"
     );
 }
+
+/// The input recordings tortwin ships and writes (the bundled ones, an
+/// import of the documented tables) open in Foxglove Studio 1.48 and
+/// Lichtblick: every property of their schemas has one string `type`
+/// (tests/python/check_mcap.py; an untyped `enum` or a `["number",
+/// "null"]` type makes those apps drop the topic), and every message
+/// validates.
+#[test]
+fn bundled_and_imported_recordings_have_schemas_the_apps_parse() {
+    let dir = tempfile::tempdir().unwrap();
+    let imported = dir.path().join("imported.mcap");
+    let o = tortwin()
+        .arg("import")
+        .arg(PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("docs/examples/demo_day_tables"))
+        .arg("--out")
+        .arg(&imported)
+        .arg("-q")
+        .output()
+        .unwrap();
+    common::check(&o, "tortwin import");
+    let mut files = vec![imported];
+    let bundled = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("recordings");
+    for entry in std::fs::read_dir(&bundled).unwrap() {
+        let path = entry.unwrap().path();
+        if path.extension().is_some_and(|e| e == "mcap") {
+            files.push(path);
+        }
+    }
+    assert!(files.len() >= 5, "{files:?}");
+    // What the rule refuses: the schemas before 2026-11-26 (a nullable
+    // curve radius, a rail side as an untyped enum).
+    let old = dir.path().join("old_schema.mcap");
+    {
+        let schema = br#"{"type": "object", "properties": {
+            "curve_radius_m": {"type": ["number", "null"]},
+            "sides": {"type": "array", "items": {"type": "object",
+                "properties": {"side": {"enum": ["high", "low"]}}}}}}"#;
+        let file = std::io::BufWriter::new(std::fs::File::create(&old).unwrap());
+        let mut writer = mcap::Writer::new(file).unwrap();
+        let schema_id = writer
+            .add_schema("tor_twin.Section", "jsonschema", schema)
+            .unwrap();
+        let channel = writer
+            .add_channel(schema_id, "/section", "json", &BTreeMap::new())
+            .unwrap();
+        writer
+            .write_to_known_channel(
+                &mcap::records::MessageHeader {
+                    channel_id: channel,
+                    sequence: 0,
+                    log_time: 1,
+                    publish_time: 1,
+                },
+                br#"{"curve_radius_m": null, "sides": [{"side": "high"}]}"#,
+            )
+            .unwrap();
+        writer.finish().unwrap();
+    }
+    let check = python("check_mcap.py", &[old.as_os_str()]);
+    let stderr = String::from_utf8_lossy(&check.stderr);
+    assert_eq!(check.status.code(), Some(1), "{stderr}");
+    assert!(
+        stderr.contains(
+            "#/properties/curve_radius_m: type [\"number\", \"null\"], not a single string"
+        ),
+        "{stderr}"
+    );
+    assert!(
+        stderr.contains("#/properties/sides/items/properties/side: type null"),
+        "{stderr}"
+    );
+    for file in &files {
+        let check = python("check_mcap.py", &[file.as_os_str()]);
+        assert!(
+            check.status.success(),
+            "{}: {}{}",
+            file.display(),
+            String::from_utf8_lossy(&check.stdout),
+            String::from_utf8_lossy(&check.stderr)
+        );
+    }
+}

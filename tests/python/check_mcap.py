@@ -12,7 +12,11 @@ tools will read it:
 - the file is complete: it has a summary whose per-channel message counts
   match the messages actually stored, and every chunk's CRC is right;
 - every channel has message_encoding "json" and a schema with encoding
-  "jsonschema" that is itself a valid JSON Schema;
+  "jsonschema" that is itself a valid JSON Schema, in which every property
+  (at every depth) has exactly one string `type`, but in Foxglove's own
+  `foxglove.*` schemas, which the apps know by name (Foxglove Studio 1.48 and
+  Lichtblick drop a topic whose schema has `"type": ["number", "null"]` or
+  an untyped `enum`);
 - every message is strict JSON (no NaN/Infinity) and validates against its
   channel's schema;
 - every topic named by --expect-topics has at least one message, and every
@@ -65,6 +69,35 @@ def _parse_expect_count(text):
     return topic, value
 
 
+def untyped_properties(schema, path="#"):
+    """Where a property of `schema` lacks a single string `type`.
+
+    Foxglove Studio 1.48 (and Lichtblick) drop a topic whose schema has a
+    property typed as a list (`["number", "null"]`) or not typed at all (an
+    `enum` alone): every property, at every depth, needs exactly one string
+    `type`.
+    """
+    found = []
+    if not isinstance(schema, dict):
+        return found
+    for name, sub in (schema.get("properties") or {}).items():
+        where = f"{path}/properties/{name}"
+        if not isinstance(sub, dict) or not isinstance(sub.get("type"), str):
+            kind = sub.get("type") if isinstance(sub, dict) else sub
+            found.append(f"{where}: type {json.dumps(kind)}, not a single string")
+        found.extend(untyped_properties(sub, where))
+    for key in ("items", "additionalProperties"):
+        if isinstance(schema.get(key), dict):
+            found.extend(untyped_properties(schema[key], f"{path}/{key}"))
+    for key in ("$defs", "definitions"):
+        for name, sub in (schema.get(key) or {}).items():
+            found.extend(untyped_properties(sub, f"{path}/{key}/{name}"))
+    for key in ("oneOf", "anyOf", "allOf"):
+        for k, sub in enumerate(schema.get(key) or []):
+            found.extend(untyped_properties(sub, f"{path}/{key}/{k}"))
+    return found
+
+
 class Checker:
     def __init__(self):
         self.failures = []
@@ -103,6 +136,11 @@ class Checker:
                 cls = jsonschema.validators.validator_for(document)
                 cls.check_schema(document)
                 validator = cls(document)
+                # Foxglove's own schemas (foxglove.*) are known to the apps
+                # by name; they type enums as oneOf consts.
+                if not schema.name.startswith("foxglove."):
+                    for problem in untyped_properties(document):
+                        self.fail(topic, f"schema {schema.name!r}: {problem}")
             except (ValueError, jsonschema.exceptions.SchemaError) as err:
                 self.fail(topic, f"schema {schema.name!r} is not a valid JSON Schema: {err}")
         self._validators[channel.id] = validator
