@@ -154,7 +154,8 @@ fn the_checker_rejects_a_broken_foxglove_message_and_a_layout_naming_a_missing_t
 /// import of the documented tables) open in Foxglove Studio 1.48 and
 /// Lichtblick: every property of their schemas has one string `type`
 /// (tests/python/check_mcap.py; an untyped `enum` or a `["number",
-/// "null"]` type makes those apps drop the topic), and every message
+/// "null"]` type makes those apps drop the topic), every map by
+/// `additionalProperties` also has `properties`, and every message
 /// validates.
 #[test]
 fn bundled_and_imported_recordings_have_schemas_the_apps_parse() {
@@ -179,13 +180,15 @@ fn bundled_and_imported_recordings_have_schemas_the_apps_parse() {
     }
     assert!(files.len() >= 5, "{files:?}");
     // What the rule refuses: the schemas before 2026-11-26 (a nullable
-    // curve radius, a rail side as an untyped enum).
+    // curve radius, a rail side as an untyped enum, a map per rail by
+    // additionalProperties alone).
     let old = dir.path().join("old_schema.mcap");
     {
         let schema = br#"{"type": "object", "properties": {
             "curve_radius_m": {"type": ["number", "null"]},
             "sides": {"type": "array", "items": {"type": "object",
-                "properties": {"side": {"enum": ["high", "low"]}}}}}}"#;
+                "properties": {"side": {"enum": ["high", "low"]}}}},
+            "load_kN": {"type": "object", "additionalProperties": {"type": "number"}}}}"#;
         let file = std::io::BufWriter::new(std::fs::File::create(&old).unwrap());
         let mut writer = mcap::Writer::new(file).unwrap();
         let schema_id = writer
@@ -218,6 +221,10 @@ fn bundled_and_imported_recordings_have_schemas_the_apps_parse() {
     );
     assert!(
         stderr.contains("#/properties/sides/items/properties/side: type null"),
+        "{stderr}"
+    );
+    assert!(
+        stderr.contains("#/properties/load_kN: a map by additionalProperties without properties"),
         "{stderr}"
     );
     for file in &files {

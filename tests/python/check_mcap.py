@@ -16,7 +16,8 @@ tools will read it:
   (at every depth) has exactly one string `type`, but in Foxglove's own
   `foxglove.*` schemas, which the apps know by name (Foxglove Studio 1.48 and
   Lichtblick drop a topic whose schema has `"type": ["number", "null"]` or
-  an untyped `enum`);
+  an untyped `enum`), and a map by `additionalProperties` also has
+  `properties` (without, Studio 1.48 fails on the schema);
 - every message is strict JSON (no NaN/Infinity) and validates against its
   channel's schema;
 - every topic named by --expect-topics has at least one message, and every
@@ -86,6 +87,11 @@ def untyped_properties(schema, path="#"):
             kind = sub.get("type") if isinstance(sub, dict) else sub
             found.append(f"{where}: type {json.dumps(kind)}, not a single string")
         found.extend(untyped_properties(sub, where))
+    # A map given by `additionalProperties` alone (wheel loads per rail):
+    # Studio 1.48 fails on it with "Cannot convert undefined or null to
+    # object" unless the schema also has `properties`.
+    if isinstance(schema.get("additionalProperties"), dict) and "properties" not in schema:
+        found.append(f"{path}: a map by additionalProperties without properties")
     for key in ("items", "additionalProperties"):
         if isinstance(schema.get(key), dict):
             found.extend(untyped_properties(schema[key], f"{path}/{key}"))

@@ -75,11 +75,13 @@ pub const PASSAGE_SCHEMA: &str = r##"{
           "wheel_load_kN": {
             "type": "object",
             "description": "vertical wheel force Q per rail name, kN",
+            "properties": {},
             "additionalProperties": {"type": "number", "exclusiveMinimum": 0}
           },
           "creepage": {
             "type": "object",
             "description": "creepage estimate per rail name",
+            "properties": {},
             "additionalProperties": {
               "type": "object",
               "required": ["cx", "cy", "spin_per_m"],
