@@ -1,10 +1,14 @@
 #!/usr/bin/env python3
-"""Write a Foxglove layout for a tortwin MCAP output.
+"""Write the Foxglove layouts for a tortwin MCAP output.
 
-    python3 scripts/foxglove_layout.py OUT.mcap LAYOUT.json
+    python3 scripts/foxglove_layout.py OUT.mcap LAYOUT.json [STUDIO_LAYOUT.json]
 
-The layout is built with Foxglove's own `foxglove.layouts` (the
-`foxglove-sdk` Python package), from what the output holds:
+One description of the panels, from what the output holds, written in two
+formats: LAYOUT.json in Foxglove's own `foxglove.layouts` format (the
+`foxglove-sdk` Python package; the current Foxglove app imports it), and
+STUDIO_LAYOUT.json in the export format of Foxglove Studio 1.48 and of
+Lichtblick (`configById` and a tree of splits; those apps do not read the
+other one). The panels:
 
 - a 3D panel on `/foxglove/track` (the section's rails coloured by mu, the
   sites and applicators labelled), seen from above, following the `section`
@@ -15,10 +19,16 @@ The layout is built with Foxglove's own `foxglove.layouts` (the
 - the Log panel on `/foxglove/log` (trains, pulses per applicator,
   warnings where a train leaves mu below the target band).
 
-docs/foxglove/tortwin-layout.json is this script's output for the bundled
-demo day (`tortwin replay recordings/demo_day.mcap --out-mcap out/demo.mcap`);
-tests/cli_foxglove.rs checks that it is current and that every topic it
-names is in that output.
+docs/foxglove/tortwin-layout.json and tortwin-layout-studio.json are this
+script's output for the bundled demo day (`tortwin replay
+recordings/demo_day.mcap --out-mcap out/demo.mcap`); tests/cli_foxglove.rs
+checks that they are current and that every topic they name is in that
+output.
+
+Studio 1.48 centres its 3D view on `cameraState.targetOffset` and ignores
+`target`: the Studio layout puts the plan's middle there (and `target` at
+the origin, so that no app adds the two). Its plot palette has 7 colours, so every series there sets
+its own.
 """
 
 from __future__ import annotations
@@ -51,9 +61,16 @@ def section_and_measured(mcap_path: Path) -> tuple[dict, dict]:
     return section, measured
 
 
-def layout(section: dict, measured: dict):
-    import foxglove.layouts as fl
+TRACK_TITLE = "Track: mu along the section (blue < 0.30 too much product, green band, yellow-red dry)"
+LOG_TITLE = "Trains, pulses, warnings"
+# A colour per series (measured, then twin, per rail and quantity): distinct
+# on a light and a dark background.
+SERIES_COLOURS = ["#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2", "#17becf"]
 
+
+def describe(section: dict, measured: dict) -> dict:
+    """The panels, in neither app's format: the 3D view's centre and size,
+    a plot per measurement site (title, series), the log."""
     length = float(section["length_m"])
     # The plan's middle and extent (docs/spec/interfaces.md, "The section
     # on a plan": on a curve of radius R it bends to the right).
@@ -67,21 +84,7 @@ def layout(section: dict, measured: dict):
     xs, ys = [p[0] for p in points], [p[1] for p in points]
     middle = ((min(xs) + max(xs)) / 2, (min(ys) + max(ys)) / 2, 0.0)
     extent = max(max(xs) - min(xs), max(ys) - min(ys), 1.0)
-    track = fl.ThreeDeePanel(
-        title="Track: mu along the section (blue < 0.30 too much product, green band, yellow-red dry)",
-        config=fl.ThreeDeeConfig(
-            follow_tf="section",
-            topics={"/foxglove/track": fl.BaseRendererSceneUpdateTopicSettings(visible=True)},
-            camera_state=fl.ThreeDeeCameraState(
-                distance=round(1.5 * extent, 1),
-                perspective=False,
-                phi=0.0,
-                target=tuple(round(c, 1) for c in middle),
-                theta_offset=0.0,
-            ),
-        ),
-    )
-    plots = []
+    sites = []
     for site in section["sites"]:
         site_id = site["id"]
         series = []
@@ -91,22 +94,62 @@ def layout(section: dict, measured: dict):
                 f'{{quantity=="{quantity}"}}'
             )
             label = f"{rail} rail {QUANTITY_LABELS.get(quantity, quantity)}"
-            series.append(fl.PlotSeries(value=f"{path}.measured", label=f"{label}, measured", enabled=True))
-            series.append(fl.PlotSeries(value=f"{path}.simulated", label=f"{label}, twin", enabled=True))
-        if not series:
-            continue
-        plots.append(
-            fl.TabItem(
-                title=f"site {site_id} ({site['position_m']:.0f} m)",
-                content=fl.PlotPanel(
-                    title=f"Site {site_id}: measured and simulated",
-                    config=fl.PlotConfig(paths=series, show_legend=True, x_axis_val="timestamp"),
-                ),
+            series.append((f"{path}.measured", f"{label}, measured"))
+            series.append((f"{path}.simulated", f"{label}, twin"))
+        if series:
+            sites.append(
+                {
+                    "id": site_id,
+                    "tab": f"site {site_id} ({site['position_m']:.0f} m)",
+                    "title": f"Site {site_id}: measured and simulated",
+                    "series": series,
+                }
             )
+    return {
+        "middle": tuple(round(c, 1) for c in middle),
+        "distance": round(1.5 * extent, 1),
+        "sites": sites,
+        "log_topic": "/foxglove/log",
+        "track_topic": "/foxglove/track",
+    }
+
+
+def layout(section: dict, measured: dict):
+    """The layout in the `foxglove.layouts` format (the current app)."""
+    import foxglove.layouts as fl
+
+    d = describe(section, measured)
+    track = fl.ThreeDeePanel(
+        title=TRACK_TITLE,
+        config=fl.ThreeDeeConfig(
+            follow_tf="section",
+            topics={d["track_topic"]: fl.BaseRendererSceneUpdateTopicSettings(visible=True)},
+            camera_state=fl.ThreeDeeCameraState(
+                distance=d["distance"],
+                perspective=False,
+                phi=0.0,
+                target=d["middle"],
+                theta_offset=0.0,
+            ),
+        ),
+    )
+    plots = [
+        fl.TabItem(
+            title=site["tab"],
+            content=fl.PlotPanel(
+                title=site["title"],
+                config=fl.PlotConfig(
+                    paths=[fl.PlotSeries(value=v, label=l, enabled=True) for v, l in site["series"]],
+                    show_legend=True,
+                    x_axis_val="timestamp",
+                ),
+            ),
         )
+        for site in d["sites"]
+    ]
     log = fl.LogPanel(
-        title="Trains, pulses, warnings",
-        config=fl.LogConfig(topic_to_render="/foxglove/log", min_log_level=1),
+        title=LOG_TITLE,
+        config=fl.LogConfig(topic_to_render=d["log_topic"], min_log_level=1),
     )
     right = [fl.SplitItem(proportion=1, content=log)]
     if plots:
@@ -122,13 +165,88 @@ def layout(section: dict, measured: dict):
     )
 
 
+def studio_layout(section: dict, measured: dict) -> dict:
+    """The layout in the export format of Foxglove Studio 1.48 and
+    Lichtblick: panel configurations by id (`TYPE!name`), and a tree of
+    splits whose leaves are those ids."""
+    d = describe(section, measured)
+    middle = list(d["middle"])
+    config_by_id: dict[str, dict] = {
+        "3D!track": {
+            "foxglovePanelTitle": TRACK_TITLE,
+            "cameraState": {
+                "distance": d["distance"],
+                "perspective": False,
+                "phi": 0.0,
+                "thetaOffset": 0.0,
+                "target": [0.0, 0.0, 0.0],
+                "targetOffset": middle,
+                "targetOrientation": [0.0, 0.0, 0.0, 1.0],
+                "fovy": 45,
+                "near": 0.5,
+                "far": 5000,
+            },
+            "followTf": "section",
+            "followMode": "follow-pose",
+            "scene": {},
+            "transforms": {},
+            "layers": {},
+            "topics": {d["track_topic"]: {"visible": True}},
+        },
+        "RosOut!log": {
+            "foxglovePanelTitle": LOG_TITLE,
+            "topicToRender": d["log_topic"],
+            "minLogLevel": 1,
+            "searchTerms": [],
+        },
+    }
+    tabs = []
+    for site in d["sites"]:
+        plot_id = f"Plot!site{site['id']}"
+        config_by_id[plot_id] = {
+            "foxglovePanelTitle": site["title"],
+            "paths": [
+                {
+                    "value": v,
+                    "label": l,
+                    "enabled": True,
+                    "timestampMethod": "receiveTime",
+                    "color": SERIES_COLOURS[k % len(SERIES_COLOURS)],
+                }
+                for k, (v, l) in enumerate(site["series"])
+            ],
+            "showLegend": True,
+            "legendDisplay": "floating",
+            "showXAxisLabels": True,
+            "showYAxisLabels": True,
+            "isSynced": True,
+            "xAxisVal": "timestamp",
+        }
+        tabs.append({"title": site["tab"], "layout": plot_id})
+    right: object = "RosOut!log"
+    if tabs:
+        config_by_id["Tab!sites"] = {"activeTabIdx": 0, "tabs": tabs}
+        right = {"direction": "column", "first": "Tab!sites", "second": "RosOut!log", "splitPercentage": 60}
+    return {
+        "configById": config_by_id,
+        "globalVariables": {},
+        "userNodes": {},
+        "linkedGlobalVariables": [],
+        "playbackConfig": {"speed": 1},
+        "layout": {"direction": "row", "first": "3D!track", "second": right, "splitPercentage": 55},
+    }
+
+
 def main(argv: list[str]) -> int:
-    if len(argv) != 3:
+    if len(argv) not in (3, 4):
         print(__doc__, file=sys.stderr)
         return 2
     section, measured = section_and_measured(Path(argv[1]))
     text = json.dumps(json.loads(layout(section, measured).to_json()), indent=2, sort_keys=True)
     Path(argv[2]).write_text(text + "\n")
+    if len(argv) == 4:
+        studio = json.dumps(studio_layout(section, measured), indent=2, sort_keys=True)
+        Path(argv[3]).write_text(studio + "\n")
     return 0
 
 

@@ -16,6 +16,12 @@ fn shipped_layout() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("docs/foxglove/tortwin-layout.json")
 }
 
+/// The same panels in the export format of Foxglove Studio 1.48 and
+/// Lichtblick.
+fn shipped_studio_layout() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("docs/foxglove/tortwin-layout-studio.json")
+}
+
 fn check(mcap: &Path, layout: Option<&Path>) -> std::process::Output {
     let mut args = vec![mcap.as_os_str().to_owned()];
     if let Some(layout) = layout {
@@ -70,15 +76,28 @@ fn foxglove_topics_validate_against_foxglove_schemas_and_the_layout_fits() {
     );
     assert!(stdout.contains("/foxglove/log\tfoxglove.Log"), "{stdout}");
     assert!(stdout.contains("layout: 3 topics"), "{stdout}");
+    let output = check(&mcap, Some(&shipped_studio_layout()));
+    let stdout = String::from_utf8_lossy(&output.stdout);
+    assert!(
+        output.status.success(),
+        "{stdout}{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    assert!(
+        stdout.contains("layout: 3 topics, 22 plot paths, all in the file"),
+        "{stdout}"
+    );
 
-    // The shipped layout is what the script makes of this output today.
+    // The shipped layouts are what the script makes of this output today.
     let fresh = dir.path().join("layout.json");
+    let fresh_studio = dir.path().join("layout-studio.json");
     let script = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("scripts/foxglove_layout.py");
     let python = std::env::var("TORTWIN_PYTHON").unwrap_or_else(|_| "python3".to_owned());
     let out = std::process::Command::new(python)
         .arg(script)
         .arg(&mcap)
         .arg(&fresh)
+        .arg(&fresh_studio)
         .output()
         .unwrap();
     assert!(
@@ -91,6 +110,12 @@ fn foxglove_topics_validate_against_foxglove_schemas_and_the_layout_fits() {
         std::fs::read_to_string(shipped_layout()).unwrap(),
         "docs/foxglove/tortwin-layout.json is stale: rerun scripts/foxglove_layout.py on \
          the demo day's output"
+    );
+    assert_eq!(
+        std::fs::read_to_string(&fresh_studio).unwrap(),
+        std::fs::read_to_string(shipped_studio_layout()).unwrap(),
+        "docs/foxglove/tortwin-layout-studio.json is stale: rerun scripts/foxglove_layout.py \
+         on the demo day's output"
     );
 }
 
@@ -146,6 +171,31 @@ fn the_checker_rejects_a_broken_foxglove_message_and_a_layout_naming_a_missing_t
     assert_eq!(output.status.code(), Some(1), "{stderr}");
     assert!(
         stderr.contains("/foxglove/logs, which the file does not have"),
+        "{stderr}"
+    );
+
+    // The Studio format: a topic the file does not have, and a tree that
+    // places a panel without a configuration.
+    let studio = std::fs::read_to_string(shipped_studio_layout()).unwrap();
+    let wrong = dir.path().join("wrong-studio.json");
+    std::fs::write(&wrong, studio.replace("/foxglove/log", "/foxglove/logs")).unwrap();
+    let output = check(&mcap, Some(&wrong));
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(output.status.code(), Some(1), "{stderr}");
+    assert!(
+        stderr.contains("/foxglove/logs, which the file does not have"),
+        "{stderr}"
+    );
+    std::fs::write(
+        &wrong,
+        studio.replace("\"first\": \"Tab!sites\"", "\"first\": \"Tab!site\""),
+    )
+    .unwrap();
+    let output = check(&mcap, Some(&wrong));
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(output.status.code(), Some(1), "{stderr}");
+    assert!(
+        stderr.contains("panel Tab!site is placed but has no configuration"),
         "{stderr}"
     );
 }

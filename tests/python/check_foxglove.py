@@ -13,8 +13,11 @@ are Foxglove's, not the copies tortwin writes into its files.
   schema `X` (jsonschema);
 - `/foxglove/track` holds SceneUpdates whose line primitives have one colour
   per point, and `/foxglove/log` Logs;
-- with --layout: every topic the layout names (3D topics, the Log panel's
-  topic, the topic of every plot path) is a channel of the file, and every
+- with --layout (either format: `foxglove.layouts`, or Foxglove Studio
+  1.48's and Lichtblick's export with `configById`, whose tree and Tab
+  panels must place exactly the panels it configures): every topic the
+  layout names (3D topics, the Log panel's topic, the topic of every plot
+  path) is a channel of the file, and every
   `{site_id=="..."}` / `{rail=="..."}` filter names a site / rail of
   `/twin/section`.
 
@@ -64,8 +67,55 @@ def npm_schemas(names: list[str]) -> dict[str, dict]:
     return json.loads(result.stdout)
 
 
+def studio_layout_topics(layout: dict) -> tuple[set[str], list[str]]:
+    """Topics and plot paths of a layout in the export format of Foxglove
+    Studio 1.48 and Lichtblick (`configById` and a tree of splits); raises
+    ValueError where the tree or a Tab panel names a panel without a
+    configuration, or a configuration is not placed anywhere."""
+    configs = layout["configById"]
+    placed: list[str] = []
+
+    def leaves(node):
+        if isinstance(node, str):
+            placed.append(node)
+        elif isinstance(node, dict):
+            for key in ("first", "second"):
+                if key not in node:
+                    raise ValueError(f"a split without {key!r}: {node}")
+                leaves(node[key])
+        else:
+            raise ValueError(f"not a panel id nor a split: {node!r}")
+
+    leaves(layout["layout"])
+    for panel_id, config in configs.items():
+        if panel_id.split("!")[0] == "Tab":
+            for tab in config.get("tabs", []):
+                leaves(tab["layout"])
+    for panel_id in placed:
+        if panel_id not in configs:
+            raise ValueError(f"panel {panel_id} is placed but has no configuration")
+    for panel_id in configs:
+        if panel_id not in placed:
+            raise ValueError(f"panel {panel_id} has a configuration but is placed nowhere")
+    topics: set[str] = set()
+    paths: list[str] = []
+    for panel_id, config in configs.items():
+        kind = panel_id.split("!")[0]
+        if kind == "3D":
+            topics.update(config.get("topics", {}))
+        elif kind == "RosOut":
+            topics.add(config["topicToRender"])
+        elif kind == "Plot":
+            for series in config.get("paths", []):
+                paths.append(series["value"])
+                topics.add(re.match(r"^(/[^{.]*)", series["value"]).group(1))
+    return topics, paths
+
+
 def layout_topics(layout: dict) -> tuple[set[str], list[str]]:
-    """Topics a layout names, and its plot paths."""
+    """Topics a layout names, and its plot paths (either format)."""
+    if "configById" in layout:
+        return studio_layout_topics(layout)
     topics: set[str] = set()
     paths: list[str] = []
 
@@ -160,7 +210,11 @@ def main(argv: list[str]) -> int:
 
     if args.layout:
         layout = json.loads(Path(args.layout).read_text())
-        topics, paths = layout_topics(layout)
+        try:
+            topics, paths = layout_topics(layout)
+        except (ValueError, KeyError) as err:
+            failures.append(f"layout {args.layout}: {err}")
+            topics, paths = set(), []
         for topic in sorted(topics - channels):
             failures.append(f"layout names topic {topic}, which the file does not have")
         sites = {s["id"] for s in (section or {}).get("sites", [])}
