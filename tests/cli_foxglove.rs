@@ -39,6 +39,49 @@ fn check(mcap: &Path, layout: Option<&Path>) -> std::process::Output {
     output
 }
 
+/// check_foxglove.py's report on a file that passes.
+fn passes(mcap: &Path, layout: Option<&Path>) -> String {
+    let output = check(mcap, layout);
+    let stdout = String::from_utf8_lossy(&output.stdout).into_owned();
+    assert!(
+        output.status.success(),
+        "{stdout}{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    stdout
+}
+
+/// check_foxglove.py fails (exit 1) and says `says`.
+fn fails_saying(mcap: &Path, layout: Option<&Path>, says: &str) {
+    let output = check(mcap, layout);
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(output.status.code(), Some(1), "{stderr}");
+    assert!(stderr.contains(says), "{stderr}");
+}
+
+/// An MCAP file of one JSON message on `topic`, with the schema
+/// `(name, JSON Schema)`.
+fn one_message_file(path: &Path, (name, schema): (&str, &[u8]), topic: &str, data: &[u8]) {
+    let file = std::io::BufWriter::new(std::fs::File::create(path).unwrap());
+    let mut writer = mcap::Writer::new(file).unwrap();
+    let schema_id = writer.add_schema(name, "jsonschema", schema).unwrap();
+    let channel = writer
+        .add_channel(schema_id, topic, "json", &BTreeMap::new())
+        .unwrap();
+    writer
+        .write_to_known_channel(
+            &mcap::records::MessageHeader {
+                channel_id: channel,
+                sequence: 0,
+                log_time: 1,
+                publish_time: 1,
+            },
+            data,
+        )
+        .unwrap();
+    writer.finish().unwrap();
+}
+
 fn replay_demo(dir: &Path) -> PathBuf {
     let mcap = dir.join("demo.mcap");
     let out = tortwin()
@@ -62,13 +105,7 @@ fn foxglove_topics_validate_against_foxglove_schemas_and_the_layout_fits() {
     let dir = tempfile::tempdir().unwrap();
     let mcap = replay_demo(dir.path());
 
-    let output = check(&mcap, Some(&shipped_layout()));
-    let stdout = String::from_utf8_lossy(&output.stdout);
-    assert!(
-        output.status.success(),
-        "{stdout}{}",
-        String::from_utf8_lossy(&output.stderr)
-    );
+    let stdout = passes(&mcap, Some(&shipped_layout()));
     // One scene per train (40 on the demo day), a log line per train and more.
     assert!(
         stdout.contains("/foxglove/track\tfoxglove.SceneUpdate\t40 messages valid"),
@@ -76,13 +113,7 @@ fn foxglove_topics_validate_against_foxglove_schemas_and_the_layout_fits() {
     );
     assert!(stdout.contains("/foxglove/log\tfoxglove.Log"), "{stdout}");
     assert!(stdout.contains("layout: 3 topics"), "{stdout}");
-    let output = check(&mcap, Some(&shipped_studio_layout()));
-    let stdout = String::from_utf8_lossy(&output.stdout);
-    assert!(
-        output.status.success(),
-        "{stdout}{}",
-        String::from_utf8_lossy(&output.stderr)
-    );
+    let stdout = passes(&mcap, Some(&shipped_studio_layout()));
     assert!(
         stdout.contains("layout: 3 topics, 22 plot paths, all in the file"),
         "{stdout}"
@@ -123,41 +154,19 @@ fn foxglove_topics_validate_against_foxglove_schemas_and_the_layout_fits() {
 fn the_checker_rejects_a_broken_foxglove_message_and_a_layout_naming_a_missing_topic() {
     let dir = tempfile::tempdir().unwrap();
     let bad = dir.path().join("bad.mcap");
-    {
-        let schema = std::fs::read(
-            PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-                .join("crates/outputs/schemas/foxglove/Log.json"),
-        )
-        .unwrap();
-        let file = std::io::BufWriter::new(std::fs::File::create(&bad).unwrap());
-        let mut writer = mcap::Writer::new(file).unwrap();
-        let schema_id = writer
-            .add_schema("foxglove.Log", "jsonschema", &schema)
-            .unwrap();
-        let channel = writer
-            .add_channel(schema_id, "/foxglove/log", "json", &BTreeMap::new())
-            .unwrap();
-        // Level 9 does not exist, and `file` and `line` are missing.
-        let data =
-            br#"{"timestamp": {"sec": 1, "nsec": 0}, "level": 9, "message": "x", "name": "y"}"#;
-        writer
-            .write_to_known_channel(
-                &mcap::records::MessageHeader {
-                    channel_id: channel,
-                    sequence: 0,
-                    log_time: 1,
-                    publish_time: 1,
-                },
-                data,
-            )
-            .unwrap();
-        writer.finish().unwrap();
-    }
-    let output = check(&bad, None);
-    let stderr = String::from_utf8_lossy(&output.stderr);
-    assert_eq!(output.status.code(), Some(1), "{stderr}");
-    assert!(stderr.contains("/foxglove/log message 0"), "{stderr}");
-    assert!(stderr.contains("'file' is a required property"), "{stderr}");
+    let schema = std::fs::read(
+        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("crates/outputs/schemas/foxglove/Log.json"),
+    )
+    .unwrap();
+    // Level 9 does not exist, and `file` and `line` are missing.
+    one_message_file(
+        &bad,
+        ("foxglove.Log", &schema),
+        "/foxglove/log",
+        br#"{"timestamp": {"sec": 1, "nsec": 0}, "level": 9, "message": "x", "name": "y"}"#,
+    );
+    fails_saying(&bad, None, "/foxglove/log message 0");
+    fails_saying(&bad, None, "'file' is a required property");
 
     // A layout that names a topic the output does not have.
     let mcap = replay_demo(dir.path());
@@ -166,12 +175,10 @@ fn the_checker_rejects_a_broken_foxglove_message_and_a_layout_naming_a_missing_t
         .replace("/foxglove/log", "/foxglove/logs");
     let wrong = dir.path().join("wrong.json");
     std::fs::write(&wrong, layout).unwrap();
-    let output = check(&mcap, Some(&wrong));
-    let stderr = String::from_utf8_lossy(&output.stderr);
-    assert_eq!(output.status.code(), Some(1), "{stderr}");
-    assert!(
-        stderr.contains("/foxglove/logs, which the file does not have"),
-        "{stderr}"
+    fails_saying(
+        &mcap,
+        Some(&wrong),
+        "/foxglove/logs, which the file does not have",
     );
 
     // The Studio format: a topic the file does not have, and a tree that
@@ -179,24 +186,20 @@ fn the_checker_rejects_a_broken_foxglove_message_and_a_layout_naming_a_missing_t
     let studio = std::fs::read_to_string(shipped_studio_layout()).unwrap();
     let wrong = dir.path().join("wrong-studio.json");
     std::fs::write(&wrong, studio.replace("/foxglove/log", "/foxglove/logs")).unwrap();
-    let output = check(&mcap, Some(&wrong));
-    let stderr = String::from_utf8_lossy(&output.stderr);
-    assert_eq!(output.status.code(), Some(1), "{stderr}");
-    assert!(
-        stderr.contains("/foxglove/logs, which the file does not have"),
-        "{stderr}"
+    fails_saying(
+        &mcap,
+        Some(&wrong),
+        "/foxglove/logs, which the file does not have",
     );
     std::fs::write(
         &wrong,
         studio.replace("\"first\": \"Tab!sites\"", "\"first\": \"Tab!site\""),
     )
     .unwrap();
-    let output = check(&mcap, Some(&wrong));
-    let stderr = String::from_utf8_lossy(&output.stderr);
-    assert_eq!(output.status.code(), Some(1), "{stderr}");
-    assert!(
-        stderr.contains("panel Tab!site is placed but has no configuration"),
-        "{stderr}"
+    fails_saying(
+        &mcap,
+        Some(&wrong),
+        "panel Tab!site is placed but has no configuration",
     );
 }
 
@@ -233,33 +236,17 @@ fn bundled_and_imported_recordings_have_schemas_the_apps_parse() {
     // curve radius, a rail side as an untyped enum, a map per rail by
     // additionalProperties alone).
     let old = dir.path().join("old_schema.mcap");
-    {
-        let schema = br#"{"type": "object", "properties": {
-            "curve_radius_m": {"type": ["number", "null"]},
-            "sides": {"type": "array", "items": {"type": "object",
-                "properties": {"side": {"enum": ["high", "low"]}}}},
-            "load_kN": {"type": "object", "additionalProperties": {"type": "number"}}}}"#;
-        let file = std::io::BufWriter::new(std::fs::File::create(&old).unwrap());
-        let mut writer = mcap::Writer::new(file).unwrap();
-        let schema_id = writer
-            .add_schema("tor_twin.Section", "jsonschema", schema)
-            .unwrap();
-        let channel = writer
-            .add_channel(schema_id, "/section", "json", &BTreeMap::new())
-            .unwrap();
-        writer
-            .write_to_known_channel(
-                &mcap::records::MessageHeader {
-                    channel_id: channel,
-                    sequence: 0,
-                    log_time: 1,
-                    publish_time: 1,
-                },
-                br#"{"curve_radius_m": null, "sides": [{"side": "high"}]}"#,
-            )
-            .unwrap();
-        writer.finish().unwrap();
-    }
+    let schema = br#"{"type": "object", "properties": {
+        "curve_radius_m": {"type": ["number", "null"]},
+        "sides": {"type": "array", "items": {"type": "object",
+            "properties": {"side": {"enum": ["high", "low"]}}}},
+        "load_kN": {"type": "object", "additionalProperties": {"type": "number"}}}}"#;
+    one_message_file(
+        &old,
+        ("tor_twin.Section", schema),
+        "/section",
+        br#"{"curve_radius_m": null, "sides": [{"side": "high"}]}"#,
+    );
     let check = python("check_mcap.py", &[old.as_os_str()]);
     let stderr = String::from_utf8_lossy(&check.stderr);
     assert_eq!(check.status.code(), Some(1), "{stderr}");
