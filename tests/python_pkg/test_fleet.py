@@ -24,7 +24,12 @@ SECTIONS = [f"S{k}" for k in range(6)]
 CLOGGED = "S3"
 BIASED = "S5"
 DATES = ["2024-04-08", "2024-04-09", "2024-04-10"]
-CLOG = "generic:acts_on=pulse_mass,applicator=A1,driver=time,form=step,t0_utc=2024-04-09T12:00:00Z,f=0.6"
+# The nozzle delivers 40 % from noon of the second day. At 60 % (this test's
+# clog before m0 became a constant of the product, 2026-11-26) a step of the
+# wheel-rail transfer to 75 % fits S3's 300 m and 16 trains a day as well
+# (RMSE 0.01010 against 0.01004 for the noise): with a constant m0 the
+# recording cannot tell the two apart, and discover names the transfer.
+CLOG = "generic:acts_on=pulse_mass,applicator=A1,driver=time,form=step,t0_utc=2024-04-09T12:00:00Z,f=0.4"
 BIAS = "generic:acts_on=measurement,site=M2,rail=high,quantity=mu,offset=0.05"
 HIDDEN = {CLOGGED: [CLOG], BIASED: [BIAS]}
 
@@ -132,7 +137,7 @@ def test_a_fleet_equals_the_command_line_day_by_day(tmp_path, recordings, local_
     summary = json.loads((out / "summary.json").read_text())
     ranked = summary["sections"]
     assert [s["section"] for s in ranked[:2]] == [CLOGGED, BIASED], ranked
-    assert ranked[0]["reasons"][0].startswith("applicator A1: Applicator A1 delivers about 60 %"), ranked[0]
+    assert ranked[0]["reasons"][0].startswith("applicator A1: Applicator A1 delivers about 40 %"), ranked[0]
     assert [(x["site"], x["rail"], x["quantity"]) for x in ranked[1]["sensors"]] == [("M2", "high", "mu")]
     assert 0.04 < ranked[1]["sensors"][0]["offset_from_others"] < 0.06, ranked[1]
     assert all(not s["reasons"] for s in ranked[2:]), ranked
