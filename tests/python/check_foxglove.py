@@ -67,6 +67,20 @@ def npm_schemas(names: list[str]) -> dict[str, dict]:
     return json.loads(result.stdout)
 
 
+def panel_topics(kind: str, config: dict, topics: set[str], paths: list[str]) -> None:
+    """Adds the topics and plot paths one panel names; `kind` in either
+    format's name (the 3D panel is `ThreeDee` or `3D`, the Log panel `Log`
+    or `RosOut`)."""
+    if kind in ("ThreeDee", "3D"):
+        topics.update(config.get("topics", {}))
+    elif kind in ("Log", "RosOut"):
+        topics.add(config["topicToRender"])
+    elif kind == "Plot":
+        for series in config.get("paths", []):
+            paths.append(series["value"])
+            topics.add(re.match(r"^(/[^{.]*)", series["value"]).group(1))
+
+
 def studio_layout_topics(layout: dict) -> tuple[set[str], list[str]]:
     """Topics and plot paths of a layout in the export format of Foxglove
     Studio 1.48 and Lichtblick (`configById` and a tree of splits); raises
@@ -100,15 +114,7 @@ def studio_layout_topics(layout: dict) -> tuple[set[str], list[str]]:
     topics: set[str] = set()
     paths: list[str] = []
     for panel_id, config in configs.items():
-        kind = panel_id.split("!")[0]
-        if kind == "3D":
-            topics.update(config.get("topics", {}))
-        elif kind == "RosOut":
-            topics.add(config["topicToRender"])
-        elif kind == "Plot":
-            for series in config.get("paths", []):
-                paths.append(series["value"])
-                topics.add(re.match(r"^(/[^{.]*)", series["value"]).group(1))
+        panel_topics(panel_id.split("!")[0], config, topics, paths)
     return topics, paths
 
 
@@ -122,16 +128,7 @@ def layout_topics(layout: dict) -> tuple[set[str], list[str]]:
     def walk(node):
         if isinstance(node, dict):
             if node.get("type") == "panel":
-                config = node.get("config", {})
-                kind = node.get("panelType")
-                if kind == "ThreeDee":
-                    topics.update(config.get("topics", {}))
-                elif kind == "Log":
-                    topics.add(config["topicToRender"])
-                elif kind == "Plot":
-                    for series in config.get("paths", []):
-                        paths.append(series["value"])
-                        topics.add(re.match(r"^(/[^{.]*)", series["value"]).group(1))
+                panel_topics(node.get("panelType"), node.get("config", {}), topics, paths)
             for value in node.values():
                 walk(value)
         elif isinstance(node, list):
