@@ -4,8 +4,13 @@
 //! command of the README's `sh` blocks.
 //!
 //! The clone builds with its own target folder (`target/newcomer`, kept
-//! between runs: the first run builds everything once, as a newcomer's
-//! machine does). Commands written with `tortwin` run the clone's own build
+//! between runs). The first time, that folder starts with the third-party
+//! crates this build has already compiled (hard links, [`seed_with_dependencies`]),
+//! as a newcomer's machine has them after the first command's first build:
+//! the clone compiles every tortwin crate from its own sources, but rerun
+//! and the other dependencies are not compiled a second time within CI's
+//! time (a cold build of them is what CI's own build from a clean clone
+//! does). Commands written with `tortwin` run the clone's own build
 //! on the PATH, as `cargo install --path .` in the clone would put it. Two
 //! kinds of line are not run: `bash .ci/run` (the test command, which runs
 //! this test) and the viewer (`pip install rerun-sdk ... && rerun FILE`, a
@@ -96,6 +101,9 @@ fn the_readme_commands_work_in_a_fresh_clone() {
         .nth(2)
         .unwrap()
         .join("newcomer");
+    if !target.exists() {
+        seed_with_dependencies(&target);
+    }
     let bin = target.join("release");
     let path_var = format!(
         "{}:{}",
@@ -136,6 +144,35 @@ fn the_readme_commands_work_in_a_fresh_clone() {
     ] {
         assert!(clone.join(output).is_file(), "{output} missing");
     }
+}
+
+/// Starts the clone's target folder `target` with this build's compiled
+/// third-party crates: cargo's fingerprints and build-script outputs
+/// copied, the dependencies' libraries hard-linked (never written again:
+/// they stay fresh). The workspace's own crates (every file named
+/// `*tortwin*`) are left out, so the clone builds them from its sources
+/// and nothing it writes reaches this build's folder.
+fn seed_with_dependencies(target: &Path) {
+    let ours = PathBuf::from(env!("CARGO_BIN_EXE_tortwin"))
+        .parent()
+        .unwrap()
+        .to_path_buf();
+    let release = target.join("release");
+    let deps = release.join("deps");
+    std::fs::create_dir_all(&deps).unwrap();
+    let script = r#"set -e
+cp -a "$1/.fingerprint" "$1/build" "$2/"
+find "$1/deps" -maxdepth 1 -type f \( -name 'lib*' -o -name '*.d' \) \
+  ! -name '*tortwin*' -exec ln -t "$2/deps" {} +"#;
+    let o = Command::new("bash")
+        .arg("-c")
+        .arg(script)
+        .arg("seed")
+        .arg(&ours)
+        .arg(&release)
+        .output()
+        .unwrap();
+    common::check(&o, "seeding the clone's target folder");
 }
 
 #[test]
