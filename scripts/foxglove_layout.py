@@ -64,8 +64,16 @@ def section_and_measured(mcap_path: Path) -> tuple[dict, dict]:
 TRACK_TITLE = "Track: mu along the section (blue < 0.30 too much product, green band, yellow-red dry)"
 LOG_TITLE = "Trains, pulses, warnings"
 # A colour per series (measured, then twin, per rail and quantity): distinct
-# on a light and a dark background.
-SERIES_COLOURS = ["#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2", "#17becf"]
+# on a light and a dark background, and as many as a site can have series
+# (two rails, three quantities, measured and twin: twelve), so that no two
+# series of one plot share a colour. Matplotlib's tab10 without its grey
+# (the apps' grid), then three saturated ones far from those nine and from
+# the greys of axes and text (tests/js/studio/open.js tells series apart by
+# colour).
+SERIES_COLOURS = [
+    "#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b",
+    "#e377c2", "#17becf", "#bcbd22", "#6b6ecf", "#e7ba52", "#ff1493",
+]
 
 
 def describe(section: dict, measured: dict) -> dict:
