@@ -10,6 +10,7 @@
 //! showing the track near the panel's middle and the log showing rows.
 //! The same file with one schema in the form that made Studio drop the
 //! topic (issue 36: an `enum` without a `type`) must fail, for that reason.
+//! The bundled input recording must open with an empty Problems list.
 //!
 //! `TORTWIN_STUDIO_SCREENSHOTS=DIR` keeps the screenshots of the passing
 //! run there (the README's are docs/foxglove/screenshots/, taken so).
@@ -25,7 +26,7 @@ use common::{demo_day, tortwin};
 
 /// `node tests/js/studio/open.js`: the app's verdict on `mcap` opened with
 /// the shipped Studio layout at its last message.
-fn open_in_studio(mcap: &Path, screenshots: &Path, timeout_s: u32) -> Output {
+fn open_in_studio(mcap: &Path, screenshots: &Path, timeout_s: u32, problems_only: bool) -> Output {
     let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
     let bytes = std::fs::read(mcap).unwrap();
     let end_ns = mcap::Summary::read(&bytes)
@@ -49,6 +50,7 @@ fn open_in_studio(mcap: &Path, screenshots: &Path, timeout_s: u32) -> Output {
         .arg(screenshots)
         .arg("--timeout-s")
         .arg(timeout_s.to_string())
+        .args(problems_only.then_some("--problems-only"))
         .output()
         .unwrap_or_else(|e| panic!("cannot run {node} ({e}): Node.js is needed"));
     assert_ne!(
@@ -97,7 +99,7 @@ fn the_demo_output_opens_in_foxglove_studio_with_every_panel_drawn() {
     let screenshots = std::env::var_os("TORTWIN_STUDIO_SCREENSHOTS")
         .map(PathBuf::from)
         .unwrap_or_else(|| dir.path().join("screenshots"));
-    let output = open_in_studio(&out, &screenshots, 240);
+    let output = open_in_studio(&out, &screenshots, 240, false);
     assert!(
         output.status.success() && failures(&output).is_empty(),
         "Foxglove Studio 1.48 does not show the demo output as it should:\n{}\n{}",
@@ -107,6 +109,20 @@ fn the_demo_output_opens_in_foxglove_studio_with_every_panel_drawn() {
     for shot in ["studio.png", "studio-Plot-siteM2.png"] {
         assert!(screenshots.join(shot).is_file(), "{shot} not taken");
     }
+}
+
+/// An input recording as tortwin writes them (the bundled day, written by
+/// `tortwin synth`): Studio parses every one of its schemas.
+#[test]
+fn the_bundled_input_recording_opens_in_foxglove_studio_without_problems() {
+    let dir = tempfile::tempdir().unwrap();
+    let output = open_in_studio(&demo_day(), &dir.path().join("screenshots"), 240, true);
+    assert!(
+        output.status.success() && failures(&output).is_empty(),
+        "Foxglove Studio 1.48 has problems with recordings/demo_day.mcap:\n{}\n{}",
+        String::from_utf8_lossy(&output.stdout),
+        String::from_utf8_lossy(&output.stderr)
+    );
 }
 
 /// The demo output with `/twin/measurement`'s `quantity` an `enum` without
@@ -149,7 +165,7 @@ fn a_schema_studio_cannot_parse_fails_the_check() {
     let out = demo_output(dir.path());
     let broken = dir.path().join("untyped.mcap");
     with_untyped_quantity(&out, &broken);
-    let output = open_in_studio(&broken, &dir.path().join("screenshots"), 60);
+    let output = open_in_studio(&broken, &dir.path().join("screenshots"), 60, false);
     let failures = failures(&output);
     eprintln!("what the app showed: {failures:#?}");
     assert_eq!(output.status.code(), Some(1), "{failures:?}");

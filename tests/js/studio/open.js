@@ -3,7 +3,7 @@
 // layout in Studio's export format, and says what a user would see:
 //
 //   node tests/js/studio/open.js --mcap FILE --layout LAYOUT.json --time RFC3339
-//        [--screenshots DIR] [--timeout-s 240]
+//        [--screenshots DIR] [--timeout-s 240] [--problems-only]
 //
 // It serves the app, React 17, the layout and the file from one local HTTP
 // server that answers byte ranges (as Studio's remote-file source needs),
@@ -12,7 +12,9 @@
 // boundary and the errors the app reports, for each Plot panel (each tab of
 // a Tab panel in turn) the pixels of each series' colour on its canvas, the
 // 3D panel's coloured pixels and where they lie, and the Log panel's rows.
-// Prints one JSON object; exits 0 when nothing is wrong, 1 when something
+// With --problems-only (a file the layout was not made for, such as an
+// input recording) only the Problems list and errors are judged. Prints one
+// JSON object; exits 0 when nothing is wrong, 1 when something
 // is (the object's `failures` say what), 2 when it could not run.
 "use strict";
 
@@ -32,6 +34,11 @@ const MIN_TRACK_SHARE = 0.003;
 function parseArgs(argv) {
   const args = { timeoutS: 240 };
   for (let i = 0; i < argv.length; i += 2) {
+    if (argv[i] === "--problems-only") {
+      args.problemsOnly = true;
+      i -= 1;
+      continue;
+    }
     const [key, value] = [argv[i], argv[i + 1]];
     if (value === undefined) throw new Error(`${key} needs a value`);
     if (key === "--mcap") args.mcap = path.resolve(value);
@@ -292,7 +299,7 @@ async function look(page, layout, shots) {
   return seen;
 }
 
-function judge(seen, problemList, appErrors) {
+function judge(seen, problemList, appErrors, problemsOnly) {
   const failures = [];
   if (!problemList.found) failures.push("the Problems tab was not found");
   else if (problemList.items.length > 0 || !problemList.empty) {
@@ -300,6 +307,7 @@ function judge(seen, problemList, appErrors) {
   }
   for (const id of seen.panelErrors) failures.push(`panel error: ${id}`);
   for (const e of appErrors) failures.push(`app error: ${e.split("\n")[0]}`);
+  if (problemsOnly) return failures;
   for (const [id, series] of Object.entries(seen.plots)) {
     if (series === null) {
       failures.push(`${id}: no chart`);
@@ -360,13 +368,18 @@ async function main() {
     // The file is read in a worker and the plots fill as blocks arrive:
     // look every few seconds until everything shows or time runs out.
     const deadline = Date.now() + args.timeoutS * 1000;
+    // The data-source sidebar gives the file's duration once its summary
+    // is read; problems with its channels are known by then.
+    await page.waitForFunction(() => /duration/i.test(document.body.innerText), {
+      timeout: args.timeoutS * 1000,
+    });
     let seen, problemList, failures, appErrors;
     do {
       await new Promise((r) => setTimeout(r, 4000));
       problemList = await problems(page);
       seen = await look(page, layout, null);
       appErrors = await page.evaluate(() => window.__studioErrors);
-      failures = judge(seen, problemList, appErrors);
+      failures = judge(seen, problemList, appErrors, args.problemsOnly);
     } while (failures.length > 0 && Date.now() < deadline);
     if (args.screenshots) {
       await look(page, layout, args.screenshots);
