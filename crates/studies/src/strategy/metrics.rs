@@ -179,7 +179,8 @@ pub(super) struct Stats {
     counts: Vec<[Counts; 2]>,
     /// Per rail: sum of mu over the wheel passes, per point (detail only).
     mu_sum: Option<Vec<Vec<f64>>>,
-    applied_kg: Vec<f64>,
+    /// Per rail: the pulses' product in whole micrograms ([`pulse_ug`]).
+    applied_ug: Vec<u64>,
     pulses: Vec<u64>,
     d_m: Vec<f64>,
     spacing_m: f64,
@@ -211,7 +212,7 @@ impl Stats {
             params: cfg.product,
             counts: (0..rails).map(|_| [zero(), zero()]).collect(),
             mu_sum: detail.then(|| vec![vec![0.0; points]; rails]),
-            applied_kg: vec![0.0; rails],
+            applied_ug: vec![0; rails],
             pulses: vec![0; rails],
             d_m: grid.d_m.clone(),
             spacing_m: grid.spacing_m,
@@ -238,12 +239,16 @@ impl Stats {
         };
         let coverage = mean(|r| r.coverage);
         let below_share = mean(|r| r.below_share);
-        let product_g_per_day = rails.iter().map(|r| r.product_g_per_day).sum();
-        let product_g_per_1000_axles = rails.iter().map(|r| r.product_g_per_1000_axles).sum();
+        let product_ug: u64 = rails.iter().map(|r| r.product_ug).sum();
+        let (product_g, product_g_per_day, product_g_per_1000_axles) =
+            per_day_and_axles(product_ug, days, traffic.axles);
         Figures {
             coverage,
             below_share,
             admissible: below_share <= self.target.max_below_share,
+            pulses: rails.iter().map(|r| r.pulses).sum(),
+            product_ug,
+            product_g,
             product_g_per_day,
             product_g_per_1000_axles,
             rails,
@@ -262,8 +267,13 @@ impl Stats {
         let below_point: Vec<f64> = (0..points)
             .map(|i| f64::from(up.below[i] + down.below[i]) / w)
             .collect();
-        let in_total: f64 = in_share.iter().sum::<f64>() * w;
-        let below_total: f64 = below_point.iter().sum::<f64>() * w;
+        // Whole counts: a share is one division of two integers.
+        let in_total: u64 = (0..points)
+            .map(|i| u64::from(up.in_band[i]) + u64::from(down.in_band[i]))
+            .sum();
+        let below_total: u64 = (0..points)
+            .map(|i| u64::from(up.below[i]) + u64::from(down.below[i]))
+            .sum();
 
         // Carry-on: from each applicator on this rail, downstream in each
         // direction that had traffic.
@@ -299,12 +309,13 @@ impl Stats {
                     (0, 0.0),
                     |best, (i, s)| if s > best.1 { (i, s) } else { best },
                 );
-        let applied_g = self.applied_kg[r] * 1e3;
+        let (product_g, product_g_per_day, product_g_per_1000_axles) =
+            per_day_and_axles(self.applied_ug[r], days, axles);
         RailFigures {
             rail: self.rail_names[r].clone(),
             wheel_passes: wheels,
-            coverage: in_total / contacts,
-            below_share: below_total / contacts,
+            coverage: in_total as f64 / contacts,
+            below_share: below_total as f64 / contacts,
             carry_on_m: carry_on.iter().map(|c| c.distance_m).fold(0.0, f64::max),
             carry_on,
             braking_risk_length_m: risk_points as f64 * self.spacing_m,
@@ -313,13 +324,10 @@ impl Stats {
                 pass_share: worst,
             }),
             pulses: self.pulses[r],
-            product_g: applied_g,
-            product_g_per_day: applied_g / days,
-            product_g_per_1000_axles: if axles == 0 {
-                0.0
-            } else {
-                applied_g * 1000.0 / axles as f64
-            },
+            product_ug: self.applied_ug[r],
+            product_g,
+            product_g_per_day,
+            product_g_per_1000_axles,
             profile: self.mu_sum.as_ref().map(|sum| Profile {
                 d_m: self.d_m.clone(),
                 mean_mu: sum[r].iter().map(|s| s / w).collect(),
@@ -373,7 +381,7 @@ impl Stats {
         if let Some(sum) = &mut self.mu_sum {
             sum.iter_mut().for_each(|s| s.fill(0.0));
         }
-        self.applied_kg.fill(0.0);
+        self.applied_ug.fill(0);
         self.pulses.fill(0);
     }
 }
@@ -469,7 +477,7 @@ impl Sink for PerTrain {
 
 impl Sink for Stats {
     fn pulse(&mut self, p: &PulseEvent<'_>) -> tortwin_engine::sink::SinkResult {
-        self.applied_kg[p.rail] += p.mass_kg;
+        self.applied_ug[p.rail] += pulse_ug(p.mass_kg);
         self.pulses[p.rail] += 1;
         Ok(())
     }
@@ -515,6 +523,26 @@ impl Sink for Stats {
     }
 }
 
+/// A pulse's mass in whole micrograms, the unit products are counted in:
+/// sums of them are exact, so two strategies that deliver the same product
+/// (0.05 g every axle and 0.1 g every second axle) compare equal, where
+/// sums of the masses in kilograms would differ in their last bits.
+pub(crate) fn pulse_ug(mass_kg: f64) -> u64 {
+    (mass_kg * 1e9).round() as u64
+}
+
+/// Grams, grams per day and grams per 1000 axles of `ug` micrograms: one
+/// rounding each, so equal counts give equal figures.
+fn per_day_and_axles(ug: u64, days: f64, axles: u64) -> (f64, f64, f64) {
+    let g = ug as f64 / 1e6;
+    let per_1000_axles = if axles == 0 {
+        0.0
+    } else {
+        ug as f64 / 1e3 / axles as f64
+    };
+    (g, ug as f64 / 1e6 / days, per_1000_axles)
+}
+
 /// The figures of one strategy over the replayed period.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Figures {
@@ -526,7 +554,14 @@ pub struct Figures {
     pub below_share: f64,
     /// `below_share` within the target's limit.
     pub admissible: bool,
-    /// Every rail's product.
+    /// Every rail's pulses.
+    pub pulses: u64,
+    /// Every rail's product in whole micrograms (each pulse's mass rounded
+    /// to the microgram, then summed): what the front and the
+    /// recommendation compare.
+    pub product_ug: u64,
+    /// `product_ug` in grams, per day and per 1000 axles.
+    pub product_g: f64,
     pub product_g_per_day: f64,
     pub product_g_per_1000_axles: f64,
     pub rails: Vec<RailFigures>,
@@ -549,6 +584,7 @@ pub struct RailFigures {
     /// no contact was below).
     pub worst_below: Option<WorstPoint>,
     pub pulses: u64,
+    pub product_ug: u64,
     pub product_g: f64,
     pub product_g_per_day: f64,
     pub product_g_per_1000_axles: f64,

@@ -422,7 +422,8 @@ pub struct Study {
     pub evaluated: Vec<Arc<search::Evaluated>>,
     pub recommended: Option<Arc<search::Evaluated>>,
     pub best_coverage: Option<Arc<search::Evaluated>>,
-    pub pareto: Vec<Arc<search::Evaluated>>,
+    /// The Pareto front, by ascending product, each point with its twins.
+    pub pareto: Vec<search::FrontPoint>,
     /// Coverage over pulse mass × interval at the recommended (or best)
     /// layout and rail set: `coverage[every][pulse]`.
     pub heatmap: Option<HeatmapData>,
@@ -512,10 +513,7 @@ pub fn study(
     let evaluated = searcher.all();
     let find =
         |k: Option<search::Key>| k.and_then(|k| evaluated.iter().find(|e| e.key == k).cloned());
-    let pareto = search::pareto_front(&found)
-        .into_iter()
-        .filter_map(|e| find(Some(e.key)))
-        .collect();
+    let pareto = search::pareto_front(&found);
     Ok(Study {
         method,
         space_size: space.size(),

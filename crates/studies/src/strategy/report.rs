@@ -106,6 +106,10 @@ struct Choice {
     figures: Figures,
     #[serde(skip_serializing_if = "Vec::is_empty")]
     reasons: Vec<String>,
+    /// On the Pareto front: the other strategies with exactly the same
+    /// product and coverage, shown as this one point.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    twins: Vec<StrategyView>,
 }
 
 #[derive(Debug, Serialize)]
@@ -124,6 +128,7 @@ fn choice(e: &Evaluated, section: &Section) -> Choice {
         strategy: StrategyView::new(&e.strategy, section),
         figures: e.figures.clone(),
         reasons: Vec::new(),
+        twins: Vec::new(),
     }
 }
 
@@ -224,7 +229,18 @@ pub(crate) fn write(
             ..choice(r, section)
         }),
         best_coverage: study.best_coverage.as_ref().map(|e| choice(e, section)),
-        pareto_front: study.pareto.iter().map(|e| choice(e, section)).collect(),
+        pareto_front: study
+            .pareto
+            .iter()
+            .map(|p| Choice {
+                twins: p
+                    .twins
+                    .iter()
+                    .map(|t| StrategyView::new(&t.strategy, section))
+                    .collect(),
+                ..choice(&p.chosen, section)
+            })
+            .collect(),
         heatmap: study.heatmap.as_ref().map(|h| HeatmapView {
             positions_m: space.layouts[h.layout]
                 .iter()
@@ -469,7 +485,7 @@ fn pareto_plot(study: &Study) -> LinePlot {
         .iter()
         .filter(|e| !e.figures.admissible)
         .map(|e| &e.figures));
-    let (px, py) = xy(&mut study.pareto.iter().map(|e| &e.figures));
+    let (px, py) = xy(&mut study.pareto.iter().map(|p| &p.chosen.figures));
     let mut panel = Panel::new("contacts with mu in band [%]")
         .series(Series::new("evaluated", ex, ey).colour(Colour::GREY).dots())
         .series(
@@ -591,12 +607,24 @@ fn markdown(
         "| strategy | in band | below band | g/day | g/1000 axles |"
     );
     let _ = writeln!(out, "|---|---|---|---|---|");
-    for e in &study.pareto {
-        let f = &e.figures;
+    for p in &study.pareto {
+        let f = &p.chosen.figures;
+        let mut name = p.chosen.strategy.describe(section);
+        if !p.twins.is_empty() {
+            let twins: Vec<String> = p
+                .twins
+                .iter()
+                .map(|t| t.strategy.describe(section))
+                .collect();
+            name = format!(
+                "{name} (the same product and coverage: {})",
+                twins.join("; ")
+            );
+        }
         let _ = writeln!(
             out,
             "| {} | {} | {} | {:.1} | {:.2} |",
-            e.strategy.describe(section),
+            name,
             pct(f.coverage),
             pct(f.below_share),
             f.product_g_per_day,

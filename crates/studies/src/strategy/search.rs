@@ -685,8 +685,23 @@ impl CostFunction for LatticeCost<'_, '_> {
     }
 }
 
-/// The recommendation among `evaluated` (see the module documentation);
-/// `None` when nothing is admissible.
+/// The order the choices follow among strategies (docs/spec/interfaces.md,
+/// "Strategy figures"): less product (whole micrograms, so equal doses are
+/// equal), then higher coverage, then fewer pulses, then the lattice point
+/// (pulse mass, interval, layout, rails: the space's order).
+fn cheaper_then_better(a: &Evaluated, b: &Evaluated) -> std::cmp::Ordering {
+    let (fa, fb) = (&a.figures, &b.figures);
+    fa.product_ug
+        .cmp(&fb.product_ug)
+        .then(fb.coverage.total_cmp(&fa.coverage))
+        .then(fa.pulses.cmp(&fb.pulses))
+        .then(a.key.cmp(&b.key))
+}
+
+/// The recommendation among `evaluated` (see the module documentation):
+/// among the admissible strategies whose coverage is within the tolerance
+/// of the best admissible coverage, the first in [`cheaper_then_better`]'s
+/// order. `None` when nothing is admissible.
 pub fn recommend<'e>(evaluated: &'e [Arc<Evaluated>], target: &Target) -> Option<&'e Evaluated> {
     let best = evaluated
         .iter()
@@ -696,17 +711,12 @@ pub fn recommend<'e>(evaluated: &'e [Arc<Evaluated>], target: &Target) -> Option
     evaluated
         .iter()
         .filter(|e| e.figures.admissible && e.figures.coverage >= best - target.coverage_tolerance)
-        .min_by(|a, b| {
-            a.figures
-                .product_g_per_day
-                .total_cmp(&b.figures.product_g_per_day)
-                .then(b.figures.coverage.total_cmp(&a.figures.coverage))
-                .then(a.key.cmp(&b.key))
-        })
+        .min_by(|a, b| cheaper_then_better(a, b))
         .map(|e| e.as_ref())
 }
 
-/// The strategy with the best admissible coverage (ties: less product).
+/// The strategy with the best admissible coverage (ties: less product,
+/// then fewer pulses, then the lattice point).
 pub(crate) fn best_coverage(evaluated: &[Arc<Evaluated>]) -> Option<&Evaluated> {
     evaluated
         .iter()
@@ -715,40 +725,148 @@ pub(crate) fn best_coverage(evaluated: &[Arc<Evaluated>]) -> Option<&Evaluated> 
             b.figures
                 .coverage
                 .total_cmp(&a.figures.coverage)
-                .then(
-                    a.figures
-                        .product_g_per_day
-                        .total_cmp(&b.figures.product_g_per_day),
-                )
-                .then(a.key.cmp(&b.key))
+                .then(cheaper_then_better(a, b))
         })
         .map(|e| e.as_ref())
 }
 
-/// The admissible strategies no other admissible one beats on both product
-/// per day (less) and coverage (more), by ascending product: the choices
-/// an engineer trades between (over-applying ones are not choices).
-pub(crate) fn pareto_front(evaluated: &[Arc<Evaluated>]) -> Vec<&Evaluated> {
-    let mut v: Vec<&Evaluated> = evaluated
-        .iter()
-        .filter(|e| e.figures.admissible)
-        .map(|e| e.as_ref())
-        .collect();
-    v.sort_by(|a, b| {
-        a.figures
-            .product_g_per_day
-            .total_cmp(&b.figures.product_g_per_day)
-            .then(b.figures.coverage.total_cmp(&a.figures.coverage))
-            .then(a.key.cmp(&b.key))
-    });
-    let mut front: Vec<&Evaluated> = Vec::new();
+/// A point of the Pareto front: the strategy shown, and its twins (other
+/// strategies with exactly the same product and coverage), in
+/// [`cheaper_then_better`]'s order.
+#[derive(Debug, Clone)]
+pub struct FrontPoint {
+    pub chosen: Arc<Evaluated>,
+    pub twins: Vec<Arc<Evaluated>>,
+}
+
+/// The Pareto front of the admissible strategies: those that no other
+/// admissible strategy dominates (at most their product and at least their
+/// coverage, one of the two strictly), by ascending product. Strategies
+/// with exactly the same product and coverage do not dominate each other:
+/// they are one point, shown once with its twins named. Over-applying
+/// strategies are not choices and are left out.
+pub(crate) fn pareto_front(evaluated: &[Arc<Evaluated>]) -> Vec<FrontPoint> {
+    let mut v: Vec<&Arc<Evaluated>> = evaluated.iter().filter(|e| e.figures.admissible).collect();
+    v.sort_by(|a, b| cheaper_then_better(a, b));
+    let mut front: Vec<FrontPoint> = Vec::new();
+    // The best coverage among the strategies before (none dominated by a
+    // later one: those have at least as much product).
+    let mut best_before = f64::NEG_INFINITY;
     for e in v {
-        if front
-            .last()
-            .is_none_or(|last| e.figures.coverage > last.figures.coverage)
-        {
-            front.push(e);
+        let f = &e.figures;
+        if let Some(last) = front.last_mut() {
+            let l = &last.chosen.figures;
+            if l.product_ug == f.product_ug && l.coverage == f.coverage {
+                last.twins.push(e.clone());
+                continue;
+            }
+        }
+        if f.coverage > best_before {
+            best_before = f.coverage;
+            front.push(FrontPoint {
+                chosen: e.clone(),
+                twins: Vec::new(),
+            });
         }
     }
     front
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    /// A strategy with only what the choices read: product, coverage,
+    /// pulses, admissibility.
+    fn evaluated(
+        i: usize,
+        product_ug: u64,
+        coverage: f64,
+        pulses: u64,
+        admissible: bool,
+    ) -> Arc<Evaluated> {
+        Arc::new(Evaluated {
+            key: Key {
+                pulse: i,
+                every: 0,
+                layout: 0,
+                rails: 0,
+            },
+            strategy: super::Strategy {
+                pulse_kg: 1e-4,
+                every_axles: 1,
+                positions_m: vec![0.0],
+                rails: vec![0],
+            },
+            figures: Figures {
+                coverage,
+                below_share: 0.0,
+                admissible,
+                pulses,
+                product_ug,
+                product_g: product_ug as f64 / 1e6,
+                product_g_per_day: product_ug as f64 / 1e6,
+                product_g_per_1000_axles: 0.0,
+                rails: Vec::new(),
+            },
+        })
+    }
+
+    fn dominates(a: &Figures, b: &Figures) -> bool {
+        a.product_ug <= b.product_ug
+            && a.coverage >= b.coverage
+            && (a.product_ug < b.product_ug || a.coverage > b.coverage)
+    }
+
+    proptest! {
+        /// Few products and coverages, so that exact ties are common: the
+        /// front (points and twins) is the admissible set no admissible
+        /// strategy dominates, each point's twins equal it, and the
+        /// recommendation is the first of the documented order.
+        #[test]
+        fn the_front_is_the_non_dominated_set(
+            rows in prop::collection::vec((0u64..6, 0u8..6, 1u64..4, any::<bool>()), 0..40),
+            tolerance in 0.0f64..0.3,
+        ) {
+            let all: Vec<Arc<Evaluated>> = rows
+                .iter()
+                .enumerate()
+                .map(|(i, &(p, c, n, a))| evaluated(i, p * 50_000, f64::from(c) / 8.0, n, a))
+                .collect();
+            let front = pareto_front(&all);
+            let mut shown: Vec<Key> = front
+                .iter()
+                .flat_map(|p| std::iter::once(&p.chosen).chain(&p.twins).map(|e| e.key))
+                .collect();
+            shown.sort();
+            let admissible: Vec<&Arc<Evaluated>> = all.iter().filter(|e| e.figures.admissible).collect();
+            let mut expected: Vec<Key> = admissible
+                .iter()
+                .filter(|e| !admissible.iter().any(|o| dominates(&o.figures, &e.figures)))
+                .map(|e| e.key)
+                .collect();
+            expected.sort();
+            prop_assert_eq!(shown, expected);
+            for p in &front {
+                for t in &p.twins {
+                    prop_assert_eq!(t.figures.product_ug, p.chosen.figures.product_ug);
+                    prop_assert_eq!(t.figures.coverage, p.chosen.figures.coverage);
+                    prop_assert!(cheaper_then_better(&p.chosen, t).is_lt());
+                }
+            }
+            let target = Target { coverage_tolerance: tolerance, ..Target::default() };
+            let best = admissible.iter().map(|e| e.figures.coverage).fold(f64::NEG_INFINITY, f64::max);
+            let by_hand = admissible
+                .iter()
+                .filter(|e| e.figures.coverage >= best - tolerance)
+                .min_by_key(|e| {
+                    // The documented order, written again: product, then
+                    // coverage (higher first), then pulses, then the key.
+                    (e.figures.product_ug, std::cmp::Reverse((e.figures.coverage * 8.0) as u64), e.figures.pulses, e.key)
+                })
+                .map(|e| e.key);
+            prop_assert_eq!(recommend(&all, &target).map(|e| e.key), by_hand);
+        }
+    }
 }
