@@ -376,6 +376,27 @@ fn figures_agree_with_mu_of_every_wheel_snapshot() {
             assert_eq!(f.wheel_passes * engine.grid().d_m.len() as u64, n);
             figures_as_documented(&count, r, f, &strategy, engine.grid(), &traffic, &target);
         }
+        // The overall figures: the mean of the (target: every) rails' shares,
+        // the rails' products summed.
+        let rails = count.rails.len() as f64;
+        let share = |k: fn(&(u64, u64, u64)) -> u64| {
+            count
+                .rails
+                .iter()
+                .map(|c| k(c) as f64 / c.0 as f64)
+                .sum::<f64>()
+                / rails
+        };
+        assert!((figures.coverage - share(|c| c.1)).abs() < 1e-15);
+        assert!((figures.below_share - share(|c| c.2)).abs() < 1e-15);
+        assert_eq!(
+            figures.admissible,
+            figures.below_share <= target.max_below_share
+        );
+        let ug: u64 = count.pulses.iter().map(|p| p.1).sum();
+        assert_eq!(figures.product_ug, ug);
+        let days = (traffic.span_s / 86_400.0).round().max(1.0);
+        assert_eq!(figures.product_g_per_day, ug as f64 / 1e6 / days);
         // Only the strategy's rails get product; a rail without any is dry.
         if strategy.rails == [0] {
             assert_eq!(figures.rails[1].pulses, 0);
