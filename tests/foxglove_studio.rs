@@ -20,9 +20,13 @@ mod common;
 use std::borrow::Cow;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
-use std::sync::Arc;
+use std::sync::{Arc, Mutex};
 
 use common::{demo_day, tortwin};
+
+/// One browser at a time: the app loads a 56 MB script and draws in
+/// software, and two at once on two cores only make each one late.
+static ONE_BROWSER: Mutex<()> = Mutex::new(());
 
 /// `node tests/js/studio/open.js`: the app's verdict on `mcap` opened with
 /// the shipped Studio layout at its last message.
@@ -38,6 +42,7 @@ fn open_in_studio(mcap: &Path, screenshots: &Path, timeout_s: u32, problems_only
     let end = chrono::DateTime::from_timestamp_nanos(end_ns.div_ceil(1000) as i64 * 1000)
         .to_rfc3339_opts(chrono::SecondsFormat::Micros, true);
     let node = std::env::var("TORTWIN_NODE").unwrap_or_else(|_| "node".to_owned());
+    let _one = ONE_BROWSER.lock().unwrap_or_else(|e| e.into_inner());
     let output = Command::new(&node)
         .arg(root.join("tests/js/studio/open.js"))
         .arg("--mcap")
@@ -165,7 +170,7 @@ fn a_schema_studio_cannot_parse_fails_the_check() {
     let out = demo_output(dir.path());
     let broken = dir.path().join("untyped.mcap");
     with_untyped_quantity(&out, &broken);
-    let output = open_in_studio(&broken, &dir.path().join("screenshots"), 60, false);
+    let output = open_in_studio(&broken, &dir.path().join("screenshots"), 90, false);
     let failures = failures(&output);
     eprintln!("what the app showed: {failures:#?}");
     assert_eq!(output.status.code(), Some(1), "{failures:?}");

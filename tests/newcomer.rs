@@ -148,22 +148,28 @@ fn the_readme_commands_work_in_a_fresh_clone() {
 
 /// Starts the clone's target folder `target` with this build's compiled
 /// third-party crates: cargo's fingerprints and build-script outputs
-/// copied, the dependencies' libraries hard-linked (never written again:
-/// they stay fresh). The workspace's own crates (every file named
-/// `*tortwin*`) are left out, so the clone builds them from its sources
-/// and nothing it writes reaches this build's folder.
+/// copied, the dependencies' libraries (`lib*`: rlib, rmeta, proc-macro
+/// .so) hard-linked. The workspace's own libraries (`libtortwin*`) are left
+/// out, so the clone builds every tortwin crate from its sources. Where the
+/// clone compiles a dependency again (a build script that reads another
+/// environment, pyo3 under maturin), rustc writes a new file and the link
+/// to this build's file is dropped, not written through. Made under a
+/// temporary name, renamed when complete.
 fn seed_with_dependencies(target: &Path) {
     let ours = PathBuf::from(env!("CARGO_BIN_EXE_tortwin"))
         .parent()
         .unwrap()
         .to_path_buf();
-    let release = target.join("release");
-    let deps = release.join("deps");
-    std::fs::create_dir_all(&deps).unwrap();
+    let seeding = target.with_extension("seeding");
+    if seeding.exists() {
+        std::fs::remove_dir_all(&seeding).unwrap();
+    }
+    let release = seeding.join("release");
+    std::fs::create_dir_all(release.join("deps")).unwrap();
     let script = r#"set -e
 cp -a "$1/.fingerprint" "$1/build" "$2/"
-find "$1/deps" -maxdepth 1 -type f \( -name 'lib*' -o -name '*.d' \) \
-  ! -name '*tortwin*' -exec ln -t "$2/deps" {} +"#;
+find "$1/deps" -maxdepth 1 -type f -name 'lib*' ! -name 'libtortwin*' \
+  -exec ln -t "$2/deps" {} +"#;
     let o = Command::new("bash")
         .arg("-c")
         .arg(script)
@@ -173,6 +179,7 @@ find "$1/deps" -maxdepth 1 -type f \( -name 'lib*' -o -name '*.d' \) \
         .output()
         .unwrap();
     common::check(&o, "seeding the clone's target folder");
+    std::fs::rename(&seeding, target).unwrap();
 }
 
 #[test]

@@ -559,8 +559,9 @@ fn front_is_the_non_dominated_set(study: &strategy::Study) -> usize {
 }
 
 /// Equal doses at different intervals and positions: 0.05 g every axle and
-/// 0.1 g every second axle deliver exactly the same product (the demo
-/// day's trains have even axle counts), so the front compares them on
+/// 0.1 g every second axle deliver exactly the same product (the counter
+/// runs on from train to train, and the demo day's 2808 axles divide by
+/// 4), so the front compares them on
 /// coverage alone, and the recommendation among equal products is the one
 /// with the higher coverage, then fewer pulses.
 #[test]

@@ -217,7 +217,7 @@ async function panel(page, id) {
 }
 
 /// Opens the tab titled `title` of a Tab panel.
-async function openTab(page, title) {
+async function openTab(page, title, settleMs) {
   const handle = await page.evaluateHandle(
     (title) =>
       [...document.querySelectorAll('[data-testid="toolbar-tab"]')].find((t) => t.title === title) ?? null,
@@ -226,7 +226,7 @@ async function openTab(page, title) {
   const tab = handle.asElement();
   if (!tab) return false;
   await tab.click();
-  await new Promise((r) => setTimeout(r, 1500));
+  await new Promise((r) => setTimeout(r, settleMs));
   return true;
 }
 
@@ -248,7 +248,7 @@ async function problems(page) {
 }
 
 /// One look at everything the layout shows.
-async function look(page, layout, shots) {
+async function look(page, layout, shots, settleMs) {
   const seen = { plots: {}, panelErrors: [], log: [], threeD: null };
   const configs = layout.configById;
   seen.panelErrors = await page.evaluate(() =>
@@ -265,7 +265,7 @@ async function look(page, layout, shots) {
     }
   }
   for (const id of plotIds) {
-    if (tabsOf[id]) await openTab(page, tabsOf[id]);
+    if (tabsOf[id]) await openTab(page, tabsOf[id], settleMs);
     const element = await panel(page, id);
     const canvas = element && (await element.$("canvas"));
     if (!canvas) {
@@ -368,24 +368,38 @@ async function main() {
     // The file is read in a worker and the plots fill as blocks arrive:
     // look every few seconds until everything shows or time runs out.
     const deadline = Date.now() + args.timeoutS * 1000;
-    // The data-source sidebar gives the file's duration once its summary
-    // is read; problems with its channels are known by then.
-    await page.waitForFunction(() => /duration/i.test(document.body.innerText), {
-      timeout: args.timeoutS * 1000,
-    });
+    // The data-source sidebar shows "—" under "Duration" until the file's
+    // summary is read (src/components/DataSourceInfoView.js); problems with
+    // its channels are known by then.
+    await page.waitForFunction(
+      () => {
+        const label = [...document.querySelectorAll("span, p")].find(
+          (e) => e.childElementCount === 0 && /^duration$/i.test(e.textContent.trim()),
+        );
+        const value = label?.nextElementSibling;
+        return Boolean(value && /\d/.test(value.textContent));
+      },
+      { timeout: args.timeoutS * 1000 },
+    );
     let seen, problemList, failures, appErrors;
+    // A Tab panel draws a tab's plot anew when it opens: each pass waits
+    // longer for it (a slow machine gets more time, not the same again).
+    let settleMs = 1500;
     do {
       await new Promise((r) => setTimeout(r, 4000));
       problemList = await problems(page);
-      seen = await look(page, layout, null);
+      seen = await look(page, layout, null, settleMs);
+      settleMs = Math.min(2 * settleMs, 20000);
       appErrors = await page.evaluate(() => window.__studioErrors);
       failures = judge(seen, problemList, appErrors, args.problemsOnly);
-    } while (failures.length > 0 && Date.now() < deadline);
+      // Problems with the file's channels do not go away: no need to wait
+      // for the plots then.
+    } while (failures.length > 0 && problemList.items.length === 0 && Date.now() < deadline);
     if (args.screenshots) {
-      await look(page, layout, args.screenshots);
+      await look(page, layout, args.screenshots, settleMs);
       // Back to the first tab for the overview.
       const tabs = Object.values(layout.configById).find((c) => c.tabs);
-      if (tabs) await openTab(page, tabs.tabs[0].title);
+      if (tabs) await openTab(page, tabs.tabs[0].title, settleMs);
       fs.writeFileSync(path.join(args.screenshots, "studio.png"), await page.screenshot());
     }
     const verdict = { url, problems: problemList.items, ...seen, appErrors, failures, console: console_.slice(-20) };

@@ -463,10 +463,13 @@ pub fn study(
     let search_seconds = t0.elapsed().as_secs_f64();
     let search_evaluations = searcher.evaluations();
     let found = searcher.all();
-    let recommended = search::recommend(&found, target).map(|e| e.key);
-    let best = search::best_coverage(&found).map(|e| e.key);
+    // The heatmap is drawn at the search's choice's layout and rails.
+    let at = search::recommend(&found, target)
+        .or_else(|| search::best_coverage(&found))
+        .or(found.first().map(|e| e.as_ref()))
+        .map(|e| e.key);
 
-    let heatmap = match recommended.or(best).or(found.first().map(|e| e.key)) {
+    let heatmap = match at {
         Some(at) => {
             let thin = |n: usize| -> Vec<usize> {
                 if n <= HEATMAP_MAX {
@@ -510,10 +513,15 @@ pub fn study(
         }
         None => None,
     };
+    // The choices are made among every strategy evaluated, the heatmap's
+    // cells included (the optimiser may not have met them): strategy.json's
+    // `evaluated` is the set they follow from.
     let evaluated = searcher.all();
     let find =
         |k: Option<search::Key>| k.and_then(|k| evaluated.iter().find(|e| e.key == k).cloned());
-    let pareto = search::pareto_front(&found);
+    let recommended = search::recommend(&evaluated, target).map(|e| e.key);
+    let best = search::best_coverage(&evaluated).map(|e| e.key);
+    let pareto = search::pareto_front(&evaluated);
     Ok(Study {
         method,
         space_size: space.size(),
