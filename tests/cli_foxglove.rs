@@ -10,7 +10,7 @@ mod common;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use common::{demo_day, python, tortwin};
+use common::{python, tortwin};
 
 fn shipped_layout() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("docs/foxglove/tortwin-layout.json")
@@ -82,28 +82,10 @@ fn one_message_file(path: &Path, (name, schema): (&str, &[u8]), topic: &str, dat
     writer.finish().unwrap();
 }
 
-fn replay_demo(dir: &Path) -> PathBuf {
-    let mcap = dir.join("demo.mcap");
-    let out = tortwin()
-        .arg("replay")
-        .arg(demo_day())
-        .arg("--out-mcap")
-        .arg(&mcap)
-        .arg("--quiet")
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    mcap
-}
-
 #[test]
 fn foxglove_topics_validate_against_foxglove_schemas_and_the_layout_fits() {
     let dir = tempfile::tempdir().unwrap();
-    let mcap = replay_demo(dir.path());
+    let mcap = common::replay_demo_mcap(dir.path());
 
     let stdout = passes(&mcap, Some(&shipped_layout()));
     // One scene per train (40 on the demo day), a log line per train and more.
@@ -169,7 +151,7 @@ fn the_checker_rejects_a_broken_foxglove_message_and_a_layout_naming_a_missing_t
     fails_saying(&bad, None, "'file' is a required property");
 
     // A layout that names a topic the output does not have.
-    let mcap = replay_demo(dir.path());
+    let mcap = common::replay_demo_mcap(dir.path());
     let layout = std::fs::read_to_string(shipped_layout())
         .unwrap()
         .replace("/foxglove/log", "/foxglove/logs");

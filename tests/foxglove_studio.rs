@@ -22,7 +22,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 use std::sync::{Arc, Mutex};
 
-use common::{demo_day, tortwin};
+use common::demo_day;
 
 /// One browser at a time: the app loads a 56 MB script and draws in
 /// software, and two at once on two cores only make each one late.
@@ -84,23 +84,10 @@ fn failures(output: &Output) -> Vec<String> {
         .collect()
 }
 
-fn demo_output(dir: &Path) -> PathBuf {
-    let out = dir.join("demo.mcap");
-    let o = tortwin()
-        .arg("replay")
-        .arg(demo_day())
-        .arg("--out-mcap")
-        .arg(&out)
-        .output()
-        .unwrap();
-    common::check(&o, "tortwin replay demo_day");
-    out
-}
-
 #[test]
 fn the_demo_output_opens_in_foxglove_studio_with_every_panel_drawn() {
     let dir = tempfile::tempdir().unwrap();
-    let out = demo_output(dir.path());
+    let out = common::replay_demo_mcap(dir.path());
     let screenshots = std::env::var_os("TORTWIN_STUDIO_SCREENSHOTS")
         .map(PathBuf::from)
         .unwrap_or_else(|| dir.path().join("screenshots"));
@@ -167,7 +154,7 @@ fn with_untyped_quantity(out: &Path, broken: &Path) {
 #[test]
 fn a_schema_studio_cannot_parse_fails_the_check() {
     let dir = tempfile::tempdir().unwrap();
-    let out = demo_output(dir.path());
+    let out = common::replay_demo_mcap(dir.path());
     let broken = dir.path().join("untyped.mcap");
     with_untyped_quantity(&out, &broken);
     let output = open_in_studio(&broken, &dir.path().join("screenshots"), 90, false);

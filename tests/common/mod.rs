@@ -32,6 +32,22 @@ pub fn demo_day() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("recordings/demo_day.mcap")
 }
 
+/// `tortwin replay recordings/demo_day.mcap --out-mcap DIR/demo.mcap`,
+/// which must succeed; returns the output's path.
+pub fn replay_demo_mcap(dir: &std::path::Path) -> PathBuf {
+    let mcap = dir.join("demo.mcap");
+    let o = tortwin()
+        .arg("replay")
+        .arg(demo_day())
+        .arg("--out-mcap")
+        .arg(&mcap)
+        .arg("--quiet")
+        .output()
+        .unwrap();
+    check(&o, "tortwin replay recordings/demo_day.mcap --out-mcap");
+    mcap
+}
+
 /// The `tortwin` binary of this build.
 pub fn tortwin() -> Command {
     Command::new(env!("CARGO_BIN_EXE_tortwin"))
