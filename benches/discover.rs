@@ -44,6 +44,7 @@ fn case(dir: &std::path::Path, name: &str, hidden: &str) -> DiscoverArgs {
         bic_threshold: -10.0,
         min_excess_share: 0.25,
         unexplained_ratio: 1.1,
+        no_calibrate: false,
         threads: None,
         quiet: true,
     };

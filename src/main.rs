@@ -51,6 +51,11 @@ enum Command {
     /// excess over the noise, cross-validation by day and by site); writes
     /// report.json, report.md with plots, model.toml and residuals.rrd.
     Discover(discover::DiscoverArgs),
+    /// Calibrate the site's constants (muD, muC, km, kc, kt, cN, m0, ...)
+    /// on a recording: which ones it determines, their values with 95 %
+    /// intervals, which only in combination; writes report.json
+    /// (site_constants), report.md, model.toml and residuals.rrd.
+    Calibrate(discover::CalibrateArgs),
     /// Evaluate application strategies (pulse mass, interval, applicator
     /// positions, rails) over a section's traffic: share of the section in
     /// the target band, carry-on distance, over-application, product per
@@ -134,6 +139,17 @@ fn run(command: Command) -> Result<()> {
             if !args.quiet {
                 let elapsed_s = t0.elapsed().as_secs_f64();
                 say(&discover::render(&args, &discovery, elapsed_s))?;
+            }
+        }
+        Command::Calibrate(args) => {
+            let t0 = Instant::now();
+            let display = Display::new(args.quiet);
+            let result = discover::calibrate_with(&args, &display);
+            display.finish();
+            let found = result?;
+            if !args.quiet {
+                let elapsed_s = t0.elapsed().as_secs_f64();
+                say(&discover::render_calibration(&args, &found, elapsed_s))?;
             }
         }
         Command::Strategy(args) => {

@@ -410,11 +410,15 @@ fn a_starting_effect_is_refitted() {
         "tau_s refitted to {tau}"
     );
     assert!(report["rmse_after"].as_f64().unwrap() <= 1.2 * SIGMA);
+    // model.toml carries it, as the final calibration (the effect fitted
+    // with the site's constants) left it: within a hair of step 0's refit.
     let model = ModelConfig::from_file(&report_dir.join("model.toml")).unwrap();
-    assert_eq!(
-        model
-            .effects
-            .param(tortwin_model::effects::Named::RailAgeing, 0),
-        Some(tau)
+    let final_tau = model
+        .effects
+        .param(tortwin_model::effects::Named::RailAgeing, 0)
+        .expect("rail_ageing stays on");
+    assert!(
+        (final_tau / tau - 1.0).abs() < 0.01,
+        "tau_s {final_tau} in model.toml, {tau} refitted"
     );
 }

@@ -476,6 +476,52 @@ fn a_named_effect_and_a_generic_term_are_both_found() {
     );
 }
 
+/// Issue 28: a strong generic term accepted first (the clogged nozzle) must
+/// not hide a weaker catalogue effect. Once the nozzle is in, the residual
+/// follows time_since_last_touch_s, rail_ageing's signature, and
+/// rail_ageing is fitted again at that step and found.
+#[test]
+fn a_catalogue_effect_behind_a_clogged_nozzle_is_found() {
+    let dir = tempfile::tempdir().unwrap();
+    let (rec, _) = synth(
+        dir.path(),
+        11,
+        &[
+            "--hidden",
+            "generic:acts_on=pulse_mass,applicator=A1,driver=time,form=step,t0_utc=2024-04-09T12:00:00Z,f=0.6",
+            "--hidden",
+            "rail_ageing:tau_s=7200",
+        ],
+    );
+    let report_dir = dir.path().join("report");
+    let report = common::discover_report(&rec, &report_dir);
+    let found = found_list(&report);
+    assert_eq!(found.len(), 2, "{found:?}");
+    let nozzle = found
+        .iter()
+        .find(|e| e["name"] == "generic")
+        .unwrap_or_else(|| panic!("no generic term: {found:?}"));
+    assert_eq!(
+        (&nozzle["acts_on"], &nozzle["driver"], &nozzle["scope"]),
+        (
+            &serde_json::json!("pulse_mass"),
+            &serde_json::json!("time"),
+            &serde_json::json!({"applicator": "A1"})
+        ),
+        "{nozzle}"
+    );
+    let f = nozzle["params"]["f"].as_f64().unwrap();
+    assert!((f - 0.6).abs() <= 0.25 * 0.4, "f = {f}");
+    let ageing = found
+        .iter()
+        .find(|e| e["name"] == "rail_ageing")
+        .unwrap_or_else(|| panic!("rail_ageing not found: {found:?}"));
+    let tau = ageing["params"]["tau_s"].as_f64().unwrap();
+    assert!((tau - 7200.0).abs() <= 0.25 * 7200.0, "tau_s = {tau}");
+    let rmse_after = report["rmse_after"].as_f64().unwrap();
+    assert!(rmse_after <= 1.2 * SIGMA, "{rmse_after}");
+}
+
 #[test]
 fn a_named_effect_is_found_through_two_percent_of_gross_outliers() {
     let dir = tempfile::tempdir().unwrap();

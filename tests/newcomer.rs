@@ -137,6 +137,7 @@ fn the_readme_commands_work_in_a_fresh_clone() {
     for output in [
         "out/imported.mcap",
         "out/tables/measurements.parquet",
+        "out/site/model.toml",
         "out/discover/model.toml",
         "out/clog/report.md",
         "out/strategy/strategy.json",

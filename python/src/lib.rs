@@ -64,6 +64,7 @@ enum Command {
     Replay(jobs::replay::ReplayArgs),
     Synth(jobs::synth::SynthArgs),
     Discover(jobs::discover::DiscoverArgs),
+    Calibrate(jobs::discover::CalibrateArgs),
     Strategy(jobs::strategy::StrategyArgs),
 }
 
@@ -371,6 +372,34 @@ fn discover(
     Ok((report, PyBytes::new(py, &residuals).unbind()))
 }
 
+/// `tortwin calibrate ARGV`. Returns report.json's content (its
+/// `site_constants`) and the residual table (Arrow IPC): every measurement
+/// with its residual before and after the calibration.
+#[pyfunction]
+#[pyo3(signature = (argv, config=None))]
+fn calibrate(
+    py: Python<'_>,
+    argv: Vec<String>,
+    config: Option<(String, String, String)>,
+) -> PyResult<(String, Py<PyBytes>)> {
+    let Command::Calibrate(mut args) = parse(argv)? else {
+        return Err(PyRuntimeError::new_err("not a calibrate command"));
+    };
+    if let Some(source) = config_source(config)? {
+        args.config = Some(source);
+    }
+    let (report, residuals) = run_job(py, move |progress| {
+        let (found, data) = jobs::discover::calibrate_with_data(&args, progress)?;
+        let json = serde_json::to_string(&found).map_err(|source| Error::Json {
+            what: "the report",
+            source,
+        })?;
+        let table = residual_table(&data, &found).map_err(ipc_error)?;
+        Ok((json, ipc(&table).map_err(ipc_error)?))
+    })?;
+    Ok((report, PyBytes::new(py, &residuals).unbind()))
+}
+
 /// One row per measurement of the recording: where and when, the value,
 /// the residual (measured − simulated) with the starting model and with
 /// the model found, and whether the fits left it out as a gross error.
@@ -476,6 +505,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(replay, m)?)?;
     m.add_function(wrap_pyfunction!(synth, m)?)?;
     m.add_function(wrap_pyfunction!(discover, m)?)?;
+    m.add_function(wrap_pyfunction!(calibrate, m)?)?;
     m.add_function(wrap_pyfunction!(strategy, m)?)?;
     m.add_function(wrap_pyfunction!(version, m)?)?;
     Ok(())

@@ -52,6 +52,7 @@ __all__ = [
     "Replay",
     "State",
     "TortwinError",
+    "calibrate",
     "discover",
     "replay",
     "strategy",
@@ -339,6 +340,21 @@ class Discovery:
         """One paragraph: what was found, or that nothing is missing."""
         return self.report["verdict"]
 
+    @property
+    def constants(self) -> list[dict[str, Any]]:
+        """The site's constants as the final model has them
+        (report.json ``site_constants``): every ``[product]`` constant with
+        ``key``, ``default``, ``value``, ``ci95`` (determined constants),
+        ``determined``, ``status`` and a ``description``."""
+        return self.report["site_constants"]
+
+    @property
+    def moved(self) -> dict[str, float]:
+        """The constants calibrated away from their reference values, by key
+        (``product.mu_d``: value)."""
+        start = {c["key"]: c.get("start", c["default"]) for c in self.constants}
+        return {c["key"]: c["value"] for c in self.constants if c["value"] != start[c["key"]]}
+
 
 def discover(
     recording: PathLike,
@@ -346,10 +362,12 @@ def discover(
     *,
     report: PathLike | None = None,
     threads: int | None = None,
+    calibrate: bool = True,
     **options: Any,
 ) -> Discovery:
     """Finds the effects the model misses in a recording with friction
-    measurements, as ``tortwin discover`` does (residuals, covariates,
+    measurements, as ``tortwin discover`` does (the site's constants
+    calibrated first, then residuals, covariates,
     candidate named effects and generic terms fitted by re-running the
     engine, forward selection by BIC and cross-validation).
 
@@ -362,6 +380,10 @@ def discover(
         residuals.rrd); default: a temporary folder, removed afterwards.
     threads
         Worker threads for the fits (default: one per core).
+    calibrate
+        Calibrate the site's constants first (step 0, as the command does);
+        ``False`` searches effects against ``config``'s constants as they
+        are (``--no-calibrate``).
     options
         ``bic_threshold``, ``min_excess_share``, ``unexplained_ratio`` (see
         ``tortwin discover --help``).
@@ -371,6 +393,8 @@ def discover(
         argv = ["discover", os.fspath(recording), "--report", os.fspath(folder), "--quiet"]
         argv += _options({"threads": threads})
         argv += _options(options)
+        if not calibrate:
+            argv.append("--no-calibrate")
         text, residuals = _native.discover(argv, _config(config))
         model_toml = (folder / "model.toml").read_text()
     found = json.loads(text)
@@ -380,6 +404,47 @@ def discover(
         model_toml=model_toml,
         report_dir=Path(report) if report is not None else None,
         effects=[e["name"] for e in found["effects_found"]],
+    )
+
+
+def calibrate(
+    recording: PathLike,
+    config: Config = None,
+    *,
+    report: PathLike | None = None,
+    threads: int | None = None,
+) -> Discovery:
+    """Calibrates the site's constants on a recording with friction
+    measurements, as ``tortwin calibrate`` does: which ``[product]``
+    constants the recording determines, their values with 95 % intervals,
+    which only in combination (``.constants``, ``.moved``); no effect is
+    searched (``.effects`` is empty). ``residuals`` holds every
+    measurement's residual before and after the calibration.
+
+    recording
+        The recording (MCAP).
+    config
+        The starting model (a path or a dict): its constants are where the
+        calibration starts and what the intervals are compared with.
+    report
+        Write the report folder here (report.md, report.json, model.toml,
+        residuals.rrd); default: a temporary folder, removed afterwards.
+    threads
+        Worker threads (default: one per core).
+    """
+    with tempfile.TemporaryDirectory(prefix="tortwin-calibrate-") as tmp:
+        folder = Path(report) if report is not None else Path(tmp)
+        argv = ["calibrate", os.fspath(recording), "--report", os.fspath(folder), "--quiet"]
+        argv += _options({"threads": threads})
+        text, residuals = _native.calibrate(argv, _config(config))
+        model_toml = (folder / "model.toml").read_text()
+    found = json.loads(text)
+    return Discovery(
+        report=found,
+        residuals=_table(residuals),
+        model_toml=model_toml,
+        report_dir=Path(report) if report is not None else None,
+        effects=[],
     )
 
 

@@ -7,7 +7,7 @@ A fleet manifest (TOML) lists sections, each with its recordings by day
     output = "out/fleet"              # the dataset and the reports (a folder or a URI)
 
     [defaults]                        # every section's, unless it says otherwise
-    run = ["replay"]                  # replay; "discover" and "strategy" over all its days
+    run = ["replay"]                  # replay; "calibrate", "discover" and "strategy" over all its days
     out_mcap = false                  # also an MCAP / .rrd per section and day
     out_rrd = false
 
@@ -33,6 +33,8 @@ The output (``output``, written through pyarrow's filesystems)::
     days/section=S/date=D/part-0.parquet      per day: counts, mass balance (g), seconds, input hash
     discover/section=S/part-0.parquet         discover over the section's days: verdict, RMSE
     findings/section=S/part-0.parquet         the effects discover found, one row each
+    constants/section=S/study=T/part-0.parquet  the site's constants (calibrate, or discover's
+                                              calibration): value, 95 % interval, determined
     strategy/section=S/part-0.parquet         today's application and the recommended one
     mcap/S/D.mcap, rrd/S/D.rrd                with out_mcap / out_rrd
     summary.md, summary.json, summary.png     sections ranked by what needs attention
@@ -68,7 +70,10 @@ import pyarrow.parquet as pq
 
 import tortwin
 
-RUNS = ("replay", "discover", "strategy")
+RUNS = ("replay", "calibrate", "discover", "strategy")
+# A constant calibrated this far from the laboratory's (relative) puts its
+# section in the summary's list.
+FAR_FROM_LABORATORY = 0.10
 # The version of what a day or study writes: part of the key a re-run
 # compares, so that a new layout or column is written again.
 FORMAT = 2
@@ -599,8 +604,62 @@ def discover_section(job: SectionJob, *days: DayResult) -> DayResult:
     def study(merged: Path, tmp: Path) -> None:
         found = tortwin.discover(merged, config=_config_arg(job), threads=job.threads)
         _write_discovery(job, found.report)
+        _write_constants(job, "discover", found.report)
 
     return _section_study(job, days, "discover", "", study)
+
+
+def calibrate_section(job: SectionJob, *days: DayResult) -> DayResult:
+    """The site's constants over all the section's days (a Ray task)."""
+
+    def study(merged: Path, tmp: Path) -> None:
+        found = tortwin.calibrate(merged, config=_config_arg(job), threads=job.threads)
+        _write_constants(job, "calibrate", found.report)
+
+    return _section_study(job, days, "calibrate", "", study)
+
+
+CONSTANTS_SCHEMA = pa.schema(
+    [
+        ("key", pa.string()),
+        ("default", pa.float64()),
+        ("start", pa.float64()),
+        ("value", pa.float64()),
+        ("ci95_low", pa.float64()),
+        ("ci95_high", pa.float64()),
+        ("determined", pa.bool_()),
+        ("status", pa.string()),
+        ("description", pa.string()),
+        ("first_date", pa.string()),
+        ("last_date", pa.string()),
+    ]
+)
+
+
+def _write_constants(job: SectionJob, study: str, report: dict[str, Any]) -> None:
+    """report.json's site_constants as a table, one row per constant."""
+    rows = []
+    for c in report.get("site_constants", []):
+        ci = c.get("ci95") or [None, None]
+        rows.append(
+            {
+                "key": c["key"],
+                "default": c["default"],
+                "start": c.get("start", c["default"]),
+                "value": c["value"],
+                "ci95_low": ci[0],
+                "ci95_high": ci[1],
+                "determined": c["determined"],
+                "status": c.get("status"),
+                "description": c["description"],
+                "first_date": job.days[0].date,
+                "last_date": job.days[-1].date,
+            }
+        )
+    _write_parquet(
+        _join(job.output, "constants", f"section={job.section}/study={study}/part-0.parquet"),
+        pa.Table.from_pylist(rows, schema=CONSTANTS_SCHEMA),
+    )
 
 
 def _write_discovery(job: SectionJob, report: dict[str, Any]) -> None:
@@ -749,6 +808,7 @@ def run(
     # discover and strategy run their fits on 2 threads each.
     study_options = {**options, "num_cpus": max(1, min(2, int(ray.cluster_resources().get("CPU", 1))))}
     discover_task = ray.remote(discover_section).options(**study_options)
+    calibrate_task = ray.remote(calibrate_section).options(**study_options)
     strategy_task = ray.remote(strategy_section).options(**study_options)
 
     day_refs: list[tuple[Section, Day, Any]] = []
@@ -780,6 +840,8 @@ def run(
             strategy_space=section.strategy_space,
             threads=study_options["num_cpus"],
         )
+        if "calibrate" in section.run:
+            study_refs.append(("calibrate", section, calibrate_task.remote(sjob, *refs)))
         if "discover" in section.run:
             study_refs.append(("discover", section, discover_task.remote(sjob, *refs)))
         if "strategy" in section.run:
@@ -831,6 +893,7 @@ def write_summary(manifest: Manifest, fleet: FleetRun) -> dict[str, Any]:
     days_table = _dataset(manifest.output, "days")
     rmse = _dataset(manifest.output, "rmse")
     findings = _dataset(manifest.output, "findings")
+    constants = _dataset(manifest.output, "constants")
     # Mean residual per section, site, rail and quantity over the manifest's days.
     wanted = pa.array(sorted(f"{x.id}/{d.date}" for x in manifest.sections for d in x.days))
     if rmse is not None and rmse.num_rows:
@@ -876,6 +939,7 @@ def write_summary(manifest: Manifest, fleet: FleetRun) -> dict[str, Any]:
         s["applicators"] = []
         s["sensors"] = []
         s["model_findings"] = []
+        s["constants_far"] = []
         if findings is not None:
             f = findings.filter(pc.equal(findings["section"], sid)).to_pylist()
             for e in f:
@@ -906,11 +970,33 @@ def write_summary(manifest: Manifest, fleet: FleetRun) -> dict[str, Any]:
                         f"sensor {site} {rail} {quantity}: reads {offset:+.3f} off the section's "
                         f"other sites (measured - simulated {row['mean']:+.3f} on average)"
                     )
+        # Constants calibrated far from the laboratory's: listed after what
+        # is broken (applicators, sensors).
+        if constants is not None:
+            c = constants.filter(pc.equal(constants["section"], sid)).to_pylist()
+            # discover's calibration (with the effects found) before calibrate's.
+            c.sort(key=lambda r: r["study"] != "discover")
+            seen = set()
+            for r in c:
+                if r["key"] in seen:
+                    continue
+                seen.add(r["key"])
+                change = r["value"] / r["start"] - 1.0 if r["start"] else 0.0
+                if abs(change) >= FAR_FROM_LABORATORY:
+                    s["constants_far"].append({"key": r["key"], "value": r["value"], "start": r["start"],
+                                               "change": change, "determined": r["determined"]})
+            if s["constants_far"]:
+                s["reasons"].append(
+                    "constants far from the laboratory's: "
+                    + ", ".join(f"{x['key'].removeprefix('product.')} {x['value']:.4g} ({100 * x['change']:+.0f} %)"
+                                for x in s["constants_far"])
+                )
         # Attention: failures first, then applicators, sensors, friction.
         s["attention"] = (
             100 * len(s["failed"])
             + 10 * len(s["applicators"])
             + 5 * len({x["site"] for x in s["sensors"]})
+            + 2 * bool(s["constants_far"])
             + (1 - s.get("in_band_share", 1.0))
         )
         sections.append(s)
@@ -944,7 +1030,8 @@ def _markdown(summary: dict[str, Any]) -> str:
         f"{summary['seconds']:.1f} s.",
         "",
         "Sections by what needs attention (failed days, applicators whose delivery looks wrong, "
-        "sensors that look biased, friction out of the band 0.30-0.40):",
+        "sensors that look biased, site constants calibrated more than "
+        f"{100 * FAR_FROM_LABORATORY:.0f} % from the laboratory's, friction out of the band 0.30-0.40):",
         "",
         "| rank | section | days | in band | below | above | carry-on (m) | product (g) | needs attention | the model misses (discover) |",
         "|---|---|---|---|---|---|---|---|---|---|",

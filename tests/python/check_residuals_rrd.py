@@ -69,9 +69,12 @@ def check(report_dir: Path) -> list[str]:
         for cell in table.column(f"{entity}:Scalars:scalars").to_pylist():
             if cell is None:
                 continue
-            if len(cell) != 2:
-                raise CheckFailed(f"{entity}: a row of {len(cell)} values, expected [before, after]")
-            squares += cell[1] ** 2
+            # [before, after], or with the site's constants calibrated
+            # [before, constants calibrated, after].
+            want_len = 3 if report.get("calibration_start") else 2
+            if len(cell) != want_len:
+                raise CheckFailed(f"{entity}: a row of {len(cell)} values, expected {want_len}")
+            squares += cell[-1] ** 2
             count += 1
     rmse = math.sqrt(squares / count)
     want = report["rmse_after_all_rows"]

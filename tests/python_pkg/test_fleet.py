@@ -32,6 +32,10 @@ DATES = ["2024-04-08", "2024-04-09", "2024-04-10"]
 CLOG = "generic:acts_on=pulse_mass,applicator=A1,driver=time,form=step,t0_utc=2024-04-09T12:00:00Z,f=0.4"
 BIAS = "generic:acts_on=measurement,site=M2,rail=high,quantity=mu,offset=0.05"
 HIDDEN = {CLOGGED: [CLOG], BIASED: [BIAS]}
+# S1's rail gives a dry friction of 0.50, not the laboratory's 0.58: a site
+# constant, which calibrate finds.
+OTHER_RAIL = "S1"
+TRUTH = {OTHER_RAIL: {"product": {"mu_d": 0.50}}}
 
 
 @pytest.fixture(scope="module")
@@ -44,14 +48,15 @@ def local_ray():
 @pytest.fixture(scope="module")
 def recordings(tmp_path_factory) -> dict[str, dict[str, Path]]:
     """Six sections, three days each, one file a day; S3's nozzle clogs,
-    S5's friction sensor at M2 on the high rail reads 0.05 too high."""
+    S5's friction sensor at M2 on the high rail reads 0.05 too high, S1's
+    dry friction is 0.50."""
     root = tmp_path_factory.mktemp("fleet-recordings")
     days = {}
     for k, sid in enumerate(SECTIONS):
         whole = root / f"{sid}.mcap"
         tortwin.synth(
             whole, days=3, seed=40 + k, trains_per_day=16, length_m=300.0,
-            hidden=HIDDEN.get(sid, []),
+            hidden=HIDDEN.get(sid, []), truth_config=TRUTH.get(sid),
         )
         days[sid] = fleet.split_by_day(whole, root / sid)
         assert sorted(days[sid]) == DATES
@@ -84,12 +89,13 @@ def test_a_fleet_equals_the_command_line_day_by_day(tmp_path, recordings, local_
     m = manifest(
         tmp_path / "fleet.toml", out, recordings, SECTIONS,
         **{CLOGGED: {"run": ["replay", "discover"]},
+           OTHER_RAIL: {"run": ["replay", "calibrate"]},
            "S0": {"run": ["replay", "strategy"], "strategy_space": str(space)}},
     )
     run = fleet.run(m)
     assert [d.status for d in run.days] == ["done"] * 18, run.days
     assert sorted((w, r.section, r.status) for w, r in run.studies) == [
-        ("discover", CLOGGED, "done"), ("strategy", "S0", "done")
+        ("calibrate", OTHER_RAIL, "done"), ("discover", CLOGGED, "done"), ("strategy", "S0", "done")
     ], run.studies
     strategy = ds.dataset(out / "strategy", format="parquet", partitioning="hive").to_table().to_pylist()
     assert [(x["section"], x["first_date"], x["last_date"]) for x in strategy] == [("S0", DATES[0], DATES[-1])]
@@ -129,9 +135,18 @@ def test_a_fleet_equals_the_command_line_day_by_day(tmp_path, recordings, local_
     day = rmse[(rmse.section == "S0") & (rmse.date.astype(str) == "2024-04-09")]
     assert day.n.sum() == len(cli_residuals)
 
+    # S1's dry friction is calibrated (its interval holds the truth); the
+    # clogged nozzle is a finding, not a constant (S3's calibration keeps
+    # mu_d and the transfer within 10 % of the laboratory's).
+    constants = ds.dataset(out / "constants", format="parquet", partitioning="hive").to_table().to_pylist()
+    assert {(c["section"], c["study"]) for c in constants} == {(OTHER_RAIL, "calibrate"), (CLOGGED, "discover")}
+    mu_d = next(c for c in constants if c["section"] == OTHER_RAIL and c["key"] == "product.mu_d")
+    assert mu_d["determined"] and mu_d["ci95_low"] <= 0.50 <= mu_d["ci95_high"], mu_d
+    assert (mu_d["first_date"], mu_d["last_date"]) == (DATES[0], DATES[-1])
+
     # The clogged nozzle is found, and its section heads the summary; the
     # biased sensor comes next (from the residuals alone: no discover ran
-    # there); nothing else needs attention.
+    # there), then S1's constant; nothing else needs attention.
     findings = ds.dataset(out / "findings", format="parquet", partitioning="hive").to_table().to_pylist()
     assert [(f["section"], f["acts_on"], f["applicator"]) for f in findings] == [(CLOGGED, "pulse_mass", "A1")]
     summary = json.loads((out / "summary.json").read_text())
@@ -140,9 +155,12 @@ def test_a_fleet_equals_the_command_line_day_by_day(tmp_path, recordings, local_
     assert ranked[0]["reasons"][0].startswith("applicator A1: Applicator A1 delivers about 40 %"), ranked[0]
     assert [(x["site"], x["rail"], x["quantity"]) for x in ranked[1]["sensors"]] == [("M2", "high", "mu")]
     assert 0.04 < ranked[1]["sensors"][0]["offset_from_others"] < 0.06, ranked[1]
-    assert all(not s["reasons"] for s in ranked[2:]), ranked
+    assert ranked[2]["section"] == OTHER_RAIL, ranked
+    assert ranked[2]["reasons"] == [f"constants far from the laboratory's: mu_d {mu_d['value']:.4g} "
+                                    f"({100 * (mu_d['value'] / 0.58 - 1):+.0f} %)"], ranked[2]
+    assert all(not s["reasons"] for s in ranked[3:]), ranked
     md = (out / "summary.md").read_text()
-    assert "| 1 | S3 |" in md and "| 2 | S5 |" in md
+    assert "| 1 | S3 |" in md and "| 2 | S5 |" in md and "| 3 | S1 |" in md
     assert (out / "summary.png").read_bytes()[:4] == b"\x89PNG"
 
     # A re-run skips every day and the study, and rewrites no table.
@@ -150,7 +168,7 @@ def test_a_fleet_equals_the_command_line_day_by_day(tmp_path, recordings, local_
     stamps = [p.stat().st_mtime_ns for p in tables]
     again = fleet.run(m)
     assert [d.status for d in again.days] == ["skipped"] * 18
-    assert [r.status for _, r in again.studies] == ["skipped", "skipped"]
+    assert [r.status for _, r in again.studies] == ["skipped"] * 3
     assert [p.stat().st_mtime_ns for p in tables] == stamps
 
     # The README's DuckDB query.

@@ -179,6 +179,29 @@ def test_discover_names_the_same_effects_as_the_command_line(tmp_path, tortwin_b
     assert rerun.summary["rmse"]["mu"]["rmse"] < 0.0105
 
 
+def test_calibrate_gives_the_command_lines_site_constants(tmp_path, tortwin_bin):
+    """A tangent whose rail gives a dry friction of 0.52, not the
+    laboratory's 0.58: calibrate through Python says what the command line
+    says, and the interval holds the truth."""
+    recording = tmp_path / "site.mcap"
+    tortwin.synth(recording, preset="tangent", days=2, seed=36, trains_per_day=24,
+                  truth_config={"product": {"mu_d": 0.52}})
+    cli = run_cli(tortwin_bin, "calibrate", recording, "--report", tmp_path / "cli", "-q")
+    assert cli.returncode == 0, cli.stderr
+    expected = json.loads((tmp_path / "cli" / "report.json").read_text())
+    found = tortwin.calibrate(recording, report=tmp_path / "py")
+    assert found.effects == [] == expected["effects_found"]
+    assert found.constants == expected["site_constants"]
+    assert found.model_toml == (tmp_path / "cli" / "model.toml").read_text()
+    mu_d = next(c for c in found.constants if c["key"] == "product.mu_d")
+    assert mu_d["determined"] and mu_d["ci95"][0] <= 0.52 <= mu_d["ci95"][1], mu_d
+    assert abs(found.moved["product.mu_d"] - 0.52) < 0.01, found.moved
+    assert tomllib.loads(found.model_toml)["product"]["mu_d"] == mu_d["value"]
+    # Every measurement's residual before and after.
+    after = found.residuals["residual_after"].to_numpy()
+    assert abs((after**2).mean() ** 0.5 - expected["rmse_after_all_rows"]) < 1e-12
+
+
 def test_synth_writes_what_the_command_line_writes(tmp_path, tortwin_bin):
     args = dict(days=1, seed=7, trains_per_day=6, length_m=300.0)
     key = tortwin.synth(tmp_path / "py.mcap", hidden=["rail_ageing:tau_s=7200"], **args)

@@ -52,6 +52,113 @@ pub struct ProductParams {
     pub m_max_kg: f64,
 }
 
+/// One constant of [`ProductParams`] by name: the `[product]` keys of the
+/// configuration, the constants a site calibration examines
+/// (docs/spec/interfaces.md, "Site constants").
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ProductKey {
+    MuD,
+    MuC,
+    KmKg,
+    Kc,
+    Kt,
+    Cn,
+    K0Kg,
+    Km1Kg,
+    M0Kg,
+    Km2,
+    Kp,
+    CmKg,
+    MMaxKg,
+}
+
+impl ProductKey {
+    /// Every constant: the friction levels first, then pick-up and
+    /// transfer, consumption, and the cap (the order reports list them in).
+    pub const ALL: [ProductKey; 13] = [
+        ProductKey::MuD,
+        ProductKey::MuC,
+        ProductKey::KmKg,
+        ProductKey::Kc,
+        ProductKey::Kt,
+        ProductKey::Cn,
+        ProductKey::K0Kg,
+        ProductKey::Km1Kg,
+        ProductKey::M0Kg,
+        ProductKey::Km2,
+        ProductKey::Kp,
+        ProductKey::CmKg,
+        ProductKey::MMaxKg,
+    ];
+
+    /// The key under `[product]`, e.g. `mu_d`.
+    pub fn name(self) -> &'static str {
+        match self {
+            ProductKey::MuD => "mu_d",
+            ProductKey::MuC => "mu_c",
+            ProductKey::KmKg => "km_kg",
+            ProductKey::Kc => "kc",
+            ProductKey::Kt => "kt",
+            ProductKey::Cn => "cn",
+            ProductKey::K0Kg => "k0_kg",
+            ProductKey::Km1Kg => "km1_kg",
+            ProductKey::M0Kg => "m0_kg",
+            ProductKey::Km2 => "km2",
+            ProductKey::Kp => "kp",
+            ProductKey::CmKg => "cm_kg",
+            ProductKey::MMaxKg => "m_max_kg",
+        }
+    }
+
+    /// What it sets, for people.
+    pub fn what(self) -> &'static str {
+        match self {
+            ProductKey::MuD => "friction of dry, clean rail (eq. 4)",
+            ProductKey::MuC => "friction with surplus product (eq. 4)",
+            ProductKey::KmKg => "mass scale of the friction decay (eq. 4)",
+            ProductKey::Kc => "creepage sensitivity of consumption (eq. 3)",
+            ProductKey::Kt => "pick-up efficiency of the transfer (eq. 6)",
+            ProductKey::Cn => "wheel revolutions scale of the transfer (eq. 6)",
+            ProductKey::K0Kg => "consumption per contact at no product (eq. 1)",
+            ProductKey::Km1Kg => "mass-dependent consumption per contact (eq. 1)",
+            ProductKey::M0Kg => "product mass applied at the site, m0 (eq. 1)",
+            ProductKey::Km2 => "mass scale of consumption in units of m0 (eq. 1)",
+            ProductKey::Kp => "pressure sensitivity of consumption (eq. 2)",
+            ProductKey::CmKg => "mass scale of the transfer (eq. 6)",
+            ProductKey::MMaxKg => "what one surface holds at one grid point (the cap)",
+        }
+    }
+
+    /// Its value in `params`.
+    pub fn get(self, p: &ProductParams) -> f64 {
+        *self.slot(&mut p.clone())
+    }
+
+    /// Sets its value in `params`.
+    pub fn set(self, p: &mut ProductParams, value: f64) {
+        *self.slot(p) = value;
+    }
+
+    fn slot(self, p: &mut ProductParams) -> &mut f64 {
+        match self {
+            ProductKey::MuD => &mut p.mu_d,
+            ProductKey::MuC => &mut p.mu_c,
+            ProductKey::KmKg => &mut p.km_kg,
+            ProductKey::Kc => &mut p.kc,
+            ProductKey::Kt => &mut p.kt,
+            ProductKey::Cn => &mut p.cn,
+            ProductKey::K0Kg => &mut p.k0_kg,
+            ProductKey::Km1Kg => &mut p.km1_kg,
+            ProductKey::M0Kg => &mut p.m0_kg,
+            ProductKey::Km2 => &mut p.km2,
+            ProductKey::Kp => &mut p.kp,
+            ProductKey::CmKg => &mut p.cm_kg,
+            ProductKey::MMaxKg => &mut p.m_max_kg,
+        }
+    }
+}
+
 /// Eq. (2): the influence of the mean Hertz pressure on consumption,
 /// `fp = max(0, 1 + kp (pm / 1178 MPa - 1))`. The clamp at 0 is fixed by
 /// model.md: below about 537 MPa the paper's linear law would turn negative
@@ -320,6 +427,27 @@ mod tests {
 
     fn table2() -> ProductParams {
         ModelConfig::default().product
+    }
+
+    #[test]
+    fn every_product_key_reads_and_writes_its_own_field() {
+        let p = table2();
+        let text = toml::to_string(&p).unwrap();
+        for (k, key) in ProductKey::ALL.into_iter().enumerate() {
+            // The serialized key of the field is the key's name.
+            let line = format!("{} = ", key.name());
+            assert!(text.contains(&line), "{line}");
+            let mut q = p;
+            key.set(&mut q, 1000.0 + k as f64);
+            assert_eq!(key.get(&q), 1000.0 + k as f64);
+            let changed: Vec<ProductKey> = ProductKey::ALL
+                .into_iter()
+                .filter(|o| o.get(&q) != o.get(&p))
+                .collect();
+            assert_eq!(changed, [key]);
+        }
+        // Every field of ProductParams has a key.
+        assert_eq!(text.lines().count(), ProductKey::ALL.len());
     }
 
     #[test]

@@ -380,11 +380,17 @@ impl<'a> Evaluator<'a> {
     }
 }
 
-/// The exact effect parameters of a configuration (the only thing the fits
-/// vary), as bits. Parameters that cannot matter are keyed as 0: the
-/// reservoir's `r` when `alpha` = 0 (nothing is ever parked).
+/// The exact parameters a fit or a calibration varies, as bits: the
+/// product constants and the effects'. Parameters that cannot matter are
+/// keyed as 0: the reservoir's `r` when `alpha` = 0 (nothing is ever
+/// parked).
 fn cache_key(cfg: &ModelConfig) -> Vec<u64> {
-    let mut key = Vec::with_capacity(16);
+    let mut key = Vec::with_capacity(32);
+    key.extend(
+        tortwin_model::product::ProductKey::ALL
+            .iter()
+            .map(|k| k.get(&cfg.product).to_bits()),
+    );
     for c in Candidate::all() {
         match c.get(&cfg.effects) {
             None => key.push(0),

@@ -26,7 +26,14 @@
 //!    not predict it.
 //! 4. **Forward selection.** Of the candidates passing both, the one with
 //!    the largest BIC drop is added, every effect in the model is refitted
-//!    jointly, and the search repeats until no candidate passes.
+//!    jointly, and the search repeats until no candidate passes. A step's
+//!    threshold is placed by the fit, between the events it acts on (the
+//!    applicator's pulses for a pulse mass, the trains otherwise); the close
+//!    contenders of a step (up to three within 80 % of the best BIC drop)
+//!    are fitted again with the model's effects free before they are
+//!    compared. The site's constants are one candidate of every step until
+//!    they are taken (`calibrate.rs`); an effect taken before them that
+//!    they make unnecessary is taken out again.
 //! 5. **What is left.** If the final RMSE is still well above the noise
 //!    estimate ([`Options::unexplained_ratio`]), the remaining residual is
 //!    reported with the covariate it follows most closely: no effect is
@@ -35,6 +42,7 @@
 //! Effects already in the starting configuration stay on and are refitted
 //! first (step 0).
 
+pub mod calibrate;
 pub mod data;
 mod describe;
 mod diagnose;
@@ -58,6 +66,7 @@ use space::Drivers;
 use tortwin_model::config::{ModelConfig, TermEffect};
 use tortwin_model::effects::Named;
 use tortwin_model::generic::{ActsOn, Driver, FormKind};
+use tortwin_recording::EventKind;
 
 /// The thresholds of the selection.
 #[derive(Debug, Clone, Copy, Serialize)]
@@ -72,8 +81,11 @@ pub struct Options {
     /// After selection, a RMSE above this times the noise estimate is
     /// reported as an unexplained residual.
     pub unexplained_ratio: f64,
-    /// At most this many effects are added.
+    /// At most this many effects are added (0: calibrate only).
     pub max_steps: usize,
+    /// Calibrate the site's constants first, and with the effects found
+    /// (docs/spec/interfaces.md, "Site constants").
+    pub calibrate: bool,
 }
 
 impl Default for Options {
@@ -83,11 +95,13 @@ impl Default for Options {
             min_excess_share: 0.25,
             unexplained_ratio: 1.1,
             max_steps: Named::ALL.len(),
+            calibrate: true,
         }
     }
 }
 
 pub use crate::progress::{Progress, Silent};
+pub use calibrate::{Calibration, Combination, SiteConstant};
 // What a `Discovery` holds, from the files that compute it.
 pub use describe::Location;
 pub use diagnose::{BinMean, CovariateScore};
@@ -245,6 +259,9 @@ pub struct Unexplained {
 pub struct Discovery {
     /// Effects the workflow added (not those of the starting model).
     pub effects_found: Vec<EffectParams>,
+    /// Every `[product]` constant examined, as the final model has it
+    /// (interfaces.md, "Site constants"); empty without calibration.
+    pub site_constants: Vec<SiteConstant>,
     /// RMSE over the measurements used (all but gross outliers), before
     /// and after: what a replay with model.toml gives when there are none.
     pub rmse_before: f64,
@@ -266,6 +283,11 @@ pub struct Discovery {
     /// The starting model's effects (from --config), and the final model's.
     pub start_effects: Vec<EffectParams>,
     pub model_effects: Vec<EffectParams>,
+    /// Step 0: the site's constants calibrated on the starting model
+    /// (before any effect is looked for).
+    pub calibration_start: Option<Calibration>,
+    /// The final calibration, with the effects found fitted jointly.
+    pub calibration: Option<Calibration>,
     /// Step 0: the starting model's effects refitted (if it has any).
     pub start_refit: Option<Vec<EffectParams>>,
     pub steps: Vec<Step>,
@@ -286,6 +308,9 @@ pub struct Discovery {
     pub model: ModelConfig,
     #[serde(skip)]
     pub residual_before: Vec<f64>,
+    /// After step 0's calibration (the starting model's residual without it).
+    #[serde(skip)]
+    pub residual_calibrated: Vec<f64>,
     #[serde(skip)]
     pub residual_after: Vec<f64>,
 }
@@ -384,12 +409,7 @@ pub fn discover(
     progress.stage("replaying with the starting model");
     // Gross outliers first: nothing after this sees them.
     let simulated_start = data.simulate(start)?;
-    let raw_residual: Vec<f64> = data
-        .rows
-        .iter()
-        .zip(&simulated_start)
-        .map(|(r, s)| r.measured - s)
-        .collect();
+    let raw_residual = residual_of(data, &simulated_start);
     let outliers = screen::outliers(data, &raw_residual);
     let ev = Evaluator::new(data, outliers.active.clone(), progress);
     let n = ev.n_active();
@@ -411,10 +431,36 @@ pub fn discover(
         .into_iter()
         .filter(|c| c.get(&start.effects).is_some())
         .collect();
+    // The effects of the starting model come first in `accepted`: they are
+    // never taken out.
+    let starting = accepted.len();
     let mut rmse_by_step = vec![("starting model".to_string(), rmse_before)];
+
+    // Step 0: the site's constants. A constant that differs for the whole
+    // recording is the site's, not an effect: calibrated before any effect
+    // is looked for, and offered to the search as the first candidate of
+    // every step until it is taken. Taken outright, the constants would
+    // average away a strong effect they can mimic (a reservoir at the wheel
+    // edge is matched to the noise by muC 2.5 times the laboratory's and kt
+    // at 40 %): the data decide which explains them better (BIC).
+    let mut calibration_start: Option<Calibration> = None;
+    // The site's constants were taken by a step, these fitted.
+    let mut constants_in = false;
+    let mut constant_keys: Vec<tortwin_model::product::ProductKey> = Vec::new();
+    let mut residual_calibrated = residual_before.clone();
+    if options.calibrate {
+        progress.stage("step 0: calibrating the site's constants");
+        // The starting model's own effects are fitted with the constants
+        // (a poor starting value would otherwise pull them).
+        let own: Vec<Candidate> = accepted.iter().filter(|c| c.dims() > 0).cloned().collect();
+        let c = calibrate::calibrate(&ev, &current, &start.product, &own, noise_estimate)?;
+        residual_calibrated = ev.residuals(&c.model)?.0;
+        calibration_start = Some(c);
+    }
 
     // Step 0: the starting model's own effects, refitted.
     let mut start_refit = None;
+    let mut start_refit_model: Option<ModelConfig> = None;
     if accepted.iter().any(|c| c.dims() > 0) {
         progress.stage("step 0: refitting the starting model's effects");
         let space = Space {
@@ -427,6 +473,7 @@ pub fn discover(
             sse = fit.eval.sse;
         }
         start_refit = Some(effects_of(&current));
+        start_refit_model = Some(current.clone());
         rmse_by_step.push(("starting effects refitted".to_string(), rmse(sse, n)));
     }
 
@@ -443,6 +490,32 @@ pub fn discover(
         ev.simulate(&current)?
     };
     for step in 1..=options.max_steps {
+        // What the residual follows now: a covariate that is a catalogue
+        // effect's signature (effects.md, "What each effect leaves in the
+        // residuals") or a driver brings that effect and every term on
+        // that driver back into this step, whatever they did before (a
+        // strong term accepted first can hide a weaker effect until then).
+        let mut forced: Vec<Driver> = Vec::new();
+        if step > 1 {
+            let residual_now = residual_of(data, &simulated_current);
+            let ranked = diagnose::rank(data, &screened(&residual_now, &ev.active));
+            let top = ranked.first().map_or(0.0, |c| c.eta2_adjusted);
+            for cov in ranked
+                .iter()
+                .take(2)
+                .filter(|c| c.eta2_adjusted >= SIGNATURE_ETA2 && c.eta2_adjusted >= 0.5 * top)
+            {
+                let (named, driver) = signature_of(&cov.name);
+                for n in named {
+                    let c = Candidate::Named(n);
+                    if hopeless.contains(&c) {
+                        hopeless.retain(|h| *h != c);
+                        warm.remove(&c);
+                    }
+                }
+                forced.extend(driver);
+            }
+        }
         let mut candidates: Vec<(Candidate, Start)> = Candidate::all()
             .into_iter()
             .filter(|c| !accepted.contains(c))
@@ -466,11 +539,22 @@ pub fn discover(
             // ΔBIC < threshold needs n ln(SSE1/SSE0) < threshold − k ln n,
             // about a reduction of (|threshold| + k ln n) σ² for k = 1.
             noise_now.map_or(0.0, |s| (options.bic_threshold.abs() + ln_n) * s * s),
+            &forced,
             &mut responses,
         )?;
+        // A term on a direction already in the model (whatever its form
+        // or range) would only stack on it.
+        let in_model = |c: &Candidate| {
+            let Candidate::Generic(g) = c else {
+                return false;
+            };
+            accepted
+                .iter()
+                .any(|a| matches!(a, Candidate::Generic(h) if h.same_direction(g)))
+        };
         let generic: Vec<(Candidate, Start)> = generic
             .into_iter()
-            .filter(|(c, _)| !accepted.contains(c) && !hopeless.contains(c))
+            .filter(|(c, _)| !accepted.contains(c) && !hopeless.contains(c) && !in_model(c))
             .collect();
         // After a step: a named effect whose earlier optimum no longer
         // lowers the SSE at all was standing in for what was just added
@@ -549,79 +633,141 @@ pub fn discover(
             );
             fits.extend(fit_each(&ev, &current, &more, progress)?);
         }
+        let judge = Judge {
+            sse,
+            n,
+            noise: noise_now,
+            options,
+        };
         let mut results: Vec<(CandidateResult, Space, Vec<f64>)> = fits
             .into_iter()
             .map(|(c, space, f)| {
                 if !c.is_generic() {
                     warm.insert(c.clone(), f.u.clone());
-                    // A named effect that could not pass the BIC while the
-                    // residual was larger will not pass on a smaller one.
-                    let bic = n as f64 * (f.eval.sse / sse).ln() + c.dims() as f64 * ln_n;
-                    if bic >= options.bic_threshold {
-                        hopeless.push(c.clone());
-                    }
                 }
                 let k = c.dims() + usize::from(is_step(&c));
-                let delta_bic = n as f64 * (f.eval.sse / sse).ln() + k as f64 * ln_n;
-                let (excess_share, passes_share) =
-                    judge_share(sse, f.eval.sse, n, noise_now, options);
                 let params = space.params(&f.u).pop().unwrap_or_default();
-                (
-                    CandidateResult {
-                        name: c.name().to_string(),
-                        label: c.label(),
-                        params: c.named(&params),
-                        sse: f.eval.sse,
-                        rmse: rmse(f.eval.sse, n),
-                        k,
-                        delta_bic,
-                        passes_bic: delta_bic < options.bic_threshold,
-                        excess_share,
-                        passes_share,
-                        cv: None,
-                        passes_cv: None,
-                        cv_site: None,
-                        passes_cv_site: None,
-                        engine_runs: f.runs,
-                    },
-                    space,
-                    f.u,
-                )
+                let mut r = judge.result(c.name(), c.label(), f.eval.sse, k);
+                r.params = c.named(&params);
+                r.engine_runs = f.runs;
+                (r, space, f.u)
             })
             .collect();
+        // A named effect that could not pass the BIC while the residual was
+        // larger will not pass on a smaller one.
+        for (r, space, _) in &results {
+            if let Some(c) = space.slots.first().filter(|c| !c.is_generic()) {
+                let bic = n as f64 * (r.sse / sse).ln() + c.dims() as f64 * ln_n;
+                if bic >= options.bic_threshold {
+                    hopeless.push(c.clone());
+                }
+            }
+        }
         results.sort_by(|a, b| a.0.delta_bic.total_cmp(&b.0.delta_bic));
         // The change point of the residual lags a cause with memory (less
         // product on the rail shows only as it runs out), and a split of the
         // residual along a driver is only a first guess: the best step in
         // time and the best step along another driver have their threshold
         // placed by the fit itself ([`refine_step`]).
+        // Steps in time on other quantities that come close to the best one
+        // (within 20 % of its BIC drop: a nozzle that clogs and a transfer
+        // that drops at about the same time) have theirs placed too, so
+        // that the comparison between them is not decided by a first guess.
         let best_bic = results.first().map_or(0.0, |r| r.0.delta_bic);
-        for time in [true, false] {
-            let Some(k) = results.iter().position(|r| {
-                is_step_slot(&r.1) && is_time_step(&r.1) == time && r.0.delta_bic < 0.5 * best_bic
-            }) else {
-                continue;
+        let mut to_place: Vec<usize> = Vec::new();
+        if let Some(k) = results.iter().position(|r| {
+            is_step_slot(&r.1) && is_time_step(&r.1) && r.0.delta_bic < 0.5 * best_bic
+        }) {
+            to_place.push(k);
+            let best_time = results[k].0.delta_bic;
+            let mut quantities = vec![acts_on_of(&results[k].1)];
+            for (i, r) in results.iter().enumerate().skip(k + 1) {
+                if to_place.len() >= MAX_TIME_STEPS_PLACED || r.0.delta_bic >= 0.8 * best_time {
+                    break;
+                }
+                let q = acts_on_of(&r.1);
+                if is_step_slot(&r.1) && is_time_step(&r.1) && !quantities.contains(&q) {
+                    quantities.push(q);
+                    to_place.push(i);
+                }
+            }
+        }
+        if let Some(k) = results.iter().position(|r| {
+            is_step_slot(&r.1) && !is_time_step(&r.1) && r.0.delta_bic < 0.5 * best_bic
+        }) {
+            to_place.push(k);
+        }
+        let update = |r: &mut CandidateResult, space: &Space, u: &[f64], eval_sse: f64| {
+            let Some(c) = space.slots.first() else {
+                unreachable!("a fitted space has its slot")
             };
+            r.label = c.label();
+            r.params = c.named(&space.params(u).pop().unwrap_or_default());
+            r.sse = eval_sse;
+            r.rmse = rmse(eval_sse, n);
+            r.delta_bic = n as f64 * (eval_sse / sse).ln() + r.k as f64 * ln_n;
+            r.passes_bic = r.delta_bic < options.bic_threshold;
+            (r.excess_share, r.passes_share) = judge_share(sse, eval_sse, n, noise_now, options);
+        };
+        for k in to_place {
             progress.stage(&format!(
                 "step {step}: placing the threshold of {}",
                 results[k].0.label
             ));
             let refined = refine_step(&ev, data, &drivers, &results[k].1, &results[k].2)?;
             if let Some((space, u, eval)) = refined {
-                let Some(c) = space.slots.first() else {
-                    unreachable!("a refined space has its slot")
-                };
-                let r = &mut results[k].0;
-                r.label = c.label();
-                r.params = c.named(&space.params(&u).pop().unwrap_or_default());
-                r.sse = eval.sse;
-                r.rmse = rmse(eval.sse, n);
-                r.delta_bic = n as f64 * (eval.sse / sse).ln() + r.k as f64 * ln_n;
-                r.passes_bic = r.delta_bic < options.bic_threshold;
-                (r.excess_share, r.passes_share) =
-                    judge_share(sse, eval.sse, n, noise_now, options);
+                update(&mut results[k].0, &space, &u, eval.sse);
                 results[k].1 = space;
                 results[k].2 = u;
+            }
+        }
+        results.sort_by(|a, b| a.0.delta_bic.total_cmp(&b.0.delta_bic));
+        // The close contenders with the model's effects free: each was
+        // fitted with them held where they had to make up for what is
+        // still missing, and the one that is missing frees them most (a
+        // clogged nozzle behind rail ageing: with ageing's time constant
+        // held where the nozzle had put it, a drop of the transfer matched
+        // the data better than the nozzle itself).
+        if !accepted.is_empty() {
+            let passing: Vec<usize> = results
+                .iter()
+                .enumerate()
+                .filter(|(_, r)| {
+                    r.0.passes_bic
+                        && r.0.passes_share
+                        && !r
+                            .1
+                            .slots
+                            .first()
+                            .is_some_and(|c| constant_in_disguise(c, &ev))
+                })
+                .map(|(k, _)| k)
+                .collect();
+            if let Some(&first) = passing.first() {
+                let best = results[first].0.delta_bic;
+                let close: Vec<usize> = passing
+                    .into_iter()
+                    .filter(|&k| results[k].0.delta_bic <= CONTENDER_SHARE * best)
+                    .take(MAX_CONTENDERS)
+                    .collect();
+                if close.len() > 1 {
+                    for k in close {
+                        progress.stage(&format!(
+                            "step {step}: {} with the model's effects free",
+                            results[k].0.label
+                        ));
+                        let (space, u) = (&results[k].1, &results[k].2);
+                        if let Some((space, u, eval_sse)) =
+                            with_effects_free(&ev, data, &drivers, &accepted, space, u)?
+                        {
+                            if eval_sse < results[k].0.sse {
+                                update(&mut results[k].0, &space, &u, eval_sse);
+                                results[k].1 = space;
+                                results[k].2 = u;
+                            }
+                        }
+                    }
+                }
             }
         }
         results.sort_by(|a, b| a.0.delta_bic.total_cmp(&b.0.delta_bic));
@@ -631,12 +777,73 @@ pub fn discover(
         prefer_direct_drivers(&mut results);
         prefer_narrow_offsets(&mut results, n);
 
+        // The site's constants, as one candidate with as many parameters as
+        // the calibration fitted, until they are taken.
+        // At the first step the calibration of step 0; after an effect is
+        // accepted the calibration runs again on the model with it (the
+        // effects held): what the recording determines of the constants
+        // changes once a strong effect no longer hides them (a clogged
+        // nozzle hid a consumption 19 % below the laboratory's, which
+        // generic terms on creepage then took).
+        let constants = match &calibration_start {
+            Some(cal0) if !constants_in => {
+                let on_start = current == *start || Some(&current) == start_refit_model.as_ref();
+                let cal = if on_start {
+                    cal0.clone()
+                } else {
+                    progress.stage(&format!("step {step}: calibrating the site's constants"));
+                    calibrate::calibrate(&ev, &current, &start.product, &[], noise_now)?
+                };
+                if cal.fitted.is_empty() {
+                    None
+                } else {
+                    let eval = ev.evaluate(&cal.model)?;
+                    let names: Vec<&str> = cal.fitted.iter().map(|key| key.name()).collect();
+                    let mut r = judge.result(
+                        SITE_CONSTANTS,
+                        format!("the site's constants ({})", names.join(", ")),
+                        eval.sse,
+                        cal.fitted.len(),
+                    );
+                    r.params = cal
+                        .fitted
+                        .iter()
+                        .map(|key| (key.name().to_string(), key.get(&cal.model.product)))
+                        .collect();
+                    Some((r, cal.model, cal.fitted))
+                }
+            }
+            _ => None,
+        };
+        let constants_keys_now: Option<Vec<tortwin_model::product::ProductKey>> =
+            constants.as_ref().map(|c| c.2.clone());
+        let constants_pass = constants
+            .as_ref()
+            .filter(|(c, _, _)| c.passes_bic && c.passes_share)
+            .map(|(c, _, _)| c.delta_bic);
+
         // The current model's held-out SSE: every block predicted as it is.
         let cv_current = sse;
         let mut chosen = None;
+        let mut take_constants = false;
         for (k, (result, space, u)) in results.iter_mut().enumerate() {
             if !(result.passes_bic && result.passes_share) {
                 continue;
+            }
+            // A change in time before the first measurement it could
+            // affect is a site constant, not a change: never an effect.
+            if space
+                .slots
+                .first()
+                .is_some_and(|c| constant_in_disguise(c, &ev))
+            {
+                continue;
+            }
+            // The site's constants explain the data better than what is
+            // left: they are taken at this step.
+            if constants_pass.is_some_and(|d| d <= result.delta_bic) {
+                take_constants = true;
+                break;
             }
             progress.stage(&format!(
                 "step {step}: cross-validating {} by day",
@@ -688,6 +895,115 @@ pub fn discover(
             rmse_after: rmse(sse, n),
             effects_after: effects_of(&current),
         };
+        if let Some((c, _, _)) = &constants {
+            let at = record
+                .candidates
+                .iter()
+                .position(|r| r.delta_bic > c.delta_bic)
+                .unwrap_or(record.candidates.len());
+            record.candidates.insert(at, c.clone());
+        }
+        if chosen.is_none() && constants_pass.is_some() {
+            take_constants = true;
+        }
+        if let (true, Some((c, model, keys))) = (take_constants, constants) {
+            progress.stage(&format!("step {step}: {} taken", c.label));
+            current = model;
+            sse = c.sse;
+            constants_in = true;
+            constant_keys = keys;
+            record.accepted = Some(c.label.clone());
+            rmse_by_step.push(("site constants calibrated".to_string(), rmse(sse, n)));
+            // What the constants could not imitate: the step's best effects
+            // fitted again beside them, the constants refitted with each.
+            // Constants that soak up part of a strong effect (rail ageing
+            // beside a km_kg 31 % high and a k0_kg 33 % low) leave its rest
+            // too small to be found afterwards; one that still explains
+            // enough of what they leave (BIC, share, cross-validation) is
+            // taken with them.
+            progress.stage(&format!(
+                "step {step}: the best effects beside the site's constants"
+            ));
+            if let Some((effect, model, pair_sse)) = effect_beside_constants(
+                &ev,
+                &results,
+                &constant_keys,
+                &start.product,
+                sse,
+                noise_now,
+                options,
+            )? {
+                progress.stage(&format!(
+                    "step {step}: {} taken with the site's constants",
+                    effect.label()
+                ));
+                current = model;
+                sse = pair_sse;
+                record.accepted = Some(format!("{}; {}", c.label, effect.label()));
+                // The constants were refitted once beside the effect as it
+                // was fitted without them: calibrated again with it free,
+                // they find their values (and which of them the recording
+                // determines) with it.
+                progress.stage(&format!(
+                    "step {step}: calibrating the site's constants with {}",
+                    effect.label()
+                ));
+                let cal = calibrate::calibrate(
+                    &ev,
+                    &current,
+                    &start.product,
+                    std::slice::from_ref(&effect),
+                    noise_now,
+                )?;
+                let cal_sse = ev.evaluate(&cal.model)?.sse;
+                if cal_sse < sse && !cal.fitted.is_empty() {
+                    current = cal.model;
+                    sse = cal_sse;
+                    constant_keys = cal.fitted;
+                }
+                rmse_by_step.push((format!("+ {}", effect.label()), rmse(sse, n)));
+                accepted.push(effect);
+            }
+            // Backward: an effect taken before the constants that stood in
+            // for them (a dry-friction step on wheel load for a site whose
+            // muD is 7 % below the laboratory's) is taken out again, the
+            // constants refitted without it.
+            let mut removed = Vec::new();
+            loop {
+                let without = without_each(
+                    &ev,
+                    &accepted,
+                    starting,
+                    &current,
+                    &constant_keys,
+                    &start.product,
+                    noise_now,
+                )?;
+                let Some((i, w, cfg)) =
+                    least_needed(&accepted, without, sse, n, noise_now, options)
+                else {
+                    break;
+                };
+                let c = accepted.remove(i);
+                progress.stage(&format!(
+                    "step {step}: {} is no longer needed with the site's constants",
+                    c.label()
+                ));
+                current = cfg;
+                sse = w;
+                removed.push(c.label());
+                hopeless.push(c);
+            }
+            if !removed.is_empty() {
+                record.removed = Some(removed.join("; "));
+            }
+            simulated_current = ev.simulate(&current)?;
+            noise_now = noise_again(&ev, &simulated_current, noise_now);
+            record.rmse_after = rmse(sse, n);
+            record.effects_after = effects_of(&current);
+            steps.push(record);
+            continue;
+        }
         let Some(k) = chosen else {
             steps.push(record);
             break;
@@ -713,6 +1029,18 @@ pub fn discover(
             if fit.eval.sse < sse {
                 current = joint.config(&fit.u);
                 sse = fit.eval.sse;
+            }
+        }
+        // The constants taken earlier made up for the effect as well as
+        // they could: with it in the model they move back.
+        if !constant_keys.is_empty() {
+            progress.stage(&format!("step {step}: refitting the site's constants"));
+            let refitted =
+                calibrate::refit(&ev, &current, &start.product, &constant_keys, noise_now)?;
+            let eval = ev.evaluate(&refitted)?;
+            if eval.sse < sse {
+                current = refitted;
+                sse = eval.sse;
             }
         }
         // The generic terms' forms once more: a term was fitted in its
@@ -773,31 +1101,16 @@ pub fn discover(
         // Backward: an effect added earlier that the model no longer needs
         // (it stood in for what came later) is taken out again.
         if accepted.len() > 1 {
-            let starting = Candidate::all()
-                .iter()
-                .filter(|c| c.get(&start.effects).is_some())
-                .count();
-            let without: Vec<f64> = accepted[starting..]
-                .par_iter()
-                .map(|c| {
-                    let mut cfg = current.clone();
-                    c.unset(&mut cfg.effects);
-                    Ok(ev.evaluate(&cfg)?.sse)
-                })
-                .collect::<Result<_>>()?;
-            let weakest = without
-                .iter()
-                .enumerate()
-                .map(|(i, &w)| {
-                    let c = &accepted[starting + i];
-                    let k = c.dims() + usize::from(is_step(c));
-                    let keep_bic = n as f64 * (sse / w).ln() + k as f64 * ln_n;
-                    let (_, big) = judge_share(w, sse, n, noise_now, options);
-                    (starting + i, keep_bic, big)
-                })
-                .filter(|(_, keep_bic, big)| *keep_bic >= options.bic_threshold || !big)
-                .max_by(|a, b| a.1.total_cmp(&b.1));
-            if let Some((i, _, _)) = weakest {
+            let without = without_each(
+                &ev,
+                &accepted,
+                starting,
+                &current,
+                &[],
+                &start.product,
+                noise_now,
+            )?;
+            if let Some((i, _, _)) = least_needed(&accepted, without, sse, n, noise_now, options) {
                 let c = accepted.remove(i);
                 progress.stage(&format!("step {step}: {} is no longer needed", c.label()));
                 c.unset(&mut current.effects);
@@ -812,21 +1125,118 @@ pub fn discover(
                 hopeless.push(c);
             }
         }
-        simulated_current = ev.simulate(&current)?;
-        let residual_now: Vec<f64> = data
-            .rows
-            .iter()
-            .zip(&simulated_current)
-            .zip(&ev.active)
-            .map(|((r, s), &a)| if a { r.measured - s } else { f64::NAN })
-            .collect();
-        if let Some(again) = diagnose::noise_estimate(data, &residual_now) {
-            noise_now = Some(noise_now.map_or(again, |s| s.min(again)));
+        rmse_by_step.push((format!("+ {}", c.label()), rmse(sse, n)));
+        // An effect taken earlier that the site's constants explain as well
+        // (BIC with the constants' parameters counted) is replaced by them:
+        // a dry-friction term on wheel load taken for a muD 7 % below the
+        // laboratory's while rail ageing, not yet in, hid the constants.
+        // The effect just added was preferred to the constants already.
+        if let Some(keys) = constants_keys_now.filter(|k| !k.is_empty() && !constants_in) {
+            let last = accepted.len().saturating_sub(1);
+            let swaps = without_each(
+                &ev,
+                &accepted[..last],
+                starting,
+                &current,
+                &keys,
+                &start.product,
+                noise_now,
+            )?;
+            let best = swaps
+                .into_iter()
+                .map(|(i, w, cfg)| {
+                    let c = &accepted[i];
+                    let k = c.dims() + usize::from(is_step(c));
+                    let bic = n as f64 * (w / sse).ln() + (keys.len() as f64 - k as f64) * ln_n;
+                    (i, bic, w, cfg)
+                })
+                .filter(|(_, bic, _, _)| *bic <= 0.0)
+                .min_by(|a, b| a.1.total_cmp(&b.1));
+            if let Some((i, _, w, cfg)) = best {
+                let c = accepted.remove(i);
+                progress.stage(&format!(
+                    "step {step}: the site's constants explain {} as well",
+                    c.label()
+                ));
+                current = cfg;
+                sse = w;
+                constants_in = true;
+                constant_keys = keys;
+                record.removed = Some(match record.removed.take() {
+                    Some(r) => format!("{r}; {}", c.label()),
+                    None => c.label(),
+                });
+                rmse_by_step.push((
+                    format!("site constants calibrated for {}", c.label()),
+                    rmse(sse, n),
+                ));
+                hopeless.push(c);
+            }
         }
+        simulated_current = ev.simulate(&current)?;
+        noise_now = noise_again(&ev, &simulated_current, noise_now);
         record.rmse_after = rmse(sse, n);
         record.effects_after = effects_of(&current);
-        rmse_by_step.push((format!("+ {}", c.label()), rmse(sse, n)));
         steps.push(record);
+    }
+
+    // The constants once more, with the effects found fitted jointly: what
+    // the recording determines may differ now that the effects are in.
+    let mut calibration = None;
+    if options.calibrate {
+        progress.stage("calibrating the site's constants with the effects found");
+        let free: Vec<Candidate> = accepted
+            .iter()
+            .filter(|c| c.get(&current.effects).is_some())
+            .cloned()
+            .collect();
+        match &calibration_start {
+            // Nothing was added: step 0's calibration is the final one.
+            Some(c0) if free.is_empty() && (c0.model == current || current == *start) => {
+                current = c0.model.clone();
+                calibration = Some(c0.clone());
+            }
+            _ => {
+                let mut c = calibrate::calibrate(&ev, &current, &start.product, &free, noise_now)?;
+                current = c.model.clone();
+                // An effect the calibrated constants make unnecessary (it
+                // made up for constants held where an earlier step had put
+                // them) is taken out, and the constants calibrated again.
+                let dropped = drop_unneeded(
+                    &ev,
+                    &mut accepted,
+                    starting,
+                    &mut current,
+                    &start.product,
+                    noise_now,
+                    options,
+                )?;
+                if !dropped.is_empty() {
+                    for d in &dropped {
+                        progress.stage(&format!(
+                            "{} is not needed with the site's constants",
+                            d.label()
+                        ));
+                    }
+                    let free: Vec<Candidate> =
+                        free.into_iter().filter(|f| !dropped.contains(f)).collect();
+                    c = calibrate::calibrate(&ev, &current, &start.product, &free, noise_now)?;
+                    current = c.model.clone();
+                    rmse_by_step.push((
+                        format!(
+                            "- {} (not needed with the site's constants)",
+                            dropped
+                                .iter()
+                                .map(Candidate::label)
+                                .collect::<Vec<_>>()
+                                .join(", ")
+                        ),
+                        rmse(ev.evaluate(&current)?.sse, n),
+                    ));
+                }
+                calibration = Some(c);
+            }
+        }
     }
 
     progress.stage("replaying with the final model");
@@ -874,6 +1284,7 @@ pub fn discover(
         rmse_after,
         noise_estimate,
         unexplained.as_ref(),
+        calibration.as_ref(),
     );
     verdict.push_str(&ties(&steps));
     let rmse_after_all_rows = {
@@ -882,6 +1293,10 @@ pub fn discover(
     };
     Ok(Discovery {
         effects_found,
+        site_constants: calibration
+            .as_ref()
+            .map(|c| c.constants.clone())
+            .unwrap_or_default(),
         rmse_before,
         rmse_after,
         noise_estimate,
@@ -894,6 +1309,8 @@ pub fn discover(
         days: data.days.len(),
         start_effects,
         model_effects,
+        calibration_start,
+        calibration,
         start_refit,
         steps,
         rmse_by_step,
@@ -907,8 +1324,208 @@ pub fn discover(
         start: start.clone(),
         model: current,
         residual_before,
+        residual_calibrated,
         residual_after,
     })
+}
+
+/// How a candidate is judged against the current model: its BIC drop
+/// and its share of the excess over the noise.
+struct Judge<'o> {
+    /// The current model's SSE, over `n` measurements.
+    sse: f64,
+    n: usize,
+    noise: Option<f64>,
+    options: &'o Options,
+}
+
+impl Judge<'_> {
+    /// The result of a candidate with `k` parameters fitted to `new_sse`
+    /// (no parameters named, no cross-validation yet).
+    fn result(&self, name: &str, label: String, new_sse: f64, k: usize) -> CandidateResult {
+        let n = self.n;
+        let delta_bic = n as f64 * (new_sse / self.sse).ln() + k as f64 * (n as f64).ln();
+        let (excess_share, passes_share) =
+            judge_share(self.sse, new_sse, n, self.noise, self.options);
+        CandidateResult {
+            name: name.to_string(),
+            label,
+            params: BTreeMap::new(),
+            sse: new_sse,
+            rmse: rmse(new_sse, n),
+            k,
+            delta_bic,
+            passes_bic: delta_bic < self.options.bic_threshold,
+            excess_share,
+            passes_share,
+            cv: None,
+            passes_cv: None,
+            cv_site: None,
+            passes_cv_site: None,
+            engine_runs: 0,
+        }
+    }
+}
+
+/// Measured minus `simulated`, row by row.
+fn residual_of(data: &Dataset, simulated: &[f64]) -> Vec<f64> {
+    data.rows
+        .iter()
+        .zip(simulated)
+        .map(|(r, s)| r.measured - s)
+        .collect()
+}
+
+/// The noise estimated again on the residual of `simulated` (an effect
+/// that varies from axle to axle inflated the earlier estimate): the
+/// smallest kept.
+fn noise_again(ev: &Evaluator<'_>, simulated: &[f64], noise: Option<f64>) -> Option<f64> {
+    let residual: Vec<f64> = ev
+        .data
+        .rows
+        .iter()
+        .zip(simulated)
+        .zip(&ev.active)
+        .map(|((r, s), &a)| if a { r.measured - s } else { f64::NAN })
+        .collect();
+    match diagnose::noise_estimate(ev.data, &residual) {
+        Some(again) => Some(noise.map_or(again, |s| s.min(again))),
+        None => noise,
+    }
+}
+
+/// The name of the site's constants as a candidate of a step.
+pub const SITE_CONSTANTS: &str = "site_constants";
+
+/// A covariate the residual follows is read as a signature when its
+/// adjusted eta² is at least this.
+const SIGNATURE_ETA2: f64 = 0.02;
+
+/// The catalogue effects whose signature a covariate is (effects.md, "What
+/// each effect leaves in the residuals"), and the generic driver it is.
+fn signature_of(covariate: &str) -> (Vec<Named>, Option<Driver>) {
+    match covariate {
+        "time_since_last_touch_s" => (vec![Named::RailAgeing], None),
+        "rain_since_last_touch_mm" => (vec![Named::RainWashoff], Some(Driver::PrecipitationMmH)),
+        "air_temperature_c" => (
+            vec![Named::TemperatureConsumption],
+            Some(Driver::AirTemperatureC),
+        ),
+        "train_speed_mps" => (vec![Named::SpeedTransfer], Some(Driver::SpeedMps)),
+        "bogie_position" => (vec![Named::BogieBands], None),
+        "distance_from_applicator_m" => (vec![Named::WheelEdgeReservoir], None),
+        "wheel_load_kn" => (Vec::new(), Some(Driver::WheelLoadKn)),
+        _ => (Vec::new(), None),
+    }
+}
+
+/// A step in time whose `t0` lies at or before the first measurement it
+/// could affect acts on every measurement of its scope alike: a constant in
+/// disguise (interfaces.md, "Site constants"), which the calibration
+/// handles; never reported as a change in time.
+fn constant_in_disguise(c: &Candidate, ev: &Evaluator<'_>) -> bool {
+    let Candidate::Generic(g) = c else {
+        return false;
+    };
+    let (Some(Driver::Time), Some(FormKind::Step), Some(t0)) = (g.driver, g.form, g.x0()) else {
+        return false;
+    };
+    t0 <= first_affected_s(g, ev)
+}
+
+/// The times (unix seconds, ascending) at which a change in time on a
+/// slot's quantity can show: the pulses in its scope for a pulse mass (a
+/// step between two pulses changes the later ones), the train passages for
+/// every other quantity.
+fn acting_times_s(g: &space::GenericSlot, data: &Dataset) -> Vec<f64> {
+    if g.acts_on == ActsOn::PulseMass {
+        let mut t: Vec<f64> = data
+            .events
+            .iter()
+            .filter_map(|e| match &e.kind {
+                EventKind::Pulse(p) => Some((e.log_time_ns, p)),
+                _ => None,
+            })
+            .filter(|(_, p)| {
+                g.applicator.as_deref().is_none_or(|a| {
+                    data.section
+                        .applicators
+                        .get(p.applicator)
+                        .is_some_and(|x| x.id == a)
+                }) && g
+                    .rail
+                    .as_deref()
+                    .is_none_or(|r| r == data.rail_name(p.rail))
+            })
+            .map(|(t, _)| t as f64 * 1e-9)
+            .collect();
+        t.sort_unstable_by(f64::total_cmp);
+        t
+    } else {
+        data.passages
+            .iter()
+            .map(|p| p.log_time_ns as f64 * 1e-9)
+            .collect()
+    }
+}
+
+/// The first time a change in time on a slot can act on what is measured:
+/// its first pulse for a pulse mass (a step at or before it changes every
+/// pulse alike), otherwise the first measurement in its scope (a step at or
+/// before it changes every measurement alike). A step there is a site
+/// constant, not a change.
+fn first_affected_s(g: &space::GenericSlot, ev: &Evaluator<'_>) -> f64 {
+    let data = ev.data;
+    if g.acts_on == ActsOn::PulseMass {
+        return acting_times_s(g, data)
+            .first()
+            .copied()
+            .unwrap_or(f64::INFINITY);
+    }
+    data.rows
+        .iter()
+        .zip(&ev.active)
+        .filter(|&(row, &a)| {
+            a && g
+                .rail
+                .as_deref()
+                .is_none_or(|r| r == data.rail_name(row.rail))
+                && g.site
+                    .as_deref()
+                    .is_none_or(|s| s == data.site_name(row.site))
+                && g.quantity.is_none_or(|q| q == row.quantity)
+        })
+        .map(|(row, _)| row.log_time_ns as f64 * 1e-9)
+        .fold(f64::INFINITY, f64::min)
+}
+
+/// Steps in time whose threshold is placed by the fit at one step, at most.
+const MAX_TIME_STEPS_PLACED: usize = 3;
+
+/// Candidates whose BIC drop is at least this share of the best one's are
+/// close contenders, fitted again with the model's effects free.
+const CONTENDER_SHARE: f64 = 0.8;
+
+/// The most close contenders fitted with the model's effects free.
+const MAX_CONTENDERS: usize = 3;
+
+/// The most thresholds a step's placement tries in one pass.
+const COARSE_THRESHOLDS: usize = 48;
+
+/// Pulses closer together than this are one burst (one train's): a step
+/// in pulse mass is placed between bursts.
+const BURST_GAP_S: f64 = 60.0;
+
+/// The thresholds a placement tries again with the factor refitted at the
+/// best one: those that came closest.
+const REFIT_THRESHOLDS: usize = 12;
+
+/// The quantity a space's (generic) slot acts on.
+fn acts_on_of(space: &Space) -> Option<ActsOn> {
+    match space.slots.first() {
+        Some(Candidate::Generic(g)) => Some(g.acts_on),
+        _ => None,
+    }
 }
 
 fn is_time_step(space: &Space) -> bool {
@@ -919,11 +1536,224 @@ fn is_step_slot(space: &Space) -> bool {
     space.slots.first().is_some_and(is_step)
 }
 
+/// A candidate fitted together with the effects already in the model (a
+/// step in time has its threshold placed again with them where they go),
+/// as a space of its own slot over a base that holds them at their new
+/// values. `None` when the candidate has no slot.
+fn with_effects_free(
+    ev: &Evaluator<'_>,
+    data: &Dataset,
+    drivers: &Drivers,
+    accepted: &[Candidate],
+    space: &Space,
+    u: &[f64],
+) -> Result<Option<(Space, Vec<f64>, f64)>> {
+    let Some(c) = space.slots.first().cloned() else {
+        return Ok(None);
+    };
+    // The joint fit from `cfg`, split back into the candidate's own space.
+    let joint_fit = |c: &Candidate, cfg: ModelConfig| -> Result<(Space, Vec<f64>, f64)> {
+        let joint = Space {
+            slots: accepted.iter().cloned().chain([c.clone()]).collect(),
+            base: cfg,
+        };
+        let fit = fit::fit(ev, &joint, Start::Warm(joint.units_of(&joint.base)), None)?;
+        let fitted = joint.config(&fit.u);
+        let mut base = fitted.clone();
+        c.unset(&mut base.effects);
+        let own = Space {
+            base,
+            slots: vec![c.clone()],
+        };
+        let u = own.units_of(&fitted);
+        Ok((own, u, fit.eval.sse))
+    };
+    let (own, u1, sse1) = joint_fit(&c, space.config(u))?;
+    if !(is_step_slot(&own) && is_time_step(&own)) {
+        return Ok(Some((own, u1, sse1)));
+    }
+    match refine_step(ev, data, drivers, &own, &u1)? {
+        Some((placed, u2, eval)) if eval.sse < sse1 => {
+            let Some(c2) = placed.slots.first().cloned() else {
+                return Ok(Some((own, u1, sse1)));
+            };
+            let (own2, u3, sse3) = joint_fit(&c2, placed.config(&u2))?;
+            Ok(Some(if sse3 < eval.sse {
+                (own2, u3, sse3)
+            } else {
+                (placed, u2, eval.sse)
+            }))
+        }
+        _ => Ok(Some((own, u1, sse1))),
+    }
+}
+
+/// Named effects fitted beside the site's constants when they are taken,
+/// and the best generic directions (offsets aside: they are the sensors').
+const GENERIC_BESIDE_CONSTANTS: usize = 3;
+
+/// The best of a step's passing effects (every named one, the best
+/// [`GENERIC_BESIDE_CONSTANTS`] generic directions) fitted beside the
+/// site's constants `keys` (the constants refitted on the effect's model,
+/// then the effect on theirs), if it explains enough of what the constants
+/// alone leave (`sse_constants`): BIC, share of the excess and
+/// cross-validation by day and by site, as any effect. The effect, the
+/// model with both and its SSE.
+fn effect_beside_constants(
+    ev: &Evaluator<'_>,
+    results: &[(CandidateResult, Space, Vec<f64>)],
+    keys: &[tortwin_model::product::ProductKey],
+    reference: &tortwin_model::product::ProductParams,
+    sse_constants: f64,
+    noise: Option<f64>,
+    options: &Options,
+) -> Result<Option<(Candidate, ModelConfig, f64)>> {
+    let n = ev.active.iter().filter(|&&a| a).count();
+    let ln_n = (n as f64).ln();
+    let mut directions: Vec<&space::GenericSlot> = Vec::new();
+    let tried: Vec<&(CandidateResult, Space, Vec<f64>)> = results
+        .iter()
+        .filter(|r| r.0.passes_bic && r.0.passes_share)
+        .filter(|r| match r.1.slots.first() {
+            Some(Candidate::Named(_)) => true,
+            Some(c @ Candidate::Generic(g)) => {
+                if g.acts_on == ActsOn::Measurement
+                    || constant_in_disguise(c, ev)
+                    || directions.len() >= GENERIC_BESIDE_CONSTANTS
+                    || directions.iter().any(|d| d.same_direction(g))
+                {
+                    return false;
+                }
+                directions.push(g);
+                true
+            }
+            None => false,
+        })
+        .collect();
+    let pairs: Vec<(Candidate, Space, Vec<f64>, f64)> = tried
+        .par_iter()
+        .map(|(_, space, u)| {
+            let Some(c) = space.slots.first().cloned() else {
+                return Ok(None);
+            };
+            let with_constants = calibrate::refit(ev, &space.config(u), reference, keys, noise)?;
+            let own = Space {
+                base: with_constants,
+                slots: vec![c.clone()],
+            };
+            let fit = fit::fit(ev, &own, Start::Warm(own.units_of(&own.base)), None)?;
+            Ok(Some((c, own, fit.u, fit.eval.sse)))
+        })
+        .collect::<Result<Vec<_>>>()?
+        .into_iter()
+        .flatten()
+        .collect();
+    let Some((c, own, u, pair_sse)) = pairs.into_iter().min_by(|a, b| a.3.total_cmp(&b.3)) else {
+        return Ok(None);
+    };
+    let k = c.dims() + usize::from(is_step(&c));
+    let delta_bic = n as f64 * (pair_sse / sse_constants).ln() + k as f64 * ln_n;
+    let (_, big) = judge_share(sse_constants, pair_sse, n, noise, options);
+    if delta_bic >= options.bic_threshold || !big {
+        return Ok(None);
+    }
+    // Held-out blocks predicted better than by the constants alone.
+    for blocking in [Blocking::Day, Blocking::Site] {
+        if blocking == Blocking::Site && ev.sites.len() < 2 {
+            continue;
+        }
+        let cv = fit::cross_validate(ev, &own, &u, blocking)?;
+        if cv.held_out_sse >= sse_constants {
+            return Ok(None);
+        }
+    }
+    Ok(Some((c, own.config(&u), pair_sse)))
+}
+
+/// Takes out of `current` (and `accepted`) every effect found that the
+/// model no longer needs ([`least_needed`]), the weakest first. The effects
+/// of the starting model (the first `starting`) stay. Returns those taken
+/// out.
+fn drop_unneeded(
+    ev: &Evaluator<'_>,
+    accepted: &mut Vec<Candidate>,
+    starting: usize,
+    current: &mut ModelConfig,
+    reference: &tortwin_model::product::ProductParams,
+    noise: Option<f64>,
+    options: &Options,
+) -> Result<Vec<Candidate>> {
+    let n = ev.active.iter().filter(|&&a| a).count();
+    let mut sse = ev.evaluate(current)?.sse;
+    let mut dropped = Vec::new();
+    loop {
+        let without = without_each(ev, accepted, starting, current, &[], reference, noise)?;
+        let Some((i, w, cfg)) = least_needed(accepted, without, sse, n, noise, options) else {
+            return Ok(dropped);
+        };
+        dropped.push(accepted.remove(i));
+        (*current, sse) = (cfg, w);
+    }
+}
+
+/// The model without each effect found (`accepted[starting..]`, those on in
+/// `current`), the site's constants `keys` refitted on it (none: as it is):
+/// the effect's index in `accepted`, the model's SSE and the model.
+fn without_each(
+    ev: &Evaluator<'_>,
+    accepted: &[Candidate],
+    starting: usize,
+    current: &ModelConfig,
+    keys: &[tortwin_model::product::ProductKey],
+    reference: &tortwin_model::product::ProductParams,
+    noise: Option<f64>,
+) -> Result<Vec<(usize, f64, ModelConfig)>> {
+    (starting..accepted.len())
+        .into_par_iter()
+        .filter(|&i| accepted[i].get(&current.effects).is_some())
+        .map(|i| {
+            let mut cfg = current.clone();
+            accepted[i].unset(&mut cfg.effects);
+            let cfg = calibrate::refit(ev, &cfg, reference, keys, noise)?;
+            Ok((i, ev.evaluate(&cfg)?.sse, cfg))
+        })
+        .collect()
+}
+
+/// Of the models `without` one effect each ([`without_each`]), the one
+/// whose effect the model (SSE `sse` over `n` measurements) needs least, if
+/// it does not need it: taking it out raises the BIC by no more than the
+/// threshold, or the effect removes too small a share of the excess over
+/// the noise to matter.
+fn least_needed(
+    accepted: &[Candidate],
+    without: Vec<(usize, f64, ModelConfig)>,
+    sse: f64,
+    n: usize,
+    noise: Option<f64>,
+    options: &Options,
+) -> Option<(usize, f64, ModelConfig)> {
+    let ln_n = (n as f64).ln();
+    without
+        .into_iter()
+        .map(|(i, w, cfg)| {
+            let c = &accepted[i];
+            let k = c.dims() + usize::from(is_step(c));
+            let keep_bic = n as f64 * (sse / w).ln() + k as f64 * ln_n;
+            let (_, big) = judge_share(w, sse, n, noise, options);
+            (keep_bic, big, (i, w, cfg))
+        })
+        .filter(|(keep_bic, big, _)| *keep_bic >= options.bic_threshold || !big)
+        .max_by(|a, b| a.0.total_cmp(&b.0))
+        .map(|(_, _, r)| r)
+}
+
 /// A fitted space: the space, its search coordinates and their evaluation.
 type Fitted = (Space, Vec<f64>, std::sync::Arc<fit::Evaluation>);
 
 /// Places a step's threshold: the fitted factor is tried at thresholds
-/// around the first guess (between consecutive trains for time; between
+/// around the first guess (between consecutive acting times for time, see
+/// [`acting_times_s`]; between
 /// consecutive observed values for another driver, coarse then fine), and
 /// the threshold goes to the middle of the thresholds that give exactly the
 /// best fit: a friction term acts only where it is measured, so every t0
@@ -971,28 +1801,45 @@ fn refine_step(
     // The intervals between consecutive values a threshold can fall in:
     // trains for time, observed values for another driver.
     let values: Vec<f64> = if driver == Driver::Time {
-        data.passages
-            .iter()
-            .map(|p| p.log_time_ns as f64 * 1e-9)
-            .collect()
+        acting_times_s(slot, data)
     } else {
         drivers.distinct(driver).to_vec()
     };
-    let gaps: Vec<(f64, f64)> = values.windows(2).map(|w| (w[0], w[1])).collect();
+    let mut gaps: Vec<(f64, f64)> = values.windows(2).map(|w| (w[0], w[1])).collect();
+    // An applicator's pulses come in bursts, one per train (an axle
+    // counter fires them a fraction of a second apart): a nozzle's change
+    // is placed between bursts, not among a train's own pulses.
+    if driver == Driver::Time
+        && slot.acts_on == ActsOn::PulseMass
+        && gaps.iter().any(|g| g.1 - g.0 >= BURST_GAP_S)
+    {
+        gaps.retain(|g| g.1 - g.0 >= BURST_GAP_S);
+    }
     if gaps.is_empty() {
         return Ok(None);
     }
     let at = gaps.partition_point(|g| g.1 <= x0).min(gaps.len() - 1);
-    // Time: the gaps from 8 h before to 2 h after. Another driver: a
-    // coarse pass over a fifth of the values on each side, then every gap
-    // next to the best coarse one.
+    // Time: the gaps from 8 h before to 2 h after (the widest 48 of them
+    // first where pulses make more, then every gap next to the best). Another
+    // driver: a coarse pass over a fifth of the values on each side, then
+    // every gap next to the best coarse one.
+    let mut fine_pass = true;
     let mut candidates: Vec<usize> = if driver == Driver::Time {
-        (0..gaps.len())
+        // Never at or before the first time it can act: that is a constant.
+        let first_s = first_affected_s(slot, ev);
+        let mut window: Vec<usize> = (0..gaps.len())
             .filter(|&k| {
                 let mid = 0.5 * (gaps[k].0 + gaps[k].1);
-                mid >= x0 - 8.0 * 3600.0 && mid <= x0 + 2.0 * 3600.0
+                mid >= x0 - 8.0 * 3600.0 && mid <= x0 + 2.0 * 3600.0 && mid > first_s
             })
-            .collect()
+            .collect();
+        if window.len() > COARSE_THRESHOLDS {
+            window.sort_by(|&a, &b| (gaps[b].1 - gaps[b].0).total_cmp(&(gaps[a].1 - gaps[a].0)));
+            window.truncate(COARSE_THRESHOLDS);
+        } else {
+            fine_pass = false;
+        }
+        window
     } else {
         let reach = (gaps.len() / 5).max(8);
         let (lo, hi) = (at.saturating_sub(reach), (at + reach).min(gaps.len() - 1));
@@ -1010,7 +1857,7 @@ fn refine_step(
             .collect::<Result<_>>()?;
         tried.extend(candidates.iter().copied().zip(sse));
         tried.sort_unstable_by_key(|t| t.0);
-        if pass == 1 || driver == Driver::Time {
+        if pass == 1 || !fine_pass {
             break;
         }
         // Fine: every gap between the best coarse one's neighbours.
@@ -1020,8 +1867,8 @@ fn refine_step(
         let from = tried[b.saturating_sub(1)].0;
         let to = tried[(b + 1).min(tried.len() - 1)].0;
         candidates = (from..=to).collect();
-        if candidates.len() > 48 {
-            let stride = candidates.len() / 48 + 1;
+        if candidates.len() > COARSE_THRESHOLDS {
+            let stride = candidates.len() / COARSE_THRESHOLDS + 1;
             candidates = (from..=to).step_by(stride).chain([tried[b].0]).collect();
         }
     }
@@ -1051,12 +1898,34 @@ fn refine_step(
         let s = with_x0(x);
         Ok(ev.evaluate(&s.config(&[s.slots[0].unit(0, f)]))?.sse)
     };
-    let again: Vec<f64> = tried
+    // Only the thresholds that came close: the factor moves the SSE of
+    // thresholds near the best alike, and one far behind does not win
+    // with it (the others keep their SSE, which can only be worse).
+    let mut order: Vec<usize> = (0..tried.len()).collect();
+    order.sort_by(|&a, &b| tried[a].1.total_cmp(&tried[b].1));
+    // (Thresholds tied with the last one kept stay: a run of thresholds
+    // that give the same values is never cut.)
+    if let Some(&last) = order.get(REFIT_THRESHOLDS.saturating_sub(1)) {
+        let cut = tried[last].1;
+        let keep = order
+            .iter()
+            .take_while(|&&t| tried[t].1 - cut <= 1e-12 * cut.abs())
+            .count()
+            .max(REFIT_THRESHOLDS);
+        order.truncate(keep);
+    }
+    let again: Vec<f64> = order
         .par_iter()
-        .map(|&(k, _)| sse_at(0.5 * (gaps[k].0 + gaps[k].1)))
+        .map(|&t| {
+            let k = tried[t].0;
+            sse_at(0.5 * (gaps[k].0 + gaps[k].1))
+        })
         .collect::<Result<_>>()?;
-    for (t, sse) in tried.iter_mut().zip(again) {
-        t.1 = sse;
+    for t in tried.iter_mut() {
+        t.1 = f64::INFINITY;
+    }
+    for (&t, sse) in order.iter().zip(again) {
+        tried[t].1 = sse;
     }
     let Some(best) = (0..tried.len()).min_by(|&a, &b| tried[a].1.total_cmp(&tried[b].1)) else {
         return Ok(None);
@@ -1126,7 +1995,6 @@ fn named_family(c: &Candidate) -> Option<Candidate> {
     }
 }
 
-/// Each candidate fitted alone on top of `current`, in parallel.
 /// Fits each candidate alone on top of `current`, in parallel, telling
 /// `progress` how many are done.
 fn fit_each(
@@ -1333,20 +2201,36 @@ fn verdict(
     rmse_after: f64,
     noise: Option<f64>,
     unexplained: Option<&Unexplained>,
+    calibration: Option<&Calibration>,
 ) -> String {
     let noise_text = noise.map_or_else(
         || "the noise could not be estimated (no pairs of axles)".to_string(),
         |s| format!("the noise estimate is {s:.5}"),
     );
-    let mut text = if found.is_empty() {
+    // The site's constants first: what differs from the laboratory for the
+    // whole recording is not an effect.
+    let (mut text, model, rmse_text) = match calibration {
+        Some(c) if !c.moved.is_empty() => (
+            format!("{} ", c.summary),
+            "With the site's constants calibrated, the model",
+            format!("RMSE {rmse_before:.5} -> {rmse_after:.5}"),
+        ),
+        Some(c) => (
+            format!("{} ", c.summary),
+            "The model",
+            format!("RMSE {rmse_after:.5}"),
+        ),
+        None => (String::new(), "The model", format!("RMSE {rmse_before:.5}")),
+    };
+    text.push_str(&if found.is_empty() {
         match unexplained {
             None => format!(
-                "The model explains the data to the noise level: no candidate effect passes \
-                 (RMSE {rmse_before:.5}; {noise_text}). Nothing was added."
+                "{model} explains the data to the noise level: no candidate effect passes \
+                 ({rmse_text}; {noise_text}). No effect was added."
             ),
             Some(_) => format!(
                 "No candidate effect passes, but the model does not explain the data to the noise \
-                 level (RMSE {rmse_before:.5}; {noise_text}). Nothing was added."
+                 level ({rmse_text}; {noise_text}). No effect was added."
             ),
         }
     } else {
@@ -1355,7 +2239,7 @@ fn verdict(
             "Found {}: RMSE {rmse_before:.5} -> {rmse_after:.5}; {noise_text}.",
             names.join(", ")
         )
-    };
+    });
     if let (Some(_), false) = (unexplained, found.is_empty()) {
         text.push_str(
             " The effects found explain part of the residual; what is left may have a cause \
@@ -1430,7 +2314,7 @@ fn ties(steps: &[Step]) -> String {
 }
 
 /// A parameter value for people: 4 significant digits.
-pub(crate) fn fmt_param(v: f64) -> String {
+pub fn fmt_param(v: f64) -> String {
     if v == 0.0 {
         "0".into()
     } else if v.abs() >= 1e4 || v.abs() < 1e-3 {

@@ -361,6 +361,57 @@ fn mu_vs_distance_plot(data: &Dataset, d: &Discovery) -> Result<Option<(String, 
     Ok(Some((svg, csv)))
 }
 
+/// The site's constants: each against the laboratory's, with its interval
+/// and what determined it (interfaces.md, "Site constants").
+fn site_constants_md(md: &mut String, d: &Discovery, c: &super::Calibration) {
+    let _ = writeln!(md, "## Site constants\n");
+    let _ = writeln!(md, "{}\n", c.summary);
+    let _ = writeln!(
+        md,
+        "A constant that differs for the whole recording is the site's (its rail, its product \
+         batch, its traffic), not an effect: it is calibrated before any effect is looked for, \
+         and again with the effects found. A constant is **determined** when the recording \
+         pins it down alone (standard error of ln p at most {:.0} %, every other constant and \
+         effect free); its 95 % interval is then honest whatever the others are. One the \
+         recording cannot tell from others stands for the **combination** it determines. A \
+         constant whose interval holds its reference value stays there.\n",
+        100.0 * super::calibrate::SD_DETERMINED
+    );
+    let _ = writeln!(
+        md,
+        "| constant | laboratory | value | 95 % interval | determined | what the recording says |\n|---|---|---|---|---|---|"
+    );
+    for k in &d.site_constants {
+        let ci = k.ci95.map_or_else(
+            || "–".to_string(),
+            |[lo, hi]| format!("{} – {}", fmt_param(lo), fmt_param(hi)),
+        );
+        let value = if k.value == k.start.unwrap_or(k.default) {
+            fmt_param(k.value)
+        } else {
+            format!("**{}**", fmt_param(k.value))
+        };
+        let _ = writeln!(
+            md,
+            "| `{}` | {} | {value} | {ci} | {} | {} |",
+            k.key,
+            fmt_param(k.default),
+            if k.determined { "yes" } else { "no" },
+            k.description
+        );
+    }
+    let _ = writeln!(
+        md,
+        "\nRMSE with the starting constants {:.5}, with the calibrated ones {:.5} (step 0, \
+         before any effect); {} engine runs.\n",
+        d.rmse_before,
+        d.calibration_start
+            .as_ref()
+            .map_or(c.rmse_after, |s| s.rmse_after),
+        c.engine_runs
+    );
+}
+
 fn effect_text(e: &EffectParams) -> String {
     format!("`{}`", e.text())
 }
@@ -430,6 +481,9 @@ fn markdown(data: &Dataset, d: &Discovery, residual_file: Option<&str>, distance
         absolute(&data.path).display()
     );
 
+    if let Some(c) = &d.calibration {
+        site_constants_md(&mut md, d, c);
+    }
     let _ = writeln!(md, "## RMSE per step\n");
     let _ = writeln!(md, "![RMSE per step](rmse_by_step.svg)\n");
     let _ = writeln!(md, "| step | model | RMSE |\n|---|---|---|");

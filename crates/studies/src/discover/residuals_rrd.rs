@@ -34,6 +34,7 @@ use tortwin_outputs::rerun_out::{blueprint_store, send_blueprint, BlueprintWrite
 
 const BEFORE: [u8; 3] = [255, 127, 14];
 const AFTER: [u8; 3] = [31, 119, 180];
+const CALIBRATED: [u8; 3] = [44, 160, 44];
 /// Width of a residual-against-covariate plot, and the height of the
 /// largest residual above (and below) its zero line, in scene units.
 const PLOT_WIDTH: f64 = 100.0;
@@ -115,6 +116,19 @@ fn finding(d: &Discovery) -> String {
         "RMSE {:.4} before, {:.4} after; the measurements' noise is about {noise}.\n",
         d.rmse_before, d.rmse_after
     );
+    if let Some(c) = &d.calibration {
+        let _ = writeln!(md, "## Site constants\n\n{}\n", c.summary);
+        for k in d.site_constants.iter().filter(|k| c.moved.contains(&k.key)) {
+            let _ = writeln!(
+                md,
+                "- `{}` = {}: {}",
+                k.key,
+                super::fmt_param(k.value),
+                k.description
+            );
+        }
+        let _ = writeln!(md);
+    }
     if d.effects_found.is_empty() {
         let _ = writeln!(
             md,
@@ -161,12 +175,24 @@ fn log_series(
     for ((site, rail, quantity), indices) in rows {
         let (site, rail) = (data.site_name(site), data.rail_name(rail));
         let path = entity(&["residuals", site, rail, quantity]);
+        // With the site's constants calibrated: before, after the
+        // calibration, after (the effects found added).
+        let calibrated = d.calibration_start.is_some();
+        let (names, colors): (Vec<&str>, Vec<Color>) = if calibrated {
+            (
+                vec!["before", "constants calibrated", "after"],
+                vec![color(BEFORE), color(CALIBRATED), color(AFTER)],
+            )
+        } else {
+            (vec!["before", "after"], vec![color(BEFORE), color(AFTER)])
+        };
+        let per_row = names.len();
         rec.log_static(
             path.clone(),
             &rerun::SeriesPoints::new()
-                .with_names(["before", "after"])
-                .with_colors([color(BEFORE), color(AFTER)])
-                .with_marker_sizes([2.0, 2.0]),
+                .with_names(names)
+                .with_colors(colors)
+                .with_marker_sizes(vec![2.0; per_row]),
         )?;
         let times: Vec<i64> = indices
             .iter()
@@ -174,13 +200,18 @@ fn log_series(
             .collect();
         let values: Vec<f64> = indices
             .iter()
-            .flat_map(|&i| [d.residual_before[i], d.residual_after[i]])
+            .flat_map(|&i| {
+                let middle = calibrated.then(|| d.residual_calibrated[i]);
+                std::iter::once(d.residual_before[i])
+                    .chain(middle)
+                    .chain(std::iter::once(d.residual_after[i]))
+            })
             .collect();
         let n = times.len();
         rec.send_columns(
             path.clone(),
             [TimeColumn::new_timestamp_nanos_since_epoch("time", times)],
-            rerun::Scalars::new(values).columns(std::iter::repeat_n(2, n))?,
+            rerun::Scalars::new(values).columns(std::iter::repeat_n(per_row, n))?,
         )?;
         entities.push((
             path,

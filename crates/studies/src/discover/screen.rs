@@ -284,6 +284,7 @@ pub struct Screening {
 
 /// The generic candidates worth fitting at this step, with where each fit
 /// starts, and what the screening saw.
+#[allow(clippy::too_many_arguments)]
 pub(super) fn propose(
     ev: &Evaluator<'_>,
     drivers: &Drivers,
@@ -291,6 +292,7 @@ pub(super) fn propose(
     simulated: &[f64],
     noise: Option<f64>,
     min_reduction: f64,
+    forced: &[Driver],
     cache: &mut ResponseCache,
 ) -> Result<(Vec<(Candidate, Start)>, Screening)> {
     let data = ev.data;
@@ -587,11 +589,19 @@ pub(super) fn propose(
         }
     }
     top_drivers.truncate(TOP_DIRECTIONS);
+    // The drivers the residual's diagnosis names: every acts_on with them,
+    // whatever the first-order screening says.
+    for &d in forced {
+        if !top_drivers.contains(&d) && drivers.varies(d) {
+            top_drivers.push(d);
+        }
+    }
     let mut taken: Vec<&Screened> = Vec::new();
-    for s in screened
-        .iter()
-        .filter(|s| s.x0.is_none() && top_drivers.contains(&s.driver) && worth(s.reduction))
-    {
+    for s in screened.iter().filter(|s| {
+        s.x0.is_none()
+            && top_drivers.contains(&s.driver)
+            && (worth(s.reduction) || forced.contains(&s.driver))
+    }) {
         if taken
             .iter()
             .any(|t| t.acts_on == s.acts_on && t.driver == s.driver)

@@ -33,12 +33,116 @@ pub struct DiscoverArgs {
     /// unexplained residual.
     #[cfg_attr(feature = "cli", arg(long, default_value_t = 1.1))]
     pub unexplained_ratio: f64,
+    /// Search effects against the starting model's constants as they are,
+    /// without calibrating the site's constants first (a model already
+    /// calibrated for this site).
+    #[cfg_attr(feature = "cli", arg(long))]
+    pub no_calibrate: bool,
     /// Worker threads for the fits (default: one per core).
     #[cfg_attr(feature = "cli", arg(long))]
     pub threads: Option<usize>,
     /// Print nothing but errors.
     #[cfg_attr(feature = "cli", arg(long, short))]
     pub quiet: bool,
+}
+
+/// `tortwin calibrate`: the site's constants alone (step 0 of discover,
+/// no effect searched), docs/spec/interfaces.md "Site constants".
+#[derive(Debug, Clone)]
+#[cfg_attr(feature = "cli", derive(clap::Args))]
+pub struct CalibrateArgs {
+    /// The recording (MCAP) with friction measurements.
+    pub recording: PathBuf,
+    /// The starting model, overlaid on the built-in defaults (TOML): its
+    /// constants are where the calibration starts and what an interval is
+    /// compared with; its effects stay on as they are.
+    #[cfg_attr(feature = "cli", arg(long))]
+    pub config: Option<super::ConfigSource>,
+    /// The report directory: report.json (`site_constants`), report.md,
+    /// model.toml (the calibrated constants) and residuals.rrd.
+    #[cfg_attr(feature = "cli", arg(long))]
+    pub report: PathBuf,
+    /// Worker threads (default: one per core).
+    #[cfg_attr(feature = "cli", arg(long))]
+    pub threads: Option<usize>,
+    /// Print nothing but errors.
+    #[cfg_attr(feature = "cli", arg(long, short))]
+    pub quiet: bool,
+}
+
+impl CalibrateArgs {
+    /// The same study as discover with no effect searched.
+    fn as_discover(&self) -> DiscoverArgs {
+        DiscoverArgs {
+            recording: self.recording.clone(),
+            config: self.config.clone(),
+            report: self.report.clone(),
+            bic_threshold: -10.0,
+            min_excess_share: 0.25,
+            unexplained_ratio: 1.1,
+            no_calibrate: false,
+            threads: self.threads,
+            quiet: self.quiet,
+        }
+    }
+}
+
+/// Calibrates the site's constants and writes the report.
+pub fn calibrate(args: &CalibrateArgs) -> Result<Discovery> {
+    calibrate_with(args, &Silent)
+}
+
+/// [`calibrate`], telling `progress` the stage.
+pub fn calibrate_with(args: &CalibrateArgs, progress: &dyn Progress) -> Result<Discovery> {
+    calibrate_with_data(args, progress).map(|(d, _)| d)
+}
+
+/// [`calibrate_with`], also returning the measurements read.
+pub fn calibrate_with_data(
+    args: &CalibrateArgs,
+    progress: &dyn Progress,
+) -> Result<(Discovery, Dataset)> {
+    let options = Options {
+        max_steps: 0,
+        ..Options::default()
+    };
+    study(&args.as_discover(), options, progress)
+}
+
+/// The few lines `tortwin calibrate` prints.
+pub fn render_calibration(args: &CalibrateArgs, d: &Discovery, elapsed_s: f64) -> String {
+    let mut out = String::new();
+    let _ = writeln!(out, "calibrate {}", args.recording.display());
+    let _ = writeln!(
+        out,
+        "  {} measurements over {} days; {} engine runs in {elapsed_s:.1} s",
+        d.measurements, d.days, d.engine_runs
+    );
+    for c in &d.site_constants {
+        let ci = c.ci95.map_or_else(
+            || "-".to_string(),
+            |[lo, hi]| format!("{}–{}", discover::fmt_param(lo), discover::fmt_param(hi)),
+        );
+        let _ = writeln!(
+            out,
+            "  {:<17} {:>10}  {:>21}  {}",
+            c.key,
+            discover::fmt_param(c.value),
+            ci,
+            if c.determined {
+                "determined"
+            } else {
+                &c.status
+            }
+        );
+    }
+    let _ = writeln!(out, "  {}", d.verdict);
+    let _ = writeln!(
+        out,
+        "report: {} (report.md, report.json, model.toml, residuals.rrd)",
+        args.report.display()
+    );
+    out
 }
 
 /// Runs the workflow the arguments ask for and writes the report.
@@ -82,13 +186,31 @@ pub fn run_with_data(args: &DiscoverArgs, progress: &dyn Progress) -> Result<(Di
         ))
         .into());
     }
-    let start = super::load_config(args.config.as_ref())?;
     let options = Options {
         bic_threshold: args.bic_threshold,
         min_excess_share: args.min_excess_share,
         unexplained_ratio: args.unexplained_ratio,
+        calibrate: !args.no_calibrate,
         ..Options::default()
     };
+    study(args, options, progress)
+}
+
+/// Reads the recording, runs the workflow with `options` and writes the
+/// report.
+fn study(
+    args: &DiscoverArgs,
+    options: Options,
+    progress: &dyn Progress,
+) -> Result<(Discovery, Dataset)> {
+    if args.report.is_file() {
+        return Err(UsageError(format!(
+            "--report {}: is a file; it must be a directory (created if missing)",
+            args.report.display()
+        ))
+        .into());
+    }
+    let start = super::load_config(args.config.as_ref())?;
     progress.stage(&format!("reading {}", args.recording.display()));
     let data = Dataset::read(&args.recording)?;
 
