@@ -90,6 +90,7 @@ fn measurement<'a>(
         axle_index,
         measured,
         simulated,
+        readout: None,
     }
 }
 

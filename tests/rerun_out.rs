@@ -192,6 +192,7 @@ fn feed(sink: &mut dyn Sink, trains: u64) -> Result<Logged, tortwin_engine::sink
                 axle_index: (quantity == Quantity::Mu).then_some(3),
                 measured: 0.25 + 0.01 * train as f64,
                 simulated: 0.24 + 0.012 * train as f64,
+                readout: None,
             };
             sink.measurement(&m)?;
             logged
@@ -395,6 +396,7 @@ fn a_long_run_comes_back_whole() {
             axle_index: Some(0),
             measured: 0.3 + 1e-6 * i as f64,
             simulated: 0.31 - 1e-6 * i as f64,
+            readout: None,
         };
         sink.measurement(&m).expect("a measurement");
         logged

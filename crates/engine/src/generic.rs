@@ -249,6 +249,30 @@ impl GenericSet {
     }
 }
 
+/// The earliest time_s at which any of `terms` can be other than 1 (or
+/// add an offset): a time step's `t0` (never, for a step of 1), and for
+/// every other term the beginning of time.
+pub fn acts_from_s(terms: &[GenericTerm], origin_ns: i64) -> f64 {
+    terms
+        .iter()
+        .map(|term| match term.effect {
+            TermEffect::Factor {
+                driver: Driver::Time,
+                form: Form::Step { x0, f },
+            } => {
+                if f == 1.0 {
+                    f64::INFINITY
+                } else {
+                    // As `GenericSet::compile` places it.
+                    let t0_ns = (x0 * 1e9).round() as i64;
+                    t0_ns.wrapping_sub(origin_ns) as f64 * 1e-9
+                }
+            }
+            _ => f64::NEG_INFINITY,
+        })
+        .fold(f64::INFINITY, f64::min)
+}
+
 /// Checks the generic terms of `terms` against `section`; the error names
 /// the term (its index among the `[[effects.generic]]` tables) and the key.
 pub fn check_terms_against(

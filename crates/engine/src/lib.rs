@@ -18,6 +18,7 @@
 #![warn(unreachable_pub)]
 
 pub mod generic;
+pub mod readout;
 mod roll;
 pub mod sink;
 mod sink_thread;
@@ -42,10 +43,11 @@ use tortwin_model::product;
 use tortwin_recording::error::InputError;
 use tortwin_recording::{
     Axle, AxleRef, BogiePosition, Creepage, Direction, Event, EventKind, Measured, Measurement,
-    Passage, Quantity, Section,
+    Passage, Quantity, Section, Weather,
 };
 
 use generic::{GenericSet, WheelDrivers};
+pub use readout::{Readout, ReadoutModel};
 pub use state::{EngineState, SavedTrack, StateError};
 use weather::{WeatherState, WeatherTimeline};
 
@@ -210,6 +212,8 @@ struct TrainRecord {
     /// muD and muC of eq. (4) at those contacts, where friction terms make
     /// them differ from the configuration's (else empty).
     site_levels: Vec<(f64, f64)>,
+    /// The time_s and weather of those contacts (for read-outs).
+    site_at: Vec<(f64, Weather)>,
 }
 
 /// An event inside a train's occupation, waiting for the train to be rolled.
@@ -217,8 +221,9 @@ struct TrainRecord {
 struct Buffered {
     event: Event,
     time_s: f64,
-    /// The simulated value of a tribometer reading, filled while rolling.
-    reading: Option<f64>,
+    /// The simulated value of a tribometer reading and the rail mass it
+    /// read, filled while rolling.
+    reading: Option<(f64, f64)>,
 }
 
 /// A pulse or tribometer reading at one point of one track, inside a window.
@@ -261,7 +266,10 @@ pub(crate) struct Totals {
     pub(crate) residual_n: [u64; 3],
 }
 
-/// The replay engine of one section.
+/// The replay engine of one section. A clone is a checkpoint: pushing the
+/// same events into it continues the replay exactly
+/// ([`Engine::resume_with`]).
+#[derive(Clone)]
 pub struct Engine {
     cfg: ModelConfig,
     opts: EngineOptions,
@@ -290,6 +298,9 @@ pub struct Engine {
     generic: Arc<GenericSet>,
     weather: WeatherState,
     occupied_until_s: f64,
+    /// The time_s of the last event pushed: nothing has been computed at a
+    /// later time.
+    last_event_s: f64,
     origin_ns: i64,
     on_rail_start_kg: f64,
     totals: Totals,
@@ -438,6 +449,7 @@ impl Engine {
             generic,
             weather: WeatherState::default(),
             occupied_until_s: f64::NEG_INFINITY,
+            last_event_s: f64::NEG_INFINITY,
             origin_ns,
             on_rail_start_kg: 0.0,
             totals: Totals::default(),
@@ -501,6 +513,7 @@ impl Engine {
             self.flush_deferred(sink)?;
         }
         let time_s = self.time_s(event.log_time_ns);
+        self.last_event_s = self.last_event_s.max(time_s);
         if let Some(train) = &self.pending {
             if matches!(event.kind, EventKind::Passage(_)) || time_s > train.end_s {
                 self.roll_pending(sink)?;
@@ -611,19 +624,28 @@ impl Engine {
                 self.emit_pulse(event.log_time_ns, pulse, sink)
             }
             EventKind::Measurement(m) => {
-                let simulated = match &m.of {
+                let (simulated, readout) = match &m.of {
                     Measured::RailMu => {
                         let track = self.reading_track[m.rail];
                         let point = self.site_points[m.site];
                         let weather = self.weather;
                         let (ctx, states, _) = self.split();
-                        ctx.read_rail(track, &states[track], point, time_s, &weather)
+                        let (value, mass_kg) =
+                            ctx.read_rail(track, &states[track], point, time_s, &weather);
+                        let readout = sink
+                            .wants_readouts()
+                            .then(|| reading_readout(mass_kg, time_s, &weather.current));
+                        (value, readout)
                     }
                     Measured::Mu(axle) | Measured::Adhesion(axle) => {
-                        self.contact_value(event, m, axle)?
+                        let record = self.record_of(event, axle)?;
+                        let readout = sink
+                            .wants_readouts()
+                            .then(|| self.readout_from(record, m, axle));
+                        (self.value_from(record, m, axle), readout)
                     }
                 };
-                self.emit_measurement(event, m, simulated, sink)
+                self.emit_measurement(event, m, simulated, readout, sink)
             }
             EventKind::Passage(_) | EventKind::Weather(_) => Ok(()),
         }
@@ -712,6 +734,7 @@ impl Engine {
             wheels: Vec::new(),
             site_mass_kg: Vec::new(),
             site_levels: Vec::new(),
+            site_at: Vec::new(),
         });
         drop(passage);
         record.log_time_ns = log_time_ns;
@@ -748,6 +771,10 @@ impl Engine {
             record.passage.axles.len() * rails * self.section.sites.len(),
             f64::NAN,
         );
+        record.site_at.clear();
+        record
+            .site_at
+            .resize(record.site_mass_kg.len(), (f64::NAN, Weather::default()));
         record.site_levels.clear();
         if self.generic.any_friction() {
             record
@@ -867,21 +894,29 @@ impl Engine {
             match &buffered.event.kind {
                 EventKind::Pulse(p) => self.emit_pulse(buffered.event.log_time_ns, p, sink)?,
                 EventKind::Measurement(m) => {
-                    let simulated = match (&m.of, buffered.reading) {
-                        (Measured::RailMu, Some(v)) => v,
+                    let wants = sink.wants_readouts();
+                    let (simulated, readout) = match (&m.of, buffered.reading) {
+                        (Measured::RailMu, Some((value, mass_kg))) => {
+                            let readout = wants.then(|| {
+                                let weather = self.timeline.at(buffered.time_s).current;
+                                reading_readout(mass_kg, buffered.time_s, &weather)
+                            });
+                            (value, readout)
+                        }
                         (Measured::RailMu, None) => {
                             unreachable!("every reading in a window is run while rolling or after")
                         }
-                        (Measured::Mu(axle) | Measured::Adhesion(axle), _)
-                            if axle.train_seq == record.passage.train_seq =>
-                        {
-                            self.value_from(&record, m, axle)
-                        }
                         (Measured::Mu(axle) | Measured::Adhesion(axle), _) => {
-                            self.contact_value(&buffered.event, m, axle)?
+                            let from = if axle.train_seq == record.passage.train_seq {
+                                &record
+                            } else {
+                                self.record_of(&buffered.event, axle)?
+                            };
+                            let readout = wants.then(|| self.readout_from(from, m, axle));
+                            (self.value_from(from, m, axle), readout)
                         }
                     };
-                    self.emit_measurement(&buffered.event, m, simulated, sink)?;
+                    self.emit_measurement(&buffered.event, m, simulated, readout, sink)?;
                 }
                 EventKind::Weather(_) => self.totals.weather_messages += 1,
                 EventKind::Passage(_) => unreachable!("a passage ends the window"),
@@ -894,21 +929,16 @@ impl Engine {
         Ok(())
     }
 
-    /// The simulated `mu` or `adhesion` of a contact of a train kept in
+    /// The record of the measured train among those kept in
     /// [`Engine::recent`].
-    fn contact_value(
-        &self,
-        event: &Event,
-        m: &Measurement,
-        axle: &AxleRef,
-    ) -> Result<f64, EngineError> {
+    fn record_of(&self, event: &Event, axle: &AxleRef) -> Result<&TrainRecord, EngineError> {
         match self
             .recent
             .iter()
             .rev()
             .find(|r| r.passage.train_seq == axle.train_seq)
         {
-            Some(record) => Ok(self.value_from(record, m, axle)),
+            Some(record) => Ok(record),
             None => Err(EngineError::MeasurementTooLate {
                 train_id: axle.train_id.clone(),
                 log_time_ns: event.log_time_ns,
@@ -934,6 +964,23 @@ impl Engine {
                 self.adhesion(wheel, record.passage.speed_mps, mu)
             }
             _ => mu,
+        }
+    }
+
+    /// What [`Engine::value_from`] reads, for a read-out.
+    fn readout_from(&self, record: &TrainRecord, m: &Measurement, axle: &AxleRef) -> Readout {
+        let rails = self.section.rails.len();
+        let sites = self.section.sites.len();
+        let k = (axle.axle_index * rails + m.rail) * sites + m.site;
+        let wheel = &record.wheels[axle.axle_index * rails + m.rail];
+        let (time_s, weather) = record.site_at[k];
+        Readout {
+            mass_kg: record.site_mass_kg[k],
+            time_s,
+            weather,
+            wheel: Some(wheel.drivers),
+            contact: matches!(m.of, Measured::Adhesion(_))
+                .then(|| self.adhesion_contact(wheel, record.passage.speed_mps)),
         }
     }
 
@@ -989,6 +1036,7 @@ impl Engine {
         event: &Event,
         m: &Measurement,
         simulated: f64,
+        readout: Option<Readout>,
         sink: &mut dyn Sink,
     ) -> Result<(), EngineError> {
         let simulated = self
@@ -1014,8 +1062,39 @@ impl Engine {
             axle_index: m.axle().map(|a| a.axle_index),
             measured: m.value,
             simulated,
+            readout,
         })?;
         Ok(())
+    }
+
+    /// This engine as a checkpoint for `cfg`: a copy that continues as a
+    /// replay of `cfg` from the start would, when `cfg` is this engine's
+    /// configuration with generic terms appended that have not acted yet
+    /// (time steps whose `t0` lies after every event pushed so far: before
+    /// it their factor is 1, exactly); `None` otherwise. Every contact,
+    /// pulse, reading and time effect so far happened at or before the last
+    /// event pushed (a train is rolled when an event after its occupation
+    /// arrives), so the state is the one a replay of `cfg` has here, bit for
+    /// bit.
+    pub fn resume_with(&self, cfg: &ModelConfig) -> Option<Engine> {
+        let own = &self.cfg.effects.generic;
+        let extra = cfg.effects.generic.get(own.len()..)?;
+        if extra.is_empty() || cfg.effects.generic[..own.len()] != own[..] {
+            return None;
+        }
+        let mut same = cfg.clone();
+        same.effects.generic.truncate(own.len());
+        if same != self.cfg || generic::acts_from_s(extra, self.origin_ns) <= self.last_event_s {
+            return None;
+        }
+        let mut engine = self.clone();
+        engine.generic = Arc::new(GenericSet::compile(
+            &cfg.effects.generic,
+            &engine.section,
+            engine.origin_ns,
+        ));
+        engine.cfg = cfg.clone();
+        Some(engine)
     }
 
     /// The state the next recording starts from, taken after
@@ -1037,6 +1116,17 @@ impl Engine {
 }
 
 /// What generic terms driven by the wheel see of axle `axle` on `rail`.
+/// What a tribometer reading read, for a read-out.
+fn reading_readout(mass_kg: f64, time_s: f64, weather: &Weather) -> Readout {
+    Readout {
+        mass_kg,
+        time_s,
+        weather: *weather,
+        wheel: None,
+        contact: None,
+    }
+}
+
 fn wheel_drivers(speed_mps: f64, axle: &Axle, rail: usize) -> WheelDrivers {
     let q_n = axle.wheel_load_n.get(rail).copied().unwrap_or(0.0);
     let c = axle.creepage.get(rail).copied().unwrap_or(Creepage {

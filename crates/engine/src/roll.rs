@@ -341,7 +341,7 @@ fn wheel_path_m(d_m: f64, d_entry_m: f64, offset_m: f64) -> f64 {
 }
 
 /// Reused buffers for the field snapshots.
-#[derive(Debug, Default)]
+#[derive(Debug, Clone, Default)]
 pub(crate) struct SnapshotBuffers {
     mu: Vec<f64>,
     /// mu of every contact of one wheel, for [`WheelContacts::mu`].
@@ -378,8 +378,9 @@ pub(crate) struct TrackWork {
     /// The roll's contributions to the run totals, to be added in the
     /// serial order (floating-point sums depend on their order).
     ledger: Vec<Addend>,
-    /// Tribometer readings taken: (window index, simulated value).
-    readings: Vec<(usize, f64)>,
+    /// Tribometer readings taken: (window index, (simulated value, rail
+    /// mass read)).
+    readings: Vec<(usize, (f64, f64))>,
     /// Contacts at measurement sites.
     sites: Vec<SiteValue>,
     /// When a sink wants every wheel's contacts: the step-2 mass of every
@@ -411,6 +412,9 @@ struct SiteValue {
     index: usize,
     mass_kg: f64,
     levels: Option<(f64, f64)>,
+    /// The contact's time_s and weather (what a read-out needs).
+    time_s: f64,
+    weather: tortwin_recording::Weather,
 }
 
 /// One addition to the run totals, with its place in the serial order:
@@ -721,12 +725,13 @@ impl Engine {
     pub(crate) fn settle(&mut self, record: &mut TrainRecord) {
         let mut ledger = std::mem::take(&mut self.ledger);
         for work in &mut self.work {
-            for &(b, value) in &work.readings {
-                self.window[b].reading = Some(value);
+            for &(b, reading) in &work.readings {
+                self.window[b].reading = Some(reading);
             }
             work.readings.clear();
             for site in &work.sites {
                 record.site_mass_kg[site.index] = site.mass_kg;
+                record.site_at[site.index] = (site.time_s, site.weather);
                 if let Some(levels) = site.levels {
                     record.site_levels[site.index] = levels;
                 }
@@ -1056,6 +1061,7 @@ impl RollContext<'_> {
             return m_kg;
         }
         let rail = self.track_info[track].rail;
+        let weather = self.timeline.at(t).current;
         let levels = (!record.site_levels.is_empty()).then(|| {
             let rails = self.section.rails.len();
             self.generic.friction_levels(
@@ -1063,7 +1069,7 @@ impl RollContext<'_> {
                 self.product.mu_c,
                 rail,
                 t,
-                &self.timeline.at(t).current,
+                &weather,
                 Some(&record.wheels[lane.axle * rails + rail].drivers),
             )
         });
@@ -1073,6 +1079,8 @@ impl RollContext<'_> {
                 index: (lane.axle * rails + rail) * sites + s,
                 mass_kg: m_kg,
                 levels,
+                time_s: t,
+                weather,
             });
         }
         m_kg
@@ -1211,6 +1219,7 @@ impl RollContext<'_> {
 
     /// A tribometer reading (model.md): eq. (4) with the rail mass alone, the
     /// time effects since the last touch applied to the value read only.
+    /// Returns the value and the mass it read.
     pub(crate) fn read_rail(
         &self,
         track: usize,
@@ -1218,7 +1227,7 @@ impl RollContext<'_> {
         point: usize,
         time_s: f64,
         weather: &WeatherState,
-    ) -> f64 {
+    ) -> (f64, f64) {
         let mut m = state.rail_mass_kg[point];
         let last = state.last_touch_s[point];
         if self.time_effects.any() && !last.is_nan() {
@@ -1234,9 +1243,9 @@ impl RollContext<'_> {
                 &weather.current,
                 None,
             );
-            return super::friction_at(self.product, levels, m);
+            return (super::friction_at(self.product, levels, m), m);
         }
-        product::friction(self.product, m)
+        (product::friction(self.product, m), m)
     }
 
     /// Runs point event `k` of `track` (a pulse or a reading of the window);
@@ -1258,8 +1267,8 @@ impl RollContext<'_> {
                 track, state, ev.point, ev.time_s, applicator, mass_kg, weather,
             )),
             PointEventKind::Reading => {
-                let value = self.read_rail(track, state, ev.point, ev.time_s, weather);
-                work.readings.push((ev.buffered, value));
+                let reading = self.read_rail(track, state, ev.point, ev.time_s, weather);
+                work.readings.push((ev.buffered, reading));
                 Ran::Reading
             }
         };

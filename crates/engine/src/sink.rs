@@ -77,6 +77,9 @@ pub struct MeasurementOutput<'a> {
     pub axle_index: Option<usize>,
     pub measured: f64,
     pub simulated: f64,
+    /// What the value was read from, when the sink asked
+    /// ([`Sink::wants_readouts`]).
+    pub readout: Option<crate::Readout>,
 }
 
 /// Whether a field snapshot closes a train or a single wheel pass.
@@ -199,6 +202,11 @@ pub trait Sink {
     fn measurement(&mut self, _m: &MeasurementOutput<'_>) -> SinkResult {
         Ok(())
     }
+    /// Whether [`MeasurementOutput::readout`] is wanted (it costs a Polach
+    /// contact per adhesion measurement).
+    fn wants_readouts(&self) -> bool {
+        false
+    }
     fn field(&mut self, _f: &FieldSnapshot<'_>) -> SinkResult {
         Ok(())
     }
@@ -229,6 +237,9 @@ impl Sink for Fanout<'_> {
     }
     fn measurement(&mut self, m: &MeasurementOutput<'_>) -> SinkResult {
         self.sinks.iter_mut().try_for_each(|s| s.measurement(m))
+    }
+    fn wants_readouts(&self) -> bool {
+        self.sinks.iter().any(|s| s.wants_readouts())
     }
     fn field(&mut self, f: &FieldSnapshot<'_>) -> SinkResult {
         self.sinks.iter_mut().try_for_each(|s| s.field(f))

@@ -356,6 +356,7 @@ fn run<S: Sink>(
                         axle_index,
                         measured,
                         simulated,
+                        readout: None,
                     })?;
                 }
                 Call::Field {
@@ -554,6 +555,7 @@ mod tests {
                     axle_index: Some(j),
                     measured: 0.3,
                     simulated: 0.3 + x,
+                    readout: None,
                 })?;
             }
             sink.wheel_contacts(&WheelContacts {

@@ -10,6 +10,8 @@
 //! - [`config`]: the model configuration (the paper's Table 2, the contact
 //!   parameters, the effects switched on), overlaid from TOML.
 //! - [`error`]: configuration and usage errors.
+//! - [`role`]: which parameters move the product masses and which only
+//!   read them (what a fit can evaluate without a replay).
 
 #![warn(unreachable_pub)]
 
@@ -21,5 +23,6 @@ pub mod exp;
 pub mod generic;
 pub mod product;
 mod quantity;
+pub mod role;
 
 pub use quantity::Quantity;

@@ -61,7 +61,7 @@ use nalgebra::{DMatrix, DVector};
 use rayon::prelude::*;
 use serde::Serialize;
 
-use super::fit::{Candidate, Evaluator};
+use super::fit::{Candidate, Evaluator, Stage};
 use super::fmt_param;
 use crate::Result;
 use tortwin_model::config::ModelConfig;
@@ -773,6 +773,7 @@ pub(super) fn calibrate(
     effects: &[Candidate],
     noise: Option<f64>,
 ) -> Result<Calibration> {
+    let _stage = ev.cost.enter(Stage::Calibration);
     let t0 = Instant::now();
     let runs0 = ev.runs();
     let mut problem = Problem::new(ev, base, reference, effects);
@@ -997,6 +998,7 @@ pub(super) fn refit(
     keys: &[ProductKey],
     noise: Option<f64>,
 ) -> Result<ModelConfig> {
+    let _stage = ev.cost.enter(Stage::Calibration);
     let mut problem = Problem::new(ev, base, reference, &[]);
     let free: Vec<usize> = (0..problem.knobs.len())
         .filter(|&k| matches!(&problem.knobs[k], Knob::Constant(key) if keys.contains(key)))

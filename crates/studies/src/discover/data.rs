@@ -15,7 +15,7 @@ use std::path::Path;
 use crate::{Error, Result};
 use tortwin_engine::sink::{MeasurementOutput, Sink};
 use tortwin_engine::weather::WeatherState;
-use tortwin_engine::{Engine, EngineOptions};
+use tortwin_engine::{Engine, EngineOptions, Readout, ReadoutModel};
 use tortwin_model::config::ModelConfig;
 use tortwin_recording::{
     BogiePosition, Direction, Event, EventKind, Passage, Quantity, Recording, Section,
@@ -186,6 +186,100 @@ impl Dataset {
     /// The simulated value of every row with `cfg`: one replay of the
     /// in-memory recording through the engine.
     pub fn simulate(&self, cfg: &ModelConfig) -> Result<Vec<f64>> {
+        Ok(self.replay(cfg, false, 0)?.0)
+    }
+
+    /// [`Dataset::simulate`], and what every row's value was read from
+    /// (for [`Dataset::read_out`] at other read-out parameters).
+    pub fn simulate_with_readouts(&self, cfg: &ModelConfig) -> Result<(Vec<f64>, Vec<Readout>)> {
+        let (simulated, readouts, _) = self.replay(cfg, true, 0)?;
+        Ok((simulated, complete(readouts)))
+    }
+
+    /// The simulated value of every row with `cfg`, read from `readouts`
+    /// (of a replay of a configuration with `cfg`'s state part,
+    /// [`ModelConfig::state_part`]) without a replay: the replay's values
+    /// bit for bit.
+    pub fn read_out(&self, cfg: &ModelConfig, readouts: &[Readout]) -> Vec<f64> {
+        let model = ReadoutModel::new(&self.section, cfg, self.origin_ns);
+        self.rows
+            .iter()
+            .zip(readouts)
+            .map(|(row, r)| model.value(r, row.site, row.rail, row.quantity))
+            .collect()
+    }
+
+    /// [`Dataset::simulate_with_readouts`], with the engine kept at
+    /// `checkpoints` points evenly spread over the events, from which a
+    /// configuration that differs only in later time steps continues
+    /// ([`Dataset::resume`]).
+    pub fn simulate_with_checkpoints(
+        &self,
+        cfg: &ModelConfig,
+        checkpoints: usize,
+    ) -> Result<(Vec<f64>, Vec<Readout>, Checkpoints)> {
+        let (simulated, readouts, cps) = self.replay(cfg, true, checkpoints)?;
+        Ok((simulated, complete(readouts), cps))
+    }
+
+    /// The read-outs of every row with `cfg`, continued from the latest of
+    /// `from`'s checkpoints that `cfg` can take over
+    /// ([`Engine::resume_with`]: `cfg` is the checkpointed configuration
+    /// with time steps appended that act only after it), the rows given
+    /// before it taken from `base` (that replay's read-outs). `None` when no
+    /// checkpoint fits. The same values as a replay of `cfg` from the start.
+    pub fn resume(
+        &self,
+        cfg: &ModelConfig,
+        from: &Checkpoints,
+        base: &[Readout],
+    ) -> Option<Result<Vec<Readout>>> {
+        let (next, mut engine) = from
+            .at
+            .iter()
+            .rev()
+            .find_map(|(next, e)| e.resume_with(cfg).map(|e| (*next, e)))?;
+        let readouts = from
+            .given_during
+            .iter()
+            .zip(base)
+            .map(|(&k, r)| (k < next).then_some(*r))
+            .collect();
+        let mut sink = Collect {
+            row_of_index: &self.row_of_index,
+            simulated: vec![0.0; self.rows.len()],
+            readouts,
+            given_during: Vec::new(),
+            pushed: next,
+        };
+        let mut run = || -> Result<Vec<Readout>> {
+            for event in &self.events[next..] {
+                engine
+                    .push(event.clone(), &mut sink)
+                    .map_err(|source| Error::Replay {
+                        what: self.path.display().to_string(),
+                        source,
+                    })?;
+            }
+            engine.finish(&mut sink, self.unknown_topic_messages)?;
+            if let Some(k) = sink.readouts.iter().position(Option::is_none) {
+                return Err(Error::NotSimulated {
+                    file: self.path.clone(),
+                    log_time_ns: self.rows[k].log_time_ns,
+                    index_in_file: Some(self.rows[k].index_in_file),
+                });
+            }
+            Ok(complete(std::mem::take(&mut sink.readouts)))
+        };
+        Some(run())
+    }
+
+    fn replay(
+        &self,
+        cfg: &ModelConfig,
+        readouts: bool,
+        checkpoints: usize,
+    ) -> Result<(Vec<f64>, Vec<Option<Readout>>, Checkpoints)> {
         let mut engine = Engine::new(
             self.section.clone(),
             cfg.clone(),
@@ -195,8 +289,25 @@ impl Dataset {
         let mut sink = Collect {
             row_of_index: &self.row_of_index,
             simulated: vec![f64::NAN; self.rows.len()],
+            readouts: if readouts {
+                vec![None; self.rows.len()]
+            } else {
+                Vec::new()
+            },
+            given_during: if checkpoints > 0 {
+                vec![usize::MAX; self.rows.len()]
+            } else {
+                Vec::new()
+            },
+            pushed: 0,
         };
-        for event in &self.events {
+        let every = (self.events.len() / (checkpoints + 1)).max(1);
+        let mut at = Vec::with_capacity(checkpoints);
+        for (k, event) in self.events.iter().enumerate() {
+            if at.len() < checkpoints && k > 0 && k % every == 0 {
+                at.push((k, engine.clone()));
+            }
+            sink.pushed = k;
             engine
                 .push(event.clone(), &mut sink)
                 .map_err(|source| Error::Replay {
@@ -204,6 +315,7 @@ impl Dataset {
                     source,
                 })?;
         }
+        sink.pushed = self.events.len();
         engine.finish(&mut sink, self.unknown_topic_messages)?;
         if let Some(k) = sink.simulated.iter().position(|v| !v.is_finite()) {
             return Err(Error::NotSimulated {
@@ -212,7 +324,11 @@ impl Dataset {
                 index_in_file: Some(self.rows[k].index_in_file),
             });
         }
-        Ok(sink.simulated)
+        let cps = Checkpoints {
+            at,
+            given_during: sink.given_during,
+        };
+        Ok((sink.simulated, sink.readouts, cps))
     }
 
     /// The weather in effect at `log_time_ns` (the defaults before the first
@@ -237,18 +353,59 @@ impl Dataset {
     }
 }
 
-/// Keeps each measurement's simulated value, by its row.
+/// Engines kept along a replay ([`Dataset::simulate_with_checkpoints`]).
+pub struct Checkpoints {
+    /// (the index of the next event, the engine before it), ascending.
+    at: Vec<(usize, Engine)>,
+    /// Per row: the index of the event during whose push its value was
+    /// given (the number of events for those given at the end).
+    given_during: Vec<usize>,
+}
+
+impl Checkpoints {
+    /// How many engines are kept.
+    pub fn len(&self) -> usize {
+        self.at.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.at.is_empty()
+    }
+}
+
+/// Every row's read-out, given that every row was simulated.
+fn complete(readouts: Vec<Option<Readout>>) -> Vec<Readout> {
+    readouts.into_iter().flatten().collect()
+}
+
+/// Keeps each measurement's simulated value, by its row, what it was read
+/// from when `readouts` is not empty, and during which event's push it came
+/// when `given_during` is not empty.
 struct Collect<'a> {
     row_of_index: &'a HashMap<u64, usize>,
     simulated: Vec<f64>,
+    readouts: Vec<Option<Readout>>,
+    given_during: Vec<usize>,
+    /// The index of the event being pushed.
+    pushed: usize,
 }
 
 impl Sink for Collect<'_> {
     fn measurement(&mut self, m: &MeasurementOutput<'_>) -> tortwin_engine::sink::SinkResult {
         if let Some(&k) = self.row_of_index.get(&m.index_in_file) {
             self.simulated[k] = m.simulated;
+            if let Some(slot) = self.readouts.get_mut(k) {
+                *slot = m.readout;
+            }
+            if let Some(slot) = self.given_during.get_mut(k) {
+                *slot = self.pushed;
+            }
         }
         Ok(())
+    }
+
+    fn wants_readouts(&self) -> bool {
+        !self.readouts.is_empty()
     }
 }
 

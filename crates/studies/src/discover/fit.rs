@@ -44,6 +44,7 @@ use super::space::GenericSlot;
 use crate::error::optimiser;
 use crate::progress::Progress;
 use crate::{Error, Result};
+use tortwin_engine::Readout;
 use tortwin_model::config::{Effects, ModelConfig};
 use tortwin_model::effects::Named;
 
@@ -261,9 +262,228 @@ pub(super) struct Evaluator<'a> {
     /// Rows that count in the SSE (false: treated as a gross outlier).
     pub(super) active: Vec<bool>,
     cache: Mutex<HashMap<Vec<u64>, Arc<Evaluation>>>,
+    /// The read-outs of the last replays, by their configuration's state
+    /// part ([`ModelConfig::state_part`]): a configuration that differs
+    /// from one of them only in read-out parameters is read, not replayed.
+    readouts: Mutex<std::collections::VecDeque<Kept>>,
+    /// The models candidates are built on ([`Evaluator::pin_base`]), with
+    /// checkpoints: a configuration that adds a later time step to one of
+    /// them continues from its state there.
+    bases: Mutex<std::collections::VecDeque<Kept>>,
+    /// How many replays' read-outs are kept (a bounded amount of memory).
+    keep_readouts: usize,
     runs: AtomicUsize,
+    /// What the evaluations cost: replays and read-outs, with their time.
+    pub(super) cost: CostMeter,
     /// Asked before every engine run whether to stop.
     progress: &'a dyn Progress,
+}
+
+/// The memory [`Evaluator`] keeps read-outs in, at most.
+const READOUTS_KEPT_BYTES: usize = 256 << 20;
+/// Checkpoints along a base's replay, and how many bases are kept.
+const CHECKPOINTS: usize = 16;
+const BASES_KEPT: usize = 4;
+
+/// A replay kept by the [`Evaluator`].
+#[derive(Clone)]
+struct Kept {
+    state: ModelConfig,
+    readouts: Arc<Vec<Readout>>,
+    checkpoints: Option<Arc<super::data::Checkpoints>>,
+}
+
+/// Engine replays and read-outs, counted and timed: a read-out is a
+/// fraction of a replay, and the report gives both as run-equivalents
+/// (replays + read-out time over the mean replay's time).
+#[derive(Debug, Default)]
+pub(super) struct CostMeter {
+    replays: AtomicUsize,
+    replay_ns: std::sync::atomic::AtomicU64,
+    readouts: AtomicUsize,
+    readout_ns: std::sync::atomic::AtomicU64,
+    resumed: AtomicUsize,
+    resumed_ns: std::sync::atomic::AtomicU64,
+    /// The stage now running, and what each stage has cost so far.
+    stages: Mutex<Stages>,
+}
+
+#[derive(Debug, Default)]
+struct Stages {
+    now: Option<Stage>,
+    spent: Vec<(Stage, Cost)>,
+}
+
+/// What discover and calibrate spend their evaluations on (report.json
+/// `cost`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Stage {
+    /// The site's constants (step 0, after each effect, the final one).
+    Calibration,
+    /// Every candidate probed at one value on the current model.
+    Screening,
+    /// The candidates' fits.
+    Fits,
+    /// Held-out days and sites.
+    CrossValidation,
+    /// Refits of a chosen candidate: with the model's effects free, its
+    /// threshold placed again, beside the constants, without each effect.
+    Refits,
+}
+
+/// A stage's cost in report.json.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct StageCost {
+    pub stage: Stage,
+    #[serde(flatten)]
+    pub cost: Cost,
+}
+
+/// Restores the stage that ran before (see [`CostMeter::enter`]).
+pub(super) struct StageGuard<'m> {
+    meter: &'m CostMeter,
+    before: Option<Stage>,
+}
+
+impl Drop for StageGuard<'_> {
+    fn drop(&mut self) {
+        self.meter.lock().now = self.before;
+    }
+}
+
+/// [`CostMeter`] at one moment; differences give a stage's cost.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
+pub struct Cost {
+    /// Engine replays from the start.
+    pub engine_runs: usize,
+    /// Replays continued from a checkpoint.
+    pub resumed_runs: usize,
+    /// Evaluations read from a kept replay.
+    pub readouts: usize,
+    /// Replays, plus the read-outs' and continued replays' time in
+    /// replays (measured).
+    pub run_equivalents: f64,
+    #[serde(skip)]
+    replay_ns: u64,
+    #[serde(skip)]
+    readout_ns: u64,
+    #[serde(skip)]
+    resumed_ns: u64,
+}
+
+impl CostMeter {
+    fn lock(&self) -> std::sync::MutexGuard<'_, Stages> {
+        self.stages.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    /// From now until the guard drops, evaluations count to `stage` (the
+    /// stage a nested call enters wins: a calibration inside a refit is
+    /// the calibration's).
+    pub(super) fn enter(&self, stage: Stage) -> StageGuard<'_> {
+        let mut lock = self.lock();
+        let before = lock.now.replace(stage);
+        StageGuard {
+            meter: self,
+            before,
+        }
+    }
+
+    /// Adds one evaluation to the stage now running.
+    fn add_to_stage(
+        &self,
+        replay_ns: Option<u64>,
+        readout_ns: Option<u64>,
+        resumed_ns: Option<u64>,
+    ) {
+        let mut lock = self.lock();
+        let stage = lock.now.unwrap_or(Stage::Fits);
+        let slot = match lock.spent.iter().position(|(s, _)| *s == stage) {
+            Some(k) => k,
+            None => {
+                lock.spent.push((stage, Cost::default()));
+                lock.spent.len() - 1
+            }
+        };
+        let cost = &mut lock.spent[slot].1;
+        if let Some(ns) = replay_ns {
+            cost.engine_runs += 1;
+            cost.replay_ns += ns;
+        }
+        if let Some(ns) = readout_ns {
+            cost.readouts += 1;
+            cost.readout_ns += ns;
+        }
+        if let Some(ns) = resumed_ns {
+            cost.resumed_runs += 1;
+            cost.resumed_ns += ns;
+        }
+    }
+
+    fn add_replay(&self, ns: u64) {
+        self.replays.fetch_add(1, Ordering::Relaxed);
+        self.replay_ns.fetch_add(ns, Ordering::Relaxed);
+        self.add_to_stage(Some(ns), None, None);
+    }
+
+    fn add_readout(&self, ns: u64) {
+        self.readouts.fetch_add(1, Ordering::Relaxed);
+        self.readout_ns.fetch_add(ns, Ordering::Relaxed);
+        self.add_to_stage(None, Some(ns), None);
+    }
+
+    fn add_resumed(&self, ns: u64) {
+        self.resumed.fetch_add(1, Ordering::Relaxed);
+        self.resumed_ns.fetch_add(ns, Ordering::Relaxed);
+        self.add_to_stage(None, None, Some(ns));
+    }
+
+    /// Each stage's cost so far, in run-equivalents of the mean replay of
+    /// the whole run.
+    pub(super) fn by_stage(&self) -> Vec<StageCost> {
+        let per_replay = self.now().per_replay_ns();
+        self.lock()
+            .spent
+            .iter()
+            .map(|(stage, cost)| StageCost {
+                stage: *stage,
+                cost: cost.with_equivalents(per_replay),
+            })
+            .collect()
+    }
+
+    /// The totals so far.
+    pub(super) fn now(&self) -> Cost {
+        let c = Cost {
+            engine_runs: self.replays.load(Ordering::Relaxed),
+            resumed_runs: self.resumed.load(Ordering::Relaxed),
+            readouts: self.readouts.load(Ordering::Relaxed),
+            run_equivalents: 0.0,
+            replay_ns: self.replay_ns.load(Ordering::Relaxed),
+            readout_ns: self.readout_ns.load(Ordering::Relaxed),
+            resumed_ns: self.resumed_ns.load(Ordering::Relaxed),
+        };
+        c.with_equivalents(c.per_replay_ns())
+    }
+}
+
+impl Cost {
+    /// Replays plus the read-outs' and continued replays' time in replays
+    /// of `per_replay_ns`.
+    fn with_equivalents(mut self, per_replay_ns: f64) -> Self {
+        self.run_equivalents = self.engine_runs as f64
+            + if per_replay_ns > 0.0 {
+                (self.readout_ns + self.resumed_ns) as f64 / per_replay_ns
+            } else {
+                0.0
+            };
+        self
+    }
+
+    /// The mean replay's time so far.
+    fn per_replay_ns(&self) -> f64 {
+        self.replay_ns as f64 / self.engine_runs.max(1) as f64
+    }
 }
 
 impl<'a> Evaluator<'a> {
@@ -294,7 +514,13 @@ impl<'a> Evaluator<'a> {
             site_slot,
             active,
             cache: Mutex::new(HashMap::new()),
+            readouts: Default::default(),
+            bases: Default::default(),
+            keep_readouts: (READOUTS_KEPT_BYTES
+                / (data.rows.len().max(1) * std::mem::size_of::<Readout>()))
+            .clamp(2, 64),
             runs: AtomicUsize::new(0),
+            cost: CostMeter::default(),
             progress,
         }
     }
@@ -321,12 +547,96 @@ impl<'a> Evaluator<'a> {
         self.active.iter().filter(|a| **a).count()
     }
 
-    /// The simulated value of every row with `cfg`: one engine run, counted.
+    /// The simulated value of every row with `cfg`: read from a kept
+    /// replay of its state part when there is one, else one engine run
+    /// (counted) whose read-outs are kept.
     pub(super) fn simulate(&self, cfg: &ModelConfig) -> Result<Vec<f64>> {
+        let state = cfg.state_part();
+        let bases: Vec<Kept> = lock_ignoring_poison(&self.bases)
+            .iter()
+            .rev()
+            .cloned()
+            .collect();
+        let kept = bases
+            .iter()
+            .chain(self.kept().iter().rev())
+            .find(|k| k.state == state)
+            .map(|k| k.readouts.clone());
+        if let Some(readouts) = kept {
+            let start = std::time::Instant::now();
+            let simulated = self.data.read_out(cfg, &readouts);
+            self.cost.add_readout(start.elapsed().as_nanos() as u64);
+            return Ok(simulated);
+        }
         crate::progress::check(self.progress)?;
-        let simulated = self.data.simulate(cfg)?;
+        let start = std::time::Instant::now();
+        for base in &bases {
+            let Some(checkpoints) = &base.checkpoints else {
+                continue;
+            };
+            if let Some(readouts) = self.data.resume(&state, checkpoints, &base.readouts) {
+                let readouts = readouts?;
+                let simulated = self.data.read_out(cfg, &readouts);
+                self.cost.add_resumed(start.elapsed().as_nanos() as u64);
+                self.keep(state, readouts);
+                return Ok(simulated);
+            }
+        }
+        let (simulated, readouts) = self.data.simulate_with_readouts(cfg)?;
+        self.cost.add_replay(start.elapsed().as_nanos() as u64);
         self.runs.fetch_add(1, Ordering::Relaxed);
+        self.keep(state, readouts);
         Ok(simulated)
+    }
+
+    /// Keeps `cfg`'s replay with checkpoints: the candidates built on it
+    /// (a time step added to it) continue from its state before their
+    /// step instead of replaying from the start. One replay, counted,
+    /// unless it is kept already.
+    pub(super) fn pin_base(&self, cfg: &ModelConfig) -> Result<()> {
+        let state = cfg.state_part();
+        {
+            let mut bases = lock_ignoring_poison(&self.bases);
+            if let Some(k) = bases.iter().position(|b| b.state == state) {
+                if let Some(b) = bases.remove(k) {
+                    bases.push_back(b);
+                }
+                return Ok(());
+            }
+        }
+        crate::progress::check(self.progress)?;
+        let start = std::time::Instant::now();
+        let (_, readouts, checkpoints) = self.data.simulate_with_checkpoints(cfg, CHECKPOINTS)?;
+        self.cost.add_replay(start.elapsed().as_nanos() as u64);
+        self.runs.fetch_add(1, Ordering::Relaxed);
+        let mut bases = lock_ignoring_poison(&self.bases);
+        if bases.len() >= BASES_KEPT {
+            bases.pop_front();
+        }
+        bases.push_back(Kept {
+            state,
+            readouts: Arc::new(readouts),
+            checkpoints: Some(Arc::new(checkpoints)),
+        });
+        Ok(())
+    }
+
+    fn kept(&self) -> std::sync::MutexGuard<'_, std::collections::VecDeque<Kept>> {
+        lock_ignoring_poison(&self.readouts)
+    }
+
+    /// Keeps a replay's read-outs in the bounded store (the oldest go
+    /// first).
+    fn keep(&self, state: ModelConfig, readouts: Vec<Readout>) {
+        let mut lock = self.kept();
+        if lock.len() >= self.keep_readouts {
+            lock.pop_front();
+        }
+        lock.push_back(Kept {
+            state,
+            readouts: Arc::new(readouts),
+            checkpoints: None,
+        });
     }
 
     /// Residuals (measured − simulated) of `cfg` by one engine run, and
@@ -378,6 +688,11 @@ impl<'a> Evaluator<'a> {
         // A panic while holding the lock leaves a consistent map.
         self.cache.lock().unwrap_or_else(|e| e.into_inner())
     }
+}
+
+/// A lock whose data stays consistent when a holder panicked.
+fn lock_ignoring_poison<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
+    m.lock().unwrap_or_else(|e| e.into_inner())
 }
 
 /// The exact parameters a fit or a calibration varies, as bits: the
@@ -836,6 +1151,7 @@ pub(super) fn cross_validate(
     u_star: &[f64],
     blocking: Blocking,
 ) -> Result<CrossValidation> {
+    let _stage = ev.cost.enter(Stage::CrossValidation);
     let labels = ev.blocks(blocking);
     let folds: Vec<(Fold, usize)> = (0..labels.len())
         .into_par_iter()

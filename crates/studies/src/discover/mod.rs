@@ -105,7 +105,7 @@ pub use calibrate::{Calibration, Combination, SiteConstant};
 // What a `Discovery` holds, from the files that compute it.
 pub use describe::Location;
 pub use diagnose::{BinMean, CovariateScore};
-pub use fit::{Blocking, CrossValidation, Fold};
+pub use fit::{Blocking, Cost, CrossValidation, Fold, Stage, StageCost};
 pub use screen::{Outliers, Screened, Screening};
 
 /// An effect switched on, with its parameters by name (interfaces.md,
@@ -298,6 +298,10 @@ pub struct Discovery {
     pub unexplained: Option<Unexplained>,
     pub options: Options,
     pub engine_runs: usize,
+    /// Replays plus read-outs in replays (measured).
+    pub run_equivalents: f64,
+    /// What each stage cost.
+    pub cost: Vec<fit::StageCost>,
     pub elapsed_s: f64,
     /// The recording and configuration read, the starting model, the
     /// version and the command line (set by the job that writes the report).
@@ -529,7 +533,11 @@ pub fn discover(
                 (c, start)
             })
             .collect();
+        // The candidates of this step are built on the current model: a
+        // time step continues from its state before the step.
+        ev.pin_base(&current)?;
         progress.stage(&format!("step {step}: screening the generic terms"));
+        let screening_stage = ev.cost.enter(fit::Stage::Screening);
         let (generic, screening) = screen::propose(
             &ev,
             &drivers,
@@ -542,6 +550,7 @@ pub fn discover(
             &forced,
             &mut responses,
         )?;
+        drop(screening_stage);
         // A term on a direction already in the model (whatever its form
         // or range) would only stack on it.
         let in_model = |c: &Candidate| {
@@ -1319,6 +1328,8 @@ pub fn discover(
         unexplained,
         options: *options,
         engine_runs: ev.runs() + 1,
+        run_equivalents: ev.cost.now().run_equivalents + 1.0,
+        cost: ev.cost.by_stage(),
         elapsed_s: t0.elapsed().as_secs_f64(),
         provenance: None,
         start: start.clone(),
@@ -1548,6 +1559,7 @@ fn with_effects_free(
     space: &Space,
     u: &[f64],
 ) -> Result<Option<(Space, Vec<f64>, f64)>> {
+    let _stage = ev.cost.enter(fit::Stage::Refits);
     let Some(c) = space.slots.first().cloned() else {
         return Ok(None);
     };
@@ -1608,6 +1620,7 @@ fn effect_beside_constants(
     noise: Option<f64>,
     options: &Options,
 ) -> Result<Option<(Candidate, ModelConfig, f64)>> {
+    let _stage = ev.cost.enter(fit::Stage::Refits);
     let n = ev.active.iter().filter(|&&a| a).count();
     let ln_n = (n as f64).ln();
     let mut directions: Vec<&space::GenericSlot> = Vec::new();
@@ -1683,6 +1696,7 @@ fn drop_unneeded(
     noise: Option<f64>,
     options: &Options,
 ) -> Result<Vec<Candidate>> {
+    let _stage = ev.cost.enter(fit::Stage::Refits);
     let n = ev.active.iter().filter(|&&a| a).count();
     let mut sse = ev.evaluate(current)?.sse;
     let mut dropped = Vec::new();
@@ -1708,6 +1722,7 @@ fn without_each(
     reference: &tortwin_model::product::ProductParams,
     noise: Option<f64>,
 ) -> Result<Vec<(usize, f64, ModelConfig)>> {
+    let _stage = ev.cost.enter(fit::Stage::Refits);
     (starting..accepted.len())
         .into_par_iter()
         .filter(|&i| accepted[i].get(&current.effects).is_some())
@@ -1769,6 +1784,7 @@ fn refine_step(
     space: &Space,
     u: &[f64],
 ) -> Result<Option<Fitted>> {
+    let _stage = ev.cost.enter(fit::Stage::Refits);
     let Some(Candidate::Generic(slot)) = space.slots.first() else {
         return Ok(None);
     };

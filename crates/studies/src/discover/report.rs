@@ -412,6 +412,31 @@ fn site_constants_md(md: &mut String, d: &Discovery, c: &super::Calibration) {
     );
 }
 
+/// What the evaluations cost, by stage, in one line.
+pub(crate) fn cost_text(d: &Discovery) -> String {
+    let stages: Vec<String> = d
+        .cost
+        .iter()
+        .map(|s| {
+            format!(
+                "{} {:.1}",
+                serde_json::to_value(s.stage)
+                    .ok()
+                    .and_then(|v| v.as_str().map(|t| t.replace('_', "-")))
+                    .unwrap_or_default(),
+                s.cost.run_equivalents
+            )
+        })
+        .collect();
+    format!(
+        "{:.1} run-equivalents: {} replays, {} read-outs; {}",
+        d.run_equivalents,
+        d.engine_runs,
+        d.cost.iter().map(|s| s.cost.readouts).sum::<usize>(),
+        stages.join(", ")
+    )
+}
+
 fn effect_text(e: &EffectParams) -> String {
     format!("`{}`", e.text())
 }
@@ -471,8 +496,10 @@ fn markdown(data: &Dataset, d: &Discovery, residual_file: Option<&str>, distance
     );
     let _ = writeln!(
         md,
-        "| engine runs | {} in {:.1} s |\n",
-        d.engine_runs, d.elapsed_s
+        "| engine runs | {} in {:.1} s ({}) |\n",
+        d.engine_runs,
+        d.elapsed_s,
+        cost_text(d)
     );
     let _ = writeln!(
         md,
