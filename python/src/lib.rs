@@ -360,16 +360,9 @@ fn discover(
     if let Some(source) = config_source(config)? {
         args.config = Some(source);
     }
-    let (report, residuals) = run_job(py, move |progress| {
-        let (found, data) = jobs::discover::run_with_data(&args, progress)?;
-        let json = serde_json::to_string(&found).map_err(|source| Error::Json {
-            what: "the report",
-            source,
-        })?;
-        let table = residual_table(&data, &found).map_err(ipc_error)?;
-        Ok((json, ipc(&table).map_err(ipc_error)?))
-    })?;
-    Ok((report, PyBytes::new(py, &residuals).unbind()))
+    report_with_residuals(py, move |progress| {
+        jobs::discover::run_with_data(&args, progress)
+    })
 }
 
 /// `tortwin calibrate ARGV`. Returns report.json's content (its
@@ -388,8 +381,19 @@ fn calibrate(
     if let Some(source) = config_source(config)? {
         args.config = Some(source);
     }
+    report_with_residuals(py, move |progress| {
+        jobs::discover::calibrate_with_data(&args, progress)
+    })
+}
+
+/// Runs a discover or calibrate job; returns report.json's content and
+/// the residual table (Arrow IPC).
+fn report_with_residuals<F>(py: Python<'_>, job: F) -> PyResult<(String, Py<PyBytes>)>
+where
+    F: FnOnce(&dyn Progress) -> Result<(Discovery, Dataset), Error> + Send + 'static,
+{
     let (report, residuals) = run_job(py, move |progress| {
-        let (found, data) = jobs::discover::calibrate_with_data(&args, progress)?;
+        let (found, data) = job(progress)?;
         let json = serde_json::to_string(&found).map_err(|source| Error::Json {
             what: "the report",
             source,

@@ -388,23 +388,10 @@ def discover(
         ``bic_threshold``, ``min_excess_share``, ``unexplained_ratio`` (see
         ``tortwin discover --help``).
     """
-    with tempfile.TemporaryDirectory(prefix="tortwin-discover-") as tmp:
-        folder = Path(report) if report is not None else Path(tmp)
-        argv = ["discover", os.fspath(recording), "--report", os.fspath(folder), "--quiet"]
-        argv += _options({"threads": threads})
-        argv += _options(options)
-        if not calibrate:
-            argv.append("--no-calibrate")
-        text, residuals = _native.discover(argv, _config(config))
-        model_toml = (folder / "model.toml").read_text()
-    found = json.loads(text)
-    return Discovery(
-        report=found,
-        residuals=_table(residuals),
-        model_toml=model_toml,
-        report_dir=Path(report) if report is not None else None,
-        effects=[e["name"] for e in found["effects_found"]],
-    )
+    flags = _options({"threads": threads}) + _options(options)
+    if not calibrate:
+        flags.append("--no-calibrate")
+    return _study(_native.discover, "discover", recording, config, report, flags)
 
 
 def calibrate(
@@ -432,11 +419,17 @@ def calibrate(
     threads
         Worker threads (default: one per core).
     """
-    with tempfile.TemporaryDirectory(prefix="tortwin-calibrate-") as tmp:
+    flags = _options({"threads": threads})
+    return _study(_native.calibrate, "calibrate", recording, config, report, flags)
+
+
+def _study(native, command, recording, config, report, flags) -> Discovery:
+    """Runs ``tortwin COMMAND`` (discover or calibrate) through ``native``
+    with its report in ``report`` (a temporary folder when None)."""
+    with tempfile.TemporaryDirectory(prefix=f"tortwin-{command}-") as tmp:
         folder = Path(report) if report is not None else Path(tmp)
-        argv = ["calibrate", os.fspath(recording), "--report", os.fspath(folder), "--quiet"]
-        argv += _options({"threads": threads})
-        text, residuals = _native.calibrate(argv, _config(config))
+        argv = [command, os.fspath(recording), "--report", os.fspath(folder), "--quiet"]
+        text, residuals = native(argv + flags, _config(config))
         model_toml = (folder / "model.toml").read_text()
     found = json.loads(text)
     return Discovery(
@@ -444,7 +437,7 @@ def calibrate(
         residuals=_table(residuals),
         model_toml=model_toml,
         report_dir=Path(report) if report is not None else None,
-        effects=[],
+        effects=[e["name"] for e in found["effects_found"]],
     )
 
 

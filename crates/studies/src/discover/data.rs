@@ -256,10 +256,7 @@ impl Dataset {
             for event in &self.events[next..] {
                 engine
                     .push(event.clone(), &mut sink)
-                    .map_err(|source| Error::Replay {
-                        what: self.path.display().to_string(),
-                        source,
-                    })?;
+                    .map_err(|source| self.replay_error(source))?;
             }
             engine.finish(&mut sink, self.unknown_topic_messages)?;
             if let Some(k) = sink.readouts.iter().position(Option::is_none) {
@@ -272,6 +269,14 @@ impl Dataset {
             Ok(complete(std::mem::take(&mut sink.readouts)))
         };
         Some(run())
+    }
+
+    /// An engine error of a replay of this recording.
+    fn replay_error(&self, source: tortwin_engine::EngineError) -> Error {
+        Error::Replay {
+            what: self.path.display().to_string(),
+            source,
+        }
     }
 
     fn replay(
@@ -310,10 +315,7 @@ impl Dataset {
             sink.pushed = k;
             engine
                 .push(event.clone(), &mut sink)
-                .map_err(|source| Error::Replay {
-                    what: self.path.display().to_string(),
-                    source,
-                })?;
+                .map_err(|source| self.replay_error(source))?;
         }
         sink.pushed = self.events.len();
         engine.finish(&mut sink, self.unknown_topic_messages)?;
