@@ -269,10 +269,9 @@ pub(super) struct Evaluator<'a> {
     /// The models candidates are built on ([`Evaluator::pin_base`]), with
     /// checkpoints: a configuration that adds a later time step to one of
     /// them continues from its state there.
-    bases: Mutex<std::collections::VecDeque<Kept>>,
+    bases: Mutex<std::collections::VecDeque<(Kept, Arc<super::data::Checkpoints>)>>,
     /// How many replays' read-outs are kept (a bounded amount of memory).
     keep_readouts: usize,
-    runs: AtomicUsize,
     /// What the evaluations cost: replays and read-outs, with their time.
     pub(super) cost: CostMeter,
     /// Asked before every engine run whether to stop.
@@ -290,7 +289,6 @@ const BASES_KEPT: usize = 4;
 struct Kept {
     state: ModelConfig,
     readouts: Arc<Vec<Readout>>,
-    checkpoints: Option<Arc<super::data::Checkpoints>>,
 }
 
 /// Engine replays and read-outs, counted and timed: a read-out is a
@@ -519,7 +517,6 @@ impl<'a> Evaluator<'a> {
             keep_readouts: (READOUTS_KEPT_BYTES
                 / (data.rows.len().max(1) * std::mem::size_of::<Readout>()))
             .clamp(2, 64),
-            runs: AtomicUsize::new(0),
             cost: CostMeter::default(),
             progress,
         }
@@ -539,7 +536,7 @@ impl<'a> Evaluator<'a> {
 
     /// Engine runs so far (cache misses).
     pub(super) fn runs(&self) -> usize {
-        self.runs.load(Ordering::Relaxed)
+        self.cost.replays.load(Ordering::Relaxed)
     }
 
     /// The rows that count.
@@ -552,13 +549,14 @@ impl<'a> Evaluator<'a> {
     /// (counted) whose read-outs are kept.
     pub(super) fn simulate(&self, cfg: &ModelConfig) -> Result<Vec<f64>> {
         let state = cfg.state_part();
-        let bases: Vec<Kept> = lock_ignoring_poison(&self.bases)
+        let bases: Vec<(Kept, Arc<super::data::Checkpoints>)> = lock_ignoring_poison(&self.bases)
             .iter()
             .rev()
             .cloned()
             .collect();
         let kept = bases
             .iter()
+            .map(|(k, _)| k)
             .chain(self.kept().iter().rev())
             .find(|k| k.state == state)
             .map(|k| k.readouts.clone());
@@ -570,10 +568,7 @@ impl<'a> Evaluator<'a> {
         }
         crate::progress::check(self.progress)?;
         let start = std::time::Instant::now();
-        for base in &bases {
-            let Some(checkpoints) = &base.checkpoints else {
-                continue;
-            };
+        for (base, checkpoints) in &bases {
             if let Some(readouts) = self.data.resume(&state, checkpoints, &base.readouts) {
                 let readouts = readouts?;
                 let simulated = self.data.read_out(cfg, &readouts);
@@ -584,7 +579,6 @@ impl<'a> Evaluator<'a> {
         }
         let (simulated, readouts) = self.data.simulate_with_readouts(cfg)?;
         self.cost.add_replay(start.elapsed().as_nanos() as u64);
-        self.runs.fetch_add(1, Ordering::Relaxed);
         self.keep(state, readouts);
         Ok(simulated)
     }
@@ -597,7 +591,7 @@ impl<'a> Evaluator<'a> {
         let state = cfg.state_part();
         {
             let mut bases = lock_ignoring_poison(&self.bases);
-            if let Some(k) = bases.iter().position(|b| b.state == state) {
+            if let Some(k) = bases.iter().position(|(b, _)| b.state == state) {
                 if let Some(b) = bases.remove(k) {
                     bases.push_back(b);
                 }
@@ -608,16 +602,17 @@ impl<'a> Evaluator<'a> {
         let start = std::time::Instant::now();
         let (_, readouts, checkpoints) = self.data.simulate_with_checkpoints(cfg, CHECKPOINTS)?;
         self.cost.add_replay(start.elapsed().as_nanos() as u64);
-        self.runs.fetch_add(1, Ordering::Relaxed);
         let mut bases = lock_ignoring_poison(&self.bases);
         if bases.len() >= BASES_KEPT {
             bases.pop_front();
         }
-        bases.push_back(Kept {
-            state,
-            readouts: Arc::new(readouts),
-            checkpoints: Some(Arc::new(checkpoints)),
-        });
+        bases.push_back((
+            Kept {
+                state,
+                readouts: Arc::new(readouts),
+            },
+            Arc::new(checkpoints),
+        ));
         Ok(())
     }
 
@@ -635,7 +630,6 @@ impl<'a> Evaluator<'a> {
         lock.push_back(Kept {
             state,
             readouts: Arc::new(readouts),
-            checkpoints: None,
         });
     }
 
