@@ -1011,6 +1011,31 @@ pub(super) fn refit(
     Ok(problem.config(&theta))
 }
 
+/// Fits the constants `keys` and the parameters of `effect` together on
+/// `base` (Levenberg–Marquardt from where they are): an effect taken
+/// beside the constants, each moved to where it no longer makes up for
+/// the other.
+pub(super) fn refit_with(
+    ev: &Evaluator<'_>,
+    base: &ModelConfig,
+    reference: &ProductParams,
+    keys: &[ProductKey],
+    effect: &Candidate,
+    noise: Option<f64>,
+) -> Result<ModelConfig> {
+    let _stage = ev.cost.enter(Stage::Refits);
+    let mut problem = Problem::new(ev, base, reference, std::slice::from_ref(effect));
+    let free: Vec<usize> = (0..problem.knobs.len())
+        .filter(|&k| match &problem.knobs[k] {
+            Knob::Constant(key) => keys.contains(key),
+            Knob::Effect(..) => true,
+        })
+        .collect();
+    problem.noise2 = noise.map_or(0.0, |s| s * s);
+    let (theta, _) = problem.fit(&problem.theta_of(base), &free, None)?;
+    Ok(problem.config(&theta))
+}
+
 #[allow(clippy::too_many_arguments)]
 fn report(
     problem: &Problem<'_, '_>,

@@ -1737,7 +1737,30 @@ fn effect_beside_constants(
                 base: with_constants,
                 slots: vec![c.clone()],
             };
-            let fit = fit::fit(ev, &own, Start::Warm(own.units_of(&own.base)), None)?;
+            let mut fit = fit::fit(ev, &own, Start::Warm(own.units_of(&own.base)), None)?;
+            // A fit that stopped at a bound of its box was standing in for
+            // the constants (rail ageing's time constant at its 60 s floor
+            // beside a muD 23 % high): beside them it starts again from
+            // the grid.
+            if u.iter().any(|&x| x <= 1e-6 || x >= 1.0 - 1e-6) {
+                let fresh = fit::fit(ev, &own, Start::Fresh, None)?;
+                if fresh.eval.sse < fit.eval.sse {
+                    fit = fresh;
+                }
+            }
+            // Then the constants and the effect together: alone, each
+            // stays where it made up for the other (kc 39 % low beside a
+            // rail ageing that takes three times the product away).
+            let joint = calibrate::refit_with(ev, &own.config(&fit.u), reference, keys, &c, noise)?;
+            let joint_sse = ev.evaluate(&joint)?.sse;
+            if joint_sse < fit.eval.sse {
+                let own = Space {
+                    base: joint,
+                    slots: vec![c.clone()],
+                };
+                let u = own.units_of(&own.base);
+                return Ok(Some((c, own, u, joint_sse)));
+            }
             Ok(Some((c, own, fit.u, fit.eval.sse)))
         })
         .collect::<Result<Vec<_>>>()?
