@@ -13,7 +13,7 @@ use anyhow::Result;
 use clap::{Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
-use tortwin_studies::jobs::{discover, paper, replay, strategy, summary, synth, tables};
+use tortwin_studies::jobs::{self, discover, paper, replay, strategy, summary, synth, tables};
 use tortwin_studies::Progress;
 
 #[derive(Debug, Parser)]
@@ -66,10 +66,16 @@ enum Command {
 
 fn main() -> ExitCode {
     tortwin_studies::jobs::join_rayon_pool();
+    // Ctrl-C or a SIGTERM deletes the run's temporary files before exiting
+    // (130, 143): nothing half-written is left behind.
+    if let Err(err) = tortwin_files::clean_up_on_signals() {
+        eprintln!("error: cannot watch for SIGINT and SIGTERM: {err}");
+        return ExitCode::from(1);
+    }
     match run(Cli::parse().command) {
         Ok(()) => ExitCode::SUCCESS,
         Err(err) => {
-            eprintln!("error: {err:#}");
+            eprintln!("error: {}", jobs::printable(&format!("{err:#}"), false));
             if is_input_error(&err) {
                 ExitCode::from(2)
             } else {
@@ -172,6 +178,7 @@ fn run(command: Command) -> Result<()> {
 fn say(text: &str) -> std::io::Result<()> {
     use std::io::Write as _;
     let mut out = std::io::stdout().lock();
+    let text = jobs::printable(text, true);
     match out.write_all(text.as_bytes()).and_then(|()| out.flush()) {
         Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => Ok(()),
         result => result,
@@ -237,7 +244,11 @@ impl Display {
         };
         if self.lines {
             let count = total.map_or(String::new(), |n| format!(" ({n} to do)"));
-            eprintln!("[{:8.1} s] {message}{count}", self.elapsed());
+            eprintln!(
+                "[{:8.1} s] {}{count}",
+                self.elapsed(),
+                jobs::printable(message, false)
+            );
         }
         match total {
             Some(n) => {
@@ -251,7 +262,8 @@ impl Display {
                 self.bar.unset_length();
             }
         }
-        self.bar.set_message(message.to_owned());
+        self.bar
+            .set_message(jobs::printable(message, false).into_owned());
     }
 
     /// The line that closes a stage with a count, when writing lines.

@@ -5,7 +5,7 @@
 
 #![warn(unreachable_pub)]
 
-pub mod files;
+pub use tortwin_files as files;
 pub mod foxglove;
 pub mod geometry;
 pub mod mcap_out;

@@ -41,6 +41,7 @@ use tortwin_recording::tables::{format_number, format_time};
 use tortwin_recording::Direction;
 
 use crate::files::{FileError, PartialFile};
+use tortwin_recording::tables::inert;
 
 /// Rows kept before they are written.
 pub const BATCH_ROWS: usize = 65_536;
@@ -221,7 +222,8 @@ impl Table {
         if let Some((partial, csv)) = &mut self.csv {
             let fields = row.iter().map(|v| match v {
                 Value::Time(ns) => format_time(*ns),
-                Value::Text(t) => t.unwrap_or_default().to_string(),
+                // Ids as no spreadsheet runs them (csv-tables.md).
+                Value::Text(t) => inert(t.unwrap_or_default()).into_owned(),
                 Value::Float(x) => format_number(*x),
                 Value::Count(n) => n.to_string(),
                 Value::Index(i) => i.map_or(String::new(), |i| i.to_string()),

@@ -155,6 +155,9 @@ impl Error {
             Error::Plot(e) => e.is_input(),
             Error::Table(TableError::File(e)) => e.is_input(),
             Error::Import(ImportError::Input(_)) | Error::Export(ExportError::Input(_)) => true,
+            Error::Import(ImportError::File(e)) | Error::Export(ExportError::File(e)) => {
+                e.is_input()
+            }
             Error::Context { source, .. } => source.is_input(),
             // Outputs (and inputs) the machine refuses: a full disk, a
             // read-only folder, a missing file.

@@ -28,7 +28,6 @@ mod layout;
 mod record;
 mod replay;
 
-use std::fs::File;
 use std::io::BufReader;
 use std::path::Path;
 
@@ -97,7 +96,7 @@ impl RecordingReader {
     /// `/section` message, which must be the first message in replay order
     /// and the only one of its topic.
     pub fn open(path: &Path, ctx: ReaderContext) -> Result<Self, InputError> {
-        let file = File::open(path)
+        let file = tortwin_files::open_input(path)
             .map_err(|e| InputError::file(path, format!("cannot open the recording: {e}")))?;
         let mut file = BufReader::new(file);
         let layout = layout::scan_layout(path, &mut file)?;
@@ -420,7 +419,7 @@ impl RawMessages {
     /// Lays out the file (every chunk checked) as [`RecordingReader::open`]
     /// does.
     pub fn open(path: &Path) -> Result<Self, InputError> {
-        let file = File::open(path)
+        let file = tortwin_files::open_input(path)
             .map_err(|e| InputError::file(path, format!("cannot open the recording: {e}")))?;
         let mut file = BufReader::new(file);
         let layout = layout::scan_layout(path, &mut file)?;

@@ -13,7 +13,7 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use super::{
-    format_number, format_time, rail_columns, MEASUREMENTS_FILE, MEASUREMENT_COLUMNS,
+    format_number, format_time, inert, rail_columns, MEASUREMENTS_FILE, MEASUREMENT_COLUMNS,
     PASSAGES_FILE, PASSAGE_COLUMNS, PULSES_FILE, PULSE_COLUMNS, SECTION_FILE, TIME_UTC,
     WEATHER_COLUMNS, WEATHER_FILE,
 };
@@ -34,6 +34,10 @@ pub enum ExportError {
         #[source]
         source: std::io::Error,
     },
+    /// An output that cannot be (an input of its name in the folder, a
+    /// pipe, a folder that cannot be made).
+    #[error(transparent)]
+    File(#[from] tortwin_files::FileError),
 }
 
 /// Rows written per table.
@@ -49,23 +53,17 @@ pub struct ExportSummary {
 /// One table being written under a temporary name in the target folder.
 struct Out {
     path: PathBuf,
-    temp: tempfile::NamedTempFile,
+    temp: tortwin_files::PartialFile,
     csv: csv::Writer<std::io::BufWriter<std::fs::File>>,
 }
 
 impl Out {
     fn create(dir: &Path, name: &str, header: &[String]) -> Result<Self, ExportError> {
         let path = dir.join(name);
-        let temp = temp_builder(&format!(".{name}.partial-"))
-            .tempfile_in(dir)
-            .map_err(|source| ExportError::Io {
-                what: "creating a file in",
-                path: dir.to_path_buf(),
-                source,
-            })?;
-        let file = temp.reopen().map_err(|source| ExportError::Io {
+        let temp = tortwin_files::PartialFile::beside(&path)?;
+        let file = std::fs::File::create(temp.temp_path()).map_err(|source| ExportError::Io {
             what: "opening",
-            path: temp.path().to_path_buf(),
+            path: temp.temp_path().to_path_buf(),
             source,
         })?;
         let csv = csv::Writer::from_writer(std::io::BufWriter::new(file));
@@ -89,34 +87,25 @@ impl Out {
     }
 
     fn finish(self) -> Result<(), ExportError> {
-        let Self { path, temp, csv } = self;
-        let io = |what: &'static str, path: &Path| {
-            let path = path.to_path_buf();
-            move |source| ExportError::Io { what, path, source }
-        };
+        let Self {
+            path,
+            mut temp,
+            csv,
+        } = self;
         let mut file = csv.into_inner().map_err(|e| ExportError::Io {
             what: "writing",
             path: path.clone(),
             source: std::io::Error::other(e.to_string()),
         })?;
-        file.flush().map_err(io("writing", &path))?;
-        temp.persist(&path).map_err(|e| ExportError::Io {
-            what: "renaming the finished table to",
+        file.flush().map_err(|source| ExportError::Io {
+            what: "writing",
             path: path.clone(),
-            source: e.error,
+            source,
         })?;
+        drop(file);
+        temp.commit()?;
         Ok(())
     }
-}
-
-/// A temporary file named `prefix...`, made like any new file (0666 less
-/// the umask; tempfile's default is 0600) so the table it becomes is.
-fn temp_builder(prefix: &str) -> tempfile::Builder<'_, '_> {
-    let mut builder = tempfile::Builder::new();
-    builder.prefix(prefix);
-    #[cfg(unix)]
-    builder.permissions(std::os::unix::fs::PermissionsExt::from_mode(0o666));
-    builder
 }
 
 /// Writes the inputs of `recording` as tables into `dir` (created if
@@ -150,7 +139,7 @@ pub fn export_dir(recording: &Path, dir: &Path) -> Result<ExportSummary, ExportE
                 for axle in &p.axles {
                     summary.axles += 1;
                     let mut row = vec![
-                        p.train_id.clone(),
+                        inert(&p.train_id).into_owned(),
                         time.clone(),
                         match p.direction {
                             Direction::Up => "up",
@@ -185,7 +174,12 @@ pub fn export_dir(recording: &Path, dir: &Path) -> Result<ExportSummary, ExportE
             }
             Wire::Pulse(p) => {
                 summary.pulses += 1;
-                pulses.row(&[time, p.applicator_id, p.rail, format_number(p.mass_g)])?;
+                pulses.row(&[
+                    time,
+                    inert(&p.applicator_id).into_owned(),
+                    inert(&p.rail).into_owned(),
+                    format_number(p.mass_g),
+                ])?;
             }
             Wire::Weather(w) => {
                 summary.weather += 1;
@@ -200,10 +194,12 @@ pub fn export_dir(recording: &Path, dir: &Path) -> Result<ExportSummary, ExportE
                 summary.measurements += 1;
                 measurements.row(&[
                     time,
-                    m.site_id,
-                    m.rail,
+                    inert(&m.site_id).into_owned(),
+                    inert(&m.rail).into_owned(),
                     m.quantity.as_str().to_string(),
-                    m.train_id.unwrap_or_default(),
+                    m.train_id
+                        .as_deref()
+                        .map_or(String::new(), |t| inert(t).into_owned()),
                     m.axle_index.map_or(String::new(), |a| a.to_string()),
                     format_number(m.value),
                 ])?;
@@ -213,28 +209,10 @@ pub fn export_dir(recording: &Path, dir: &Path) -> Result<ExportSummary, ExportE
 
     // section.toml last: written whole once the recording has read through.
     let toml = section_toml(&section, reader.section_log_time_ns());
-    let path = dir.join(SECTION_FILE);
-    let mut temp = temp_builder(&format!(".{SECTION_FILE}.partial-"))
-        .tempfile_in(dir)
-        .map_err(|source| ExportError::Io {
-            what: "creating a file in",
-            path: dir.to_path_buf(),
-            source,
-        })?;
-    temp.write_all(toml.as_bytes())
-        .map_err(|source| ExportError::Io {
-            what: "writing",
-            path: path.clone(),
-            source,
-        })?;
     for out in [passages, pulses, weather, measurements] {
         out.finish()?;
     }
-    temp.persist(&path).map_err(|e| ExportError::Io {
-        what: "renaming the finished table to",
-        path: path.clone(),
-        source: e.error,
-    })?;
+    tortwin_files::write_atomically(&dir.join(SECTION_FILE), toml.as_bytes())?;
     Ok(summary)
 }
 

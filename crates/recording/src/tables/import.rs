@@ -17,9 +17,9 @@ use serde::Deserialize;
 use toml::Spanned;
 
 use super::{
-    parse_time, rail_columns, LOG_TIME_NS, MEASUREMENTS_FILE, MEASUREMENT_COLUMNS, PASSAGES_FILE,
-    PASSAGE_COLUMNS, PULSES_FILE, PULSE_COLUMNS, SECTION_FILE, TIME_UTC, WEATHER_COLUMNS,
-    WEATHER_FILE,
+    active, parse_time, rail_columns, LOG_TIME_NS, MEASUREMENTS_FILE, MEASUREMENT_COLUMNS,
+    PASSAGES_FILE, PASSAGE_COLUMNS, PULSES_FILE, PULSE_COLUMNS, SECTION_FILE, TIME_UTC,
+    WEATHER_COLUMNS, WEATHER_FILE,
 };
 use crate::decode::{self, DecodeError, Decoder};
 use crate::error::{InputError, WriteError};
@@ -50,6 +50,10 @@ pub enum ImportError {
         #[source]
         source: std::io::Error,
     },
+    /// An output that cannot be (one of the tables, a pipe, a folder that
+    /// cannot be made).
+    #[error(transparent)]
+    File(#[from] tortwin_files::FileError),
 }
 
 /// What an import wrote.
@@ -148,29 +152,13 @@ fn write(
         let path = path.to_path_buf();
         move |source| ImportError::Io { what, path, source }
     };
-    let folder = match out.parent() {
-        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
-        _ => PathBuf::from("."),
-    };
-    std::fs::create_dir_all(&folder).map_err(io("creating the folder", &folder))?;
-    let prefix = format!(
-        ".{}.partial-",
-        out.file_name()
-            .map_or("recording".into(), |n| n.to_string_lossy())
-    );
-    let mut builder = tempfile::Builder::new();
-    builder.prefix(&prefix);
-    // Made like any new file (0666 less the umask), not tempfile's 0600.
-    #[cfg(unix)]
-    builder.permissions(std::os::unix::fs::PermissionsExt::from_mode(0o666));
-    let temp = builder
-        .tempfile_in(&folder)
-        .map_err(io("creating a file in", &folder))?;
+    let mut temp = tortwin_files::PartialFile::beside(out)?;
+    let temp_file = File::create(temp.temp_path()).map_err(io("opening", temp.temp_path()))?;
     let write_error = |source| ImportError::Write {
         path: out.to_path_buf(),
         source,
     };
-    let file = std::io::BufWriter::new(temp.as_file());
+    let file = std::io::BufWriter::new(&temp_file);
     let options = mcap::WriteOptions::new()
         .compression(Some(mcap::Compression::Zstd))
         .chunk_size(Some(1 << 20));
@@ -188,11 +176,8 @@ fn write(
     let mut file = writer.finish().map_err(write_error)?;
     std::io::Write::flush(&mut file).map_err(io("writing", out))?;
     drop(file);
-    temp.persist(out).map_err(|e| ImportError::Io {
-        what: "renaming the finished recording to",
-        path: out.to_path_buf(),
-        source: e.error,
-    })?;
+    drop(temp_file);
+    temp.commit()?;
     Ok(())
 }
 
@@ -284,7 +269,7 @@ struct Table {
 
 impl Table {
     fn open(path: &Path, required: &[String]) -> Result<Self, InputError> {
-        let file = File::open(path)
+        let file = tortwin_files::open_input(path)
             .map_err(|e| InputError::file(path, format!("cannot open the table: {e}")))?;
         let mut reader = csv::ReaderBuilder::new()
             .trim(csv::Trim::All)
@@ -381,7 +366,7 @@ impl Table {
         if text.is_empty() {
             return Err(self.fail(row, column, format!("`{name}` is empty")));
         }
-        Ok(text.to_string())
+        Ok(active(text).to_string())
     }
 
     fn number(&self, row: &Row, name: &str) -> Result<f64, InputError> {
@@ -629,7 +614,7 @@ fn read_events(path: &Path, topic: Topic, items: &mut Vec<Item>) -> Result<(), I
                     site_id: table.text(&row, "site_id")?,
                     rail: table.text(&row, "rail")?,
                     quantity,
-                    train_id: (!train.is_empty()).then(|| train.to_string()),
+                    train_id: (!train.is_empty()).then(|| active(train).to_string()),
                     axle_index,
                     value: table.number(&row, "value")?,
                 })
@@ -715,7 +700,8 @@ fn line_column(text: &str, offset: usize) -> (u64, usize) {
 }
 
 fn read_section(path: &Path) -> Result<Section, InputError> {
-    let text = std::fs::read_to_string(path)
+    let text = tortwin_files::check_input(path)
+        .and_then(|()| std::fs::read_to_string(path))
         .map_err(|e| InputError::file(path, format!("cannot read the section description: {e}")))?;
     let file: SectionFile = toml::from_str(&text).map_err(|e| {
         let (line, column) = e.span().map_or((1, 1), |s| line_column(&text, s.start));

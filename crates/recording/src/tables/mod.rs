@@ -23,7 +23,31 @@
 pub mod export;
 pub mod import;
 
+use std::borrow::Cow;
+
 use chrono::{DateTime, SecondsFormat, Utc};
+
+/// The first characters that make a spreadsheet run a cell as a formula.
+pub const FORMULA_STARTS: [char; 6] = ['=', '+', '-', '@', '\t', '\r'];
+
+/// A text cell (an id) as no spreadsheet runs it: `'` in front of one
+/// that begins like a formula (docs/spec/csv-tables.md; OWASP, "CSV
+/// Injection"). Numbers are never passed through it.
+pub fn inert(id: &str) -> Cow<'_, str> {
+    if id.starts_with(FORMULA_STARTS) {
+        Cow::Owned(format!("'{id}"))
+    } else {
+        Cow::Borrowed(id)
+    }
+}
+
+/// An id as [`inert`] wrote it, the `'` taken off again.
+pub fn active(id: &str) -> &str {
+    match id.strip_prefix('\'') {
+        Some(rest) if rest.starts_with(FORMULA_STARTS) => rest,
+        _ => id,
+    }
+}
 
 pub const SECTION_FILE: &str = "section.toml";
 pub const PASSAGES_FILE: &str = "passages.csv";

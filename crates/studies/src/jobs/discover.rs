@@ -226,7 +226,11 @@ fn study(
     inputs.extend(args.config.as_ref().and_then(super::ConfigSource::path));
     discovery.provenance = Some(Provenance::of_run(&inputs, &start)?);
     progress.stage("writing the report");
-    discover::report::write(&args.report, &data, &discovery)?;
+    // Written whole beside the report folder, then moved in: a report that
+    // fails half-way leaves none of its files (tortwin_files::StagedFolder).
+    let staged = tortwin_outputs::files::StagedFolder::beside(&args.report)?;
+    discover::report::write(staged.path(), &data, &discovery)?;
+    staged.commit()?;
     Ok((discovery, data))
 }
 

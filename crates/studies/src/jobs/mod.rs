@@ -7,12 +7,14 @@
 
 pub mod discover;
 pub mod paper;
+mod printable;
 pub mod replay;
 pub mod strategy;
 pub mod summary;
 pub mod synth;
 pub mod tables;
 
+pub use printable::printable;
 use std::path::{Path, PathBuf};
 
 use tortwin_model::config::ModelConfig;
@@ -66,7 +68,14 @@ impl ConfigSource {
     /// The defaults overlaid with this configuration.
     pub fn load(&self) -> Result<ModelConfig, ConfigError> {
         match self {
-            ConfigSource::File(p) => ModelConfig::from_file(p),
+            ConfigSource::File(p) => {
+                tortwin_outputs::files::check_input(p).map_err(|e| ConfigError {
+                    source_name: p.display().to_string(),
+                    key: "-".into(),
+                    message: format!("cannot read: {e}"),
+                })?;
+                ModelConfig::from_file(p)
+            }
             ConfigSource::Text { text, name } => ModelConfig::from_overlay_str(text, name),
         }
     }

@@ -76,7 +76,8 @@ impl ReplayArgs {
 
 /// Reads a state written by `--state-out`.
 pub fn read_state(path: &Path) -> Result<EngineState, InputError> {
-    let text = std::fs::read_to_string(path)
+    let text = tortwin_outputs::files::check_input(path)
+        .and_then(|()| std::fs::read_to_string(path))
         .map_err(|e| InputError::file(path, format!("cannot read the state: {e}")))?;
     let state: EngineState = serde_json::from_str(&text)
         .map_err(|e| InputError::file(path, format!("not a tortwin state: {e}")))?;

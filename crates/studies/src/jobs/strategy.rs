@@ -152,7 +152,8 @@ impl Default for SearchConfig {
 
 impl StrategyFile {
     pub(crate) fn read(path: &Path) -> Result<Self, UsageError> {
-        let text = std::fs::read_to_string(path)
+        let text = tortwin_outputs::files::check_input(path)
+            .and_then(|()| std::fs::read_to_string(path))
             .map_err(|e| UsageError(format!("--space {}: {e}", path.display())))?;
         Self::parse(&text).map_err(|e| UsageError(format!("--space {}: {e}", path.display())))
     }
@@ -248,8 +249,11 @@ pub fn run_with(args: &StrategyArgs, progress: &dyn Progress) -> Result<(Traffic
     inputs.extend(args.config.as_ref().and_then(super::ConfigSource::path));
     inputs.extend(args.space.as_deref());
     let provenance = Provenance::of_run(&inputs, &cfg)?;
+    // Written whole beside the output folder, then moved in: a report that
+    // fails half-way leaves none of its files (tortwin_files::StagedFolder).
+    let staged = tortwin_outputs::files::StagedFolder::beside(&args.out)?;
     strategy::report::write(
-        &args.out,
+        staged.path(),
         &traffic,
         &cfg,
         &target,
@@ -257,6 +261,7 @@ pub fn run_with(args: &StrategyArgs, progress: &dyn Progress) -> Result<(Traffic
         &study,
         &provenance,
     )?;
+    staged.commit()?;
     Ok((traffic, study))
 }
 
