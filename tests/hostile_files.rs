@@ -229,7 +229,7 @@ fn pipes_devices_and_folders_are_never_replaced_and_links_are_followed() {
 #[test]
 fn a_named_pipe_as_input_is_refused_without_blocking() {
     let work = tempfile::tempdir().unwrap();
-    let fifo = work.path().join("in.mcap");
+    let fifo = work.path().join("pipe.mcap");
     mkfifo(&fifo);
     let t0 = Instant::now();
     let o = tortwin()

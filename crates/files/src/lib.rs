@@ -89,19 +89,65 @@ pub enum FileError {
     /// [`PartialFile::commit`] called twice.
     #[error("{} is already in place", path.display())]
     AlreadyCommitted { path: PathBuf },
-    /// The output would replace one of the run's inputs.
-    #[error(
-        "{}: this output is the input {}; choose another name (nothing was written)",
-        path.display(),
-        input.display()
-    )]
-    IsAnInput { path: PathBuf, input: PathBuf },
+    /// The output would replace one of the run's inputs. The source is a
+    /// [`UsageError`] saying so (so layers that know only that type, the
+    /// engine's sink errors, classify it as the user's).
+    #[error("{}", path.display())]
+    IsAnInput {
+        path: PathBuf,
+        input: PathBuf,
+        #[source]
+        reason: UsageError,
+    },
     /// The output path holds something an output must not replace.
-    #[error("{}: is {what}, not a regular file; an output never replaces one", path.display())]
-    NotARegularFile { path: PathBuf, what: &'static str },
+    #[error("{}", path.display())]
+    NotARegularFile {
+        path: PathBuf,
+        what: &'static str,
+        #[source]
+        reason: UsageError,
+    },
     /// A symbolic link whose target does not exist.
-    #[error("{}: a symbolic link to nothing; an output follows a link only to an existing file", path.display())]
-    DanglingLink { path: PathBuf },
+    #[error("{}", path.display())]
+    DanglingLink {
+        path: PathBuf,
+        #[source]
+        reason: UsageError,
+    },
+}
+
+impl FileError {
+    fn is_an_input(path: &Path, input: PathBuf) -> Self {
+        let reason = UsageError(format!(
+            "this output is the input {}; choose another name (nothing was written)",
+            input.display()
+        ));
+        FileError::IsAnInput {
+            path: path.to_path_buf(),
+            input,
+            reason,
+        }
+    }
+
+    fn not_a_regular_file(path: &Path, what: &'static str) -> Self {
+        FileError::NotARegularFile {
+            path: path.to_path_buf(),
+            what,
+            reason: UsageError(format!(
+                "is {what}, not a regular file; an output never replaces one"
+            )),
+        }
+    }
+
+    fn dangling_link(path: &Path) -> Self {
+        FileError::DanglingLink {
+            path: path.to_path_buf(),
+            reason: UsageError(
+                "a symbolic link to nothing; an output follows a link only to an existing file"
+                    .into(),
+            ),
+        }
+    }
 }
 
 impl FileError {
@@ -250,24 +296,16 @@ fn input_at(metadata: &std::fs::Metadata) -> Option<PathBuf> {
 pub fn output_target(path: &Path) -> Result<PathBuf, FileError> {
     let target = match std::fs::symlink_metadata(path) {
         Ok(m) if m.file_type().is_symlink() => {
-            std::fs::canonicalize(path).map_err(|_| FileError::DanglingLink {
-                path: path.to_path_buf(),
-            })?
+            std::fs::canonicalize(path).map_err(|_| FileError::dangling_link(path))?
         }
         _ => path.to_path_buf(),
     };
     if let Ok(m) = std::fs::metadata(&target) {
         if !m.is_file() {
-            return Err(FileError::NotARegularFile {
-                path: path.to_path_buf(),
-                what: kind_of(m.file_type()),
-            });
+            return Err(FileError::not_a_regular_file(path, kind_of(m.file_type())));
         }
         if let Some(input) = input_at(&m) {
-            return Err(FileError::IsAnInput {
-                path: path.to_path_buf(),
-                input,
-            });
+            return Err(FileError::is_an_input(path, input));
         }
     }
     Ok(target)
@@ -501,9 +539,13 @@ impl StagedFolder {
     pub fn beside(final_dir: &Path) -> Result<Self, FileError> {
         if let Ok(m) = std::fs::metadata(final_dir) {
             if !m.is_dir() {
-                return Err(FileError::NotARegularFile {
-                    path: final_dir.to_path_buf(),
-                    what: "a file where a report folder was asked for",
+                return Err(FileError::Folder {
+                    folder: final_dir.to_path_buf(),
+                    source: UsageError(format!(
+                        "{} is {}; a report folder is made here",
+                        final_dir.display(),
+                        kind_of(m.file_type())
+                    )),
                 });
             }
         }
@@ -774,14 +816,13 @@ mod tests {
         assert!(matches!(err, FileError::IsAnInput { .. }), "{err:?}");
         assert!(err.is_input());
         let err = PartialFile::beside(&input).unwrap_err();
-        assert!(
-            err.to_string().contains("this output is the input"),
-            "{err}"
-        );
+        let why = std::error::Error::source(&err).unwrap().to_string();
+        assert!(why.contains("this output is the input"), "{why}");
         assert_eq!(std::fs::read(&input).unwrap(), b"data");
         assert_eq!(names_in(dir.path()), ["in.mcap"]);
         // A folder is no input.
         let err = check_input(dir.path()).unwrap_err();
+        assert_eq!(err.kind(), std::io::ErrorKind::InvalidInput);
         assert!(err.to_string().contains("a folder"), "{err}");
     }
 }

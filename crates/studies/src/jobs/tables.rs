@@ -140,6 +140,15 @@ pub fn export(args: &ExportArgs, progress: &dyn Progress) -> Result<Exported> {
         ))
         .into());
     }
+    // The inputs are known before the first table is made: none of the
+    // tables may be one of them (tortwin_files::output_target).
+    tortwin_outputs::files::check_input(&args.recording).map_err(|e| {
+        tortwin_recording::error::InputError::file(
+            &args.recording,
+            format!("cannot open the recording: {e}"),
+        )
+    })?;
+    super::load_config(args.config.as_ref())?;
     make_folder(&args.out)?;
     let options = TableOptions {
         formats: Formats {
