@@ -32,8 +32,15 @@
 //!    contenders of a step (up to three within 80 % of the best BIC drop)
 //!    are fitted again with the model's effects free before they are
 //!    compared. The site's constants are one candidate of every step until
-//!    they are taken (`calibrate.rs`); an effect taken before them that
-//!    they make unnecessary is taken out again.
+//!    they are taken (`calibrate.rs`), calibrated with the effects already
+//!    taken free and, when they contend, reduced to the fewest that explain
+//!    as well; an effect must beat them by the BIC threshold (a constant is
+//!    the plainer story), and a generic term everywhere on a quantity one
+//!    constant scales (transfer: kt; muD, muC) must beat that constant
+//!    fitted alone by as much. An effect taken before them that they make
+//!    unnecessary is taken out again; when they are taken, the step's best
+//!    effects are fitted jointly with them, and every named effect is
+//!    fitted afresh at the next step.
 //! 5. **What is left.** If the final RMSE is still well above the noise
 //!    estimate ([`Options::unexplained_ratio`]), the remaining residual is
 //!    reported with the covariate it follows most closely: no effect is
