@@ -181,11 +181,55 @@ const NAME_KEPT: usize = 200;
 
 // ---------------------------------------------------------------- inputs
 
-/// The run's inputs: device, inode and the path they were read by.
-static INPUTS: Mutex<Vec<(u64, u64, PathBuf)>> = Mutex::new(Vec::new());
+/// The inputs of the jobs running: device, inode, the path they were read
+/// by and the [`InputScope`] that read them (0: the process's).
+static INPUTS: Mutex<Vec<(u64, u64, PathBuf, u64)>> = Mutex::new(Vec::new());
 
-fn inputs() -> MutexGuard<'static, Vec<(u64, u64, PathBuf)>> {
+fn inputs() -> MutexGuard<'static, Vec<(u64, u64, PathBuf, u64)>> {
     INPUTS.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+thread_local! {
+    /// The scope inputs read on this thread belong to.
+    static SCOPE: std::cell::Cell<u64> = const { std::cell::Cell::new(0) };
+}
+static NEXT_SCOPE: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(1);
+
+/// One job's inputs: those read on this thread while it lives are its, and
+/// stop being protected when it ends. A process that runs one job after
+/// another (the Python package, a fleet, the tests) may write a file that
+/// an earlier job read; while a job runs, no output replaces what it (or
+/// any job running beside it) reads.
+/// A scope entered inside another is the outer one: a job that calls
+/// another (export runs a replay; the replay writes its state after the
+/// stepping) keeps its inputs to its end.
+#[derive(Debug)]
+pub struct InputScope {
+    /// The scope this guard ends, if it began it.
+    owned: Option<u64>,
+}
+
+impl InputScope {
+    /// Enters a new scope on this thread (until dropped), unless one is
+    /// already open here.
+    #[must_use]
+    pub fn enter() -> Self {
+        if SCOPE.with(std::cell::Cell::get) != 0 {
+            return Self { owned: None };
+        }
+        let id = NEXT_SCOPE.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        SCOPE.with(|s| s.set(id));
+        Self { owned: Some(id) }
+    }
+}
+
+impl Drop for InputScope {
+    fn drop(&mut self) {
+        if let Some(id) = self.owned {
+            SCOPE.with(|s| s.set(0));
+            inputs().retain(|e| e.3 != id);
+        }
+    }
 }
 
 /// What a file system entry is, for a message.
@@ -266,9 +310,13 @@ fn remember_input(path: &Path, metadata: &std::fs::Metadata) {
     if cfg!(not(unix)) {
         return;
     }
+    let scope = SCOPE.with(std::cell::Cell::get);
     let mut known = inputs();
-    if !known.iter().any(|&(d, i, _)| d == dev && i == ino) {
-        known.push((dev, ino, path.to_path_buf()));
+    if !known
+        .iter()
+        .any(|&(d, i, _, s)| d == dev && i == ino && s == scope)
+    {
+        known.push((dev, ino, path.to_path_buf(), scope));
     }
 }
 
@@ -282,10 +330,10 @@ fn input_at(metadata: &std::fs::Metadata) -> Option<PathBuf> {
     // since may have passed its inode on to a new file.
     inputs()
         .iter()
-        .find(|&&(d, i, ref p)| {
+        .find(|&&(d, i, ref p, _)| {
             d == dev && i == ino && std::fs::metadata(p).is_ok_and(|m| identity(&m) == (d, i))
         })
-        .map(|(_, _, p)| p.clone())
+        .map(|(_, _, p, _)| p.clone())
 }
 
 // --------------------------------------------------------------- outputs
@@ -820,6 +868,15 @@ mod tests {
         assert!(why.contains("this output is the input"), "{why}");
         assert_eq!(std::fs::read(&input).unwrap(), b"data");
         assert_eq!(names_in(dir.path()), ["in.mcap"]);
+        // Once the job that read it has ended, it may be written.
+        let later = dir.path().join("later.json");
+        std::fs::write(&later, b"{}").unwrap();
+        {
+            let _job = InputScope::enter();
+            check_input(&later).unwrap();
+            assert!(write_atomically(&later, b"[]").is_err());
+        }
+        write_atomically(&later, b"[]").unwrap();
         // A folder is no input.
         let err = check_input(dir.path()).unwrap_err();
         assert_eq!(err.kind(), std::io::ErrorKind::InvalidInput);

@@ -203,6 +203,7 @@ fn study(
     options: Options,
     progress: &dyn Progress,
 ) -> Result<(Discovery, Dataset)> {
+    let _inputs = tortwin_outputs::files::InputScope::enter();
     if args.report.is_file() {
         return Err(UsageError(format!(
             "--report {}: is a file; it must be a directory (created if missing)",

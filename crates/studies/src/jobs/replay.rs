@@ -108,6 +108,8 @@ pub fn replay_run(
     extra: &mut [&mut dyn Sink],
     progress: &dyn Progress,
 ) -> Result<Replayed> {
+    // The inputs read from here on are this job's (tortwin_files::InputScope).
+    let _inputs = tortwin_outputs::files::InputScope::enter();
     let saved;
     let start = match (start, &args.state_in) {
         (Some(start), _) => Some(start),
@@ -160,6 +162,7 @@ pub fn replay_from(
     extra: &mut [&mut dyn Sink],
     progress: &dyn Progress,
 ) -> Result<Replayed> {
+    let _inputs = tortwin_outputs::files::InputScope::enter();
     let cfg = load_config(args.config.as_ref())?;
     let outputs = [&args.out_mcap, &args.out_rrd, &args.state_out];
     for (k, a) in outputs.iter().enumerate() {

@@ -170,6 +170,7 @@ pub fn run(args: &StrategyArgs) -> Result<(Traffic, Study)> {
 
 /// [`run`], telling `progress` the stage and the strategies evaluated.
 pub fn run_with(args: &StrategyArgs, progress: &dyn Progress) -> Result<(Traffic, Study)> {
+    let _inputs = tortwin_outputs::files::InputScope::enter();
     if args.out.is_file() {
         return Err(UsageError(format!(
             "--out {}: is a file; it must be a directory (created if missing)",

@@ -127,6 +127,7 @@ pub fn synth_with(
     args: &SynthArgs,
     progress: &dyn crate::progress::Progress,
 ) -> Result<(SynthReport, PathBuf)> {
+    let _inputs = tortwin_outputs::files::InputScope::enter();
     let (params, truth) = prepare(args)?;
     let key_path = key_path(args);
     if key_path == args.out {

@@ -99,6 +99,7 @@ impl ExportArgs {
 
 /// Builds the recording `args.out` from the tables in `args.tables`.
 pub fn import(args: &ImportArgs, progress: &dyn Progress) -> Result<ImportSummary> {
+    let _inputs = tortwin_outputs::files::InputScope::enter();
     if !args.tables.is_dir() {
         return Err(UsageError(format!(
             "{}: not a folder of tables (section.toml, passages.csv, ...)",
@@ -142,6 +143,7 @@ pub fn export(args: &ExportArgs, progress: &dyn Progress) -> Result<Exported> {
     }
     // The inputs are known before the first table is made: none of the
     // tables may be one of them (tortwin_files::output_target).
+    let _inputs = tortwin_outputs::files::InputScope::enter();
     tortwin_outputs::files::check_input(&args.recording).map_err(|e| {
         tortwin_recording::error::InputError::file(
             &args.recording,
