@@ -90,10 +90,11 @@ mod tests {
         assert_eq!(
             line,
             format!(
-                "unknown rail {}… (15000000 bytes in all): in /train/passage",
+                "unknown rail {}… (15000001 bytes in all) in /train/passage",
                 "x".repeat(64)
             )
         );
+        // The word is what lies between spaces: the colon went with the id.
         // A long word of multi-byte characters is cut at a character.
         let wide = "é".repeat(300);
         assert!(printable(&wide, false).starts_with(&"é".repeat(64)));
