@@ -61,15 +61,7 @@ fn replay_into(recording: &Path, dir: &Path) -> Command {
 fn a_killed_run_leaves_no_output_and_its_leftovers_are_swept_by_a_later_run() {
     let work = tempfile::tempdir().unwrap();
     // Four days: long enough to be killed in the middle.
-    let recording = work.path().join("four_days.mcap");
-    check(
-        &tortwin()
-            .args(["synth", "--quiet", "--days", "4", "--out"])
-            .arg(&recording)
-            .output()
-            .unwrap(),
-        "synth",
-    );
+    let recording = common::four_days(work.path());
     let out = work.path().join("out");
     std::fs::create_dir(&out).unwrap();
 

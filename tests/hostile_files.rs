@@ -313,15 +313,7 @@ fn interrupted(mut command: Command, dir: &Path, signal: &str) -> std::process::
 fn sigint_and_sigterm_leave_nothing_behind() {
     let work = tempfile::tempdir().unwrap();
     // Four days: long enough to be interrupted in the middle.
-    let recording = work.path().join("four_days.mcap");
-    check(
-        &tortwin()
-            .args(["synth", "--quiet", "--days", "4", "--out"])
-            .arg(&recording)
-            .output()
-            .unwrap(),
-        "synth",
-    );
+    let recording = common::four_days(work.path());
     for (signal, code) in [("INT", 130), ("TERM", 143)] {
         let out = work.path().join(format!("out-{signal}"));
         std::fs::create_dir(&out).unwrap();

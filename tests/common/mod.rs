@@ -48,6 +48,21 @@ pub fn replay_demo_mcap(dir: &std::path::Path) -> PathBuf {
     mcap
 }
 
+/// `tortwin synth --days 4` into `dir/four_days.mcap`: a recording long
+/// enough for a run to be killed or interrupted in the middle.
+pub fn four_days(dir: &std::path::Path) -> PathBuf {
+    let recording = dir.join("four_days.mcap");
+    check(
+        &tortwin()
+            .args(["synth", "--quiet", "--days", "4", "--out"])
+            .arg(&recording)
+            .output()
+            .unwrap(),
+        "synth",
+    );
+    recording
+}
+
 /// The `tortwin` binary of this build.
 pub fn tortwin() -> Command {
     Command::new(env!("CARGO_BIN_EXE_tortwin"))

@@ -272,18 +272,7 @@ fn identity(_: &std::fs::Metadata) -> (u64, u64) {
 /// pipe is refused before it is opened, where opening it would block.
 /// Recorded as one of the run's inputs.
 pub fn check_input(path: &Path) -> std::io::Result<()> {
-    let metadata = std::fs::metadata(path)?;
-    if !metadata.is_file() {
-        return Err(std::io::Error::new(
-            std::io::ErrorKind::InvalidInput,
-            format!(
-                "{} (an input must be a regular file)",
-                kind_of(metadata.file_type())
-            ),
-        ));
-    }
-    remember_input(path, &metadata);
-    Ok(())
+    remember_input(path, &std::fs::metadata(path)?)
 }
 
 /// Opens the input `path` for reading after [`check_input`]; the opened
@@ -291,7 +280,12 @@ pub fn check_input(path: &Path) -> std::io::Result<()> {
 pub fn open_input(path: &Path) -> std::io::Result<File> {
     check_input(path)?;
     let file = File::open(path)?;
-    let metadata = file.metadata()?;
+    remember_input(path, &file.metadata()?)?;
+    Ok(file)
+}
+
+/// Refuses what is not a regular file, and records one as an input.
+fn remember_input(path: &Path, metadata: &std::fs::Metadata) -> std::io::Result<()> {
     if !metadata.is_file() {
         return Err(std::io::Error::new(
             std::io::ErrorKind::InvalidInput,
@@ -301,14 +295,9 @@ pub fn open_input(path: &Path) -> std::io::Result<File> {
             ),
         ));
     }
-    remember_input(path, &metadata);
-    Ok(file)
-}
-
-fn remember_input(path: &Path, metadata: &std::fs::Metadata) {
     let (dev, ino) = identity(metadata);
     if cfg!(not(unix)) {
-        return;
+        return Ok(());
     }
     let scope = SCOPE.with(std::cell::Cell::get);
     let mut known = inputs();
@@ -318,6 +307,7 @@ fn remember_input(path: &Path, metadata: &std::fs::Metadata) {
     {
         known.push((dev, ino, path.to_path_buf(), scope));
     }
+    Ok(())
 }
 
 /// The input an existing file is, if it is one of the run's.
