@@ -332,7 +332,11 @@ proptest! {
         // One wheel at a time in the serial order (what a sink that wants a
         // field snapshot after every wheel gets), as the engine rolled
         // before the wavefront; every wheel's contacts are compared too.
-        let serial = EngineOptions { snapshot_every_wheel: true, every_wheel_contacts: true };
+        let serial = EngineOptions {
+            snapshot_every_wheel: true,
+            every_wheel_contacts: true,
+            tangents: false,
+        };
         let contacts = EngineOptions { every_wheel_contacts: true, ..EngineOptions::default() };
         let run = |opts, threads| {
             rolled_bits(&cfg, &section, &events, opts, threads).map_err(TestCaseError::fail)
@@ -348,5 +352,9 @@ proptest! {
             let plain = run(EngineOptions::default(), threads)?;
             prop_assert!(plain_reference == plain, "the plain wavefront on {} thread(s) differs", threads);
         }
+        // Carrying the tangents (contacts one by one, with the tangent
+        // steps beside): the same masses, bit for bit.
+        let tangents = run(EngineOptions { tangents: true, ..EngineOptions::default() }, 2)?;
+        prop_assert!(plain_reference == tangents, "the replay with tangents differs");
     }
 }

@@ -40,6 +40,7 @@ use tortwin_model::effects::{Named, TimeEffects};
 use tortwin_model::error::{ConfigError, UsageError};
 use tortwin_model::generic::Driver;
 use tortwin_model::product;
+use tortwin_model::tangent::{self, Tangent};
 use tortwin_recording::error::InputError;
 use tortwin_recording::{
     Axle, AxleRef, BogiePosition, Creepage, Direction, Event, EventKind, Measured, Measurement,
@@ -131,6 +132,12 @@ pub struct EngineOptions {
     /// Give every wheel's contacts to [`Sink::wheel_contacts`] (what strategy
     /// statistics over every contact need; far cheaper than a snapshot).
     pub every_wheel_contacts: bool,
+    /// Carry every mass's derivatives with respect to the state constants
+    /// (`tortwin_model::tangent`) and give each measurement's with its
+    /// [`Readout`] (`mass_tangent`). The contacts run one by one (not four
+    /// wheels at once); the masses are the same. A replay from a saved
+    /// state starts with zero tangents: the saved masses are taken as given.
+    pub tangents: bool,
 }
 
 /// The calculation grid: `d_i = i * C`, `C = pi * nominal wheel diameter`,
@@ -214,6 +221,8 @@ struct TrainRecord {
     site_levels: Vec<(f64, f64)>,
     /// The time_s and weather of those contacts (for read-outs).
     site_at: Vec<(f64, Weather)>,
+    /// With tangents: the tangents of `site_mass_kg` (else empty).
+    site_tan: Vec<Tangent>,
 }
 
 /// An event inside a train's occupation, waiting for the train to be rolled.
@@ -223,7 +232,7 @@ struct Buffered {
     time_s: f64,
     /// The simulated value of a tribometer reading and the rail mass it
     /// read, filled while rolling.
-    reading: Option<(f64, f64)>,
+    reading: Option<roll::Reading>,
 }
 
 /// A pulse or tribometer reading at one point of one track, inside a window.
@@ -420,7 +429,16 @@ impl Engine {
                 nu: cfg.contact.nu,
             },
             tracks: (0..n_tracks).map(|_| TrackState::new(points)).collect(),
-            work: vec![roll::TrackWork::new(points); n_tracks],
+            work: vec![
+                {
+                    let mut work = roll::TrackWork::new(points);
+                    if opts.tangents {
+                        work.rail_tan = vec![[0.0; tangent::SLOTS]; points];
+                    }
+                    work
+                };
+                n_tracks
+            ],
             ledger: Vec::new(),
             last_axle: vec![usize::MAX; n_tracks],
             last_row: vec![0; n_tracks],
@@ -609,10 +627,11 @@ impl Engine {
                     let share = pulse.mass_kg / self.pulse_tracks[pulse.rail].len() as f64;
                     let point = self.applicator_points[pulse.applicator];
                     let weather = self.weather;
-                    let (ctx, states, _) = self.split();
+                    let (ctx, states, works) = self.split();
                     let added = ctx.land_pulse(
                         track,
                         &mut states[track],
+                        &mut works[track].rail_tan,
                         point,
                         time_s,
                         pulse.applicator,
@@ -629,13 +648,19 @@ impl Engine {
                         let track = self.reading_track[m.rail];
                         let point = self.site_points[m.site];
                         let weather = self.weather;
-                        let (ctx, states, _) = self.split();
-                        let (value, mass_kg) =
-                            ctx.read_rail(track, &states[track], point, time_s, &weather);
+                        let (ctx, states, works) = self.split();
+                        let reading = ctx.read_rail(
+                            track,
+                            &states[track],
+                            &works[track].rail_tan,
+                            point,
+                            time_s,
+                            &weather,
+                        );
                         let readout = sink
                             .wants_readouts()
-                            .then(|| reading_readout(mass_kg, time_s, &weather.current));
-                        (value, readout)
+                            .then(|| self.reading_readout(&reading, time_s, &weather.current));
+                        (reading.value, readout)
                     }
                     Measured::Mu(axle) | Measured::Adhesion(axle) => {
                         let record = self.record_of(event, axle)?;
@@ -735,6 +760,7 @@ impl Engine {
             site_mass_kg: Vec::new(),
             site_levels: Vec::new(),
             site_at: Vec::new(),
+            site_tan: Vec::new(),
         });
         drop(passage);
         record.log_time_ns = log_time_ns;
@@ -775,6 +801,12 @@ impl Engine {
         record
             .site_at
             .resize(record.site_mass_kg.len(), (f64::NAN, Weather::default()));
+        record.site_tan.clear();
+        if self.opts.tangents {
+            record
+                .site_tan
+                .resize(record.site_mass_kg.len(), [f64::NAN; tangent::SLOTS]);
+        }
         record.site_levels.clear();
         if self.generic.any_friction() {
             record
@@ -896,12 +928,12 @@ impl Engine {
                 EventKind::Measurement(m) => {
                     let wants = sink.wants_readouts();
                     let (simulated, readout) = match (&m.of, buffered.reading) {
-                        (Measured::RailMu, Some((value, mass_kg))) => {
+                        (Measured::RailMu, Some(reading)) => {
                             let readout = wants.then(|| {
                                 let weather = self.timeline.at(buffered.time_s).current;
-                                reading_readout(mass_kg, buffered.time_s, &weather)
+                                self.reading_readout(&reading, buffered.time_s, &weather)
                             });
-                            (value, readout)
+                            (reading.value, readout)
                         }
                         (Measured::RailMu, None) => {
                             unreachable!("every reading in a window is run while rolling or after")
@@ -981,6 +1013,19 @@ impl Engine {
             wheel: Some(wheel.drivers),
             contact: matches!(m.of, Measured::Adhesion(_))
                 .then(|| self.adhesion_contact(wheel, record.passage.speed_mps)),
+            mass_tangent: record.site_tan.get(k).copied(),
+        }
+    }
+
+    /// What a tribometer reading read, for a read-out.
+    fn reading_readout(&self, reading: &roll::Reading, time_s: f64, weather: &Weather) -> Readout {
+        Readout {
+            mass_kg: reading.mass_kg,
+            time_s,
+            weather: *weather,
+            wheel: None,
+            contact: None,
+            mass_tangent: self.opts.tangents.then_some(reading.tangent),
         }
     }
 
@@ -1116,17 +1161,6 @@ impl Engine {
 }
 
 /// What generic terms driven by the wheel see of axle `axle` on `rail`.
-/// What a tribometer reading read, for a read-out.
-fn reading_readout(mass_kg: f64, time_s: f64, weather: &Weather) -> Readout {
-    Readout {
-        mass_kg,
-        time_s,
-        weather: *weather,
-        wheel: None,
-        contact: None,
-    }
-}
-
 fn wheel_drivers(speed_mps: f64, axle: &Axle, rail: usize) -> WheelDrivers {
     let q_n = axle.wheel_load_n.get(rail).copied().unwrap_or(0.0);
     let c = axle.creepage.get(rail).copied().unwrap_or(Creepage {

@@ -16,6 +16,7 @@ use std::sync::Arc;
 use tortwin_model::config::ModelConfig;
 use tortwin_model::contact::PolachContact;
 use tortwin_model::product::{self, ProductParams};
+use tortwin_model::tangent::Tangent;
 use tortwin_model::Quantity;
 use tortwin_recording::{Section, Weather};
 
@@ -35,6 +36,10 @@ pub struct Readout {
     pub(crate) wheel: Option<WheelDrivers>,
     /// The wheel's contact, for an adhesion measurement.
     pub(crate) contact: Option<PolachContact>,
+    /// With [`crate::EngineOptions::tangents`]: the tangent of `mass_kg`,
+    /// its derivatives with respect to `ln p` of the state constants
+    /// ([`tortwin_model::tangent::STATE_KEYS`]).
+    pub mass_tangent: Option<Tangent>,
 }
 
 /// The read-out parameters of one configuration, compiled for a section.
@@ -80,5 +85,16 @@ impl ReadoutModel {
             _ => mu,
         };
         self.generic.measured(value, site, rail, quantity)
+    }
+
+    /// The derivative of [`ReadoutModel::value`] with respect to the mass
+    /// read, by central differences over a ten-thousandth of eq. (4)'s mass
+    /// scale (`km / 10⁴`): eq. (4), Polach's law in `mu` and the offsets
+    /// are smooth in the mass, so the difference is exact to about 1e-9
+    /// relative.
+    pub fn slope(&self, r: &Readout, site: usize, rail: usize, quantity: Quantity) -> f64 {
+        let h = 1e-4 * self.product.km_kg;
+        let at = |mass_kg: f64| self.value(&Readout { mass_kg, ..*r }, site, rail, quantity);
+        (at(r.mass_kg + h) - at(r.mass_kg - h)) / (2.0 * h)
     }
 }

@@ -19,6 +19,7 @@ use tortwin_model::exp::exp4_inline;
 use tortwin_model::exp::exp4_is_vectorised;
 use tortwin_model::generic::ActsOn;
 use tortwin_model::product::{self, ContactConditions, ProductParams};
+use tortwin_model::tangent::{self, ConditionTangents, Tangent, SLOTS};
 use tortwin_recording::Section;
 
 /// What a wheel saw at every point of its track (kept for the last wheel of
@@ -51,6 +52,11 @@ struct WheelRoll {
     consumed_kg: f64,
     capped_kg: f64,
     lost_kg: f64,
+    /// With tangents ([`crate::EngineOptions::tangents`]): the tangents of
+    /// `wheel_kg` and `edge_kg`, and of the step-2 mass of the last contact.
+    wheel_tan: Tangent,
+    edge_tan: Tangent,
+    seen_tan: Tangent,
 }
 
 /// What a contact needs that depends only on the wheel: computed once.
@@ -81,6 +87,8 @@ struct Roller {
     /// wheel_edge_reservoir's (alpha, r).
     reservoir: Option<(f64, f64)>,
     observe: bool,
+    /// The tangent of `fp_fc` (zero without tangents).
+    fp_fc_tan: Tangent,
 }
 
 impl Roller {
@@ -124,6 +132,74 @@ impl Roller {
         self.touched(track, &touch, i);
         let conditions = self.conditions(st, &touch, revolution, i);
         self.finish(st, track, observed, &touch, &conditions, None, i)
+    }
+
+    /// [`Roller::contact`] with the tangents carried
+    /// ([`tortwin_model::tangent`]): the same masses, and the rail's
+    /// tangent at `i` (`rail_tan`) and the wheel's updated by each step.
+    #[allow(clippy::too_many_arguments)]
+    fn contact_tangent(
+        &self,
+        st: &mut WheelRoll,
+        track: &mut TrackState,
+        rail_tan: &mut [Tangent],
+        observed: &mut Observed,
+        d_m: &[f64],
+        revolution: &[f64],
+        timeline: &WeatherTimeline,
+        i: usize,
+    ) -> f64 {
+        let mut touch = self.touch(track, d_m, timeline, i);
+        let mut dr = rail_tan[i];
+        if touch.aged {
+            let exps = self
+                .time_effects
+                .exp_args(touch.dt_s, touch.rain_mm)
+                .map(f64::exp);
+            self.age(st, &mut touch, exps);
+            // The time effects multiply the mass: its tangent alike.
+            for x in &mut dr {
+                *x = self.time_effects.apply_given(*x, touch.rain_mm, exps);
+            }
+        }
+        self.touched(track, &touch, i);
+        let conditions = self.conditions(st, &touch, revolution, i);
+        let tangents = ConditionTangents {
+            fp_fc: self.fp_fc_tan,
+            transfer_revolution: match (conditions.transfer_revolution, st.applicator_point) {
+                (Some(r), Some(ia)) => tangent::revolution_tangent(&self.params, r, i.abs_diff(ia)),
+                _ => [0.0; SLOTS],
+            },
+        };
+        let mut rail_kg = touch.rail_kg;
+        let m_kg = st.wheel_kg + rail_kg;
+        st.seen_tan = tangent::add(&st.wheel_tan, &dr);
+        let losses = tangent::roll(
+            &self.params,
+            &mut st.wheel_kg,
+            &mut rail_kg,
+            &conditions,
+            &tangents,
+            &mut st.wheel_tan,
+            &mut dr,
+        );
+        st.consumed_kg += losses.consumed_kg;
+        st.capped_kg += losses.capped_kg;
+        if let Some((alpha, r)) = self.reservoir {
+            (st.wheel_kg, st.edge_kg) =
+                effects::wheel_edge_reservoir(st.wheel_kg, st.edge_kg, alpha, r);
+            for k in 0..SLOTS {
+                (st.wheel_tan[k], st.edge_tan[k]) =
+                    effects::wheel_edge_reservoir(st.wheel_tan[k], st.edge_tan[k], alpha, r);
+            }
+        }
+        track.rail_mass_kg[i] = rail_kg;
+        rail_tan[i] = dr;
+        if self.observe {
+            observed.mass_kg[i] = m_kg;
+            observed.wheel_mass_kg[i] = st.wheel_kg;
+        }
+        m_kg
     }
 
     /// Step 1, what it reads: the time, the weather, the rail mass and the
@@ -378,9 +454,8 @@ pub(crate) struct TrackWork {
     /// The roll's contributions to the run totals, to be added in the
     /// serial order (floating-point sums depend on their order).
     ledger: Vec<Addend>,
-    /// Tribometer readings taken: (window index, (simulated value, rail
-    /// mass read)).
-    readings: Vec<(usize, (f64, f64))>,
+    /// Tribometer readings taken, by their window index.
+    readings: Vec<(usize, Reading)>,
     /// Contacts at measurement sites.
     sites: Vec<SiteValue>,
     /// When a sink wants every wheel's contacts: the step-2 mass of every
@@ -388,6 +463,18 @@ pub(crate) struct TrackWork {
     /// wheel in axle order (handed to the sink in the serial order after
     /// the roll).
     wheel_seen: Vec<f64>,
+    /// With tangents ([`crate::EngineOptions::tangents`]): the tangent of
+    /// the rail mass at every point (else empty).
+    pub(crate) rail_tan: Vec<Tangent>,
+}
+
+/// A tribometer reading's simulated value, the rail mass it read and that
+/// mass's tangent (zero without tangents).
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Reading {
+    pub(crate) value: f64,
+    pub(crate) mass_kg: f64,
+    pub(crate) tangent: Tangent,
 }
 
 impl TrackWork {
@@ -401,6 +488,7 @@ impl TrackWork {
             readings: Vec::new(),
             sites: Vec::new(),
             wheel_seen: Vec::new(),
+            rail_tan: Vec::new(),
         }
     }
 }
@@ -415,6 +503,8 @@ struct SiteValue {
     /// The contact's time_s and weather (what a read-out needs).
     time_s: f64,
     weather: tortwin_recording::Weather,
+    /// The step-2 mass's tangent (zero without tangents).
+    tangent: Tangent,
 }
 
 /// One addition to the run totals, with its place in the serial order:
@@ -505,6 +595,8 @@ pub(crate) struct RollContext<'a> {
     observe_every_wheel: bool,
     /// Keep every wheel's step-2 masses in [`TrackWork::wheel_seen`].
     keep_seen: bool,
+    /// Carry the masses' tangents ([`crate::EngineOptions::tangents`]).
+    tangents: bool,
     origin_ns: i64,
 }
 
@@ -554,6 +646,7 @@ impl Engine {
                 last_axle: &self.last_axle,
                 observe_every_wheel: self.opts.snapshot_every_wheel,
                 keep_seen: self.opts.every_wheel_contacts && !self.opts.snapshot_every_wheel,
+                tangents: self.opts.tangents,
                 origin_ns: self.origin_ns,
             },
             &mut self.tracks,
@@ -735,6 +828,9 @@ impl Engine {
                 if let Some(levels) = site.levels {
                     record.site_levels[site.index] = levels;
                 }
+                if let Some(slot) = record.site_tan.get_mut(site.index) {
+                    *slot = site.tangent;
+                }
             }
             work.sites.clear();
             ledger.append(&mut work.ledger);
@@ -851,7 +947,7 @@ impl RollContext<'_> {
         for s in 0..points + n - 1 {
             let lo = s.saturating_sub(points - 1);
             let hi = n.min(s + 1);
-            if lo == 0 && hi == LANES {
+            if lo == 0 && hi == LANES && !self.tangents {
                 let is: [usize; LANES] =
                     std::array::from_fn(|j| if up { s - j } else { points - 1 - (s - j) });
                 if !is.iter().any(|&i| special[i]) {
@@ -873,7 +969,7 @@ impl RollContext<'_> {
                 let m_kg = if special[i] {
                     self.special_contact(record, track, state, work, lane, i)
                 } else {
-                    self.contact(lane, state, &mut work.observed, i)
+                    self.contact(lane, state, work, i)
                 };
                 if self.keep_seen {
                     work.wheel_seen[lane.row * points + i] = m_kg;
@@ -887,19 +983,32 @@ impl RollContext<'_> {
     }
 
     /// One contact of `lane`'s wheel at point `i`, its exponentials taken
-    /// one by one ([`Roller::contact`]); returns the step-2 mass.
+    /// one by one ([`Roller::contact`], or [`Roller::contact_tangent`] with
+    /// tangents); returns the step-2 mass.
     #[inline(always)]
     fn contact(
         &self,
         lane: &mut Lane,
         state: &mut TrackState,
-        observed: &mut Observed,
+        work: &mut TrackWork,
         i: usize,
     ) -> f64 {
+        if self.tangents {
+            return lane.roller.contact_tangent(
+                &mut lane.st,
+                state,
+                &mut work.rail_tan,
+                &mut work.observed,
+                self.d_m,
+                self.revolution,
+                self.timeline,
+                i,
+            );
+        }
         lane.roller.contact(
             &mut lane.st,
             state,
-            observed,
+            &mut work.observed,
             self.d_m,
             self.revolution,
             self.timeline,
@@ -1055,7 +1164,7 @@ impl RollContext<'_> {
             // The wheel passes this applicator: N counts from here.
             lane.st.applicator_point = Some(i);
         }
-        let m_kg = self.contact(lane, state, &mut work.observed, i);
+        let m_kg = self.contact(lane, state, work, i);
         let sites_here = &self.sites_at[i];
         if sites_here.is_empty() {
             return m_kg;
@@ -1081,6 +1190,7 @@ impl RollContext<'_> {
                 levels,
                 time_s: t,
                 weather,
+                tangent: lane.st.seen_tan,
             });
         }
         m_kg
@@ -1103,6 +1213,9 @@ impl RollContext<'_> {
             consumed_kg: 0.0,
             capped_kg: 0.0,
             lost_kg: 0.0,
+            wheel_tan: [0.0; SLOTS],
+            edge_tan: [0.0; SLOTS],
+            seen_tan: [0.0; SLOTS],
         };
         let generic = self.generic;
         let wheel_generic = |acts_on| {
@@ -1154,6 +1267,16 @@ impl RollContext<'_> {
                 .get(Named::WheelEdgeReservoir)
                 .map(|p| (p[0], p[1])),
             observe: self.observe_every_wheel || self.last_axle[track] == a,
+            fp_fc_tan: if self.tangents {
+                tangent::fp_fc_tangent(
+                    self.product,
+                    wheel.hertz.pm_pa,
+                    wheel.creepage.cx,
+                    wheel.creepage.cy,
+                )
+            } else {
+                [0.0; SLOTS]
+            },
         };
         Lane {
             axle: a,
@@ -1174,6 +1297,7 @@ impl RollContext<'_> {
         &self,
         track: usize,
         state: &mut TrackState,
+        rail_tan: &mut [Tangent],
         point: usize,
         time_s: f64,
         applicator: usize,
@@ -1200,13 +1324,28 @@ impl RollContext<'_> {
         let mut m = state.rail_mass_kg[point];
         let last = state.last_touch_s[point];
         let mut lost_kg = None;
+        let mut tan = rail_tan.get(point).copied();
         if effects.any() && !last.is_nan() {
-            let aged = effects.apply(m, time_s - last, precip - state.precip_at_touch_mm[point]);
+            let (dt_s, rain_mm) = (time_s - last, precip - state.precip_at_touch_mm[point]);
+            let aged = effects.apply(m, dt_s, rain_mm);
             lost_kg = Some(m - aged);
             m = aged;
+            // The same multiplications on the tangent.
+            if let Some(t) = &mut tan {
+                for x in t {
+                    *x = effects.apply(*x, dt_s, rain_mm);
+                }
+            }
         }
+        // The pulse's mass does not depend on the constants.
         m += mass_kg;
-        let capped_kg = product::cap(self.product, &mut m);
+        let capped_kg = match &mut tan {
+            Some(t) => tangent::cap(self.product, &mut m, t),
+            None => product::cap(self.product, &mut m),
+        };
+        if let Some(t) = tan {
+            rail_tan[point] = t;
+        }
         state.rail_mass_kg[point] = m;
         state.last_touch_s[point] = time_s;
         state.precip_at_touch_mm[point] = precip;
@@ -1219,21 +1358,32 @@ impl RollContext<'_> {
 
     /// A tribometer reading (model.md): eq. (4) with the rail mass alone, the
     /// time effects since the last touch applied to the value read only.
-    /// Returns the value and the mass it read.
+    /// Returns the value, the mass it read and that mass's tangent (from
+    /// `rail_tan`, zero when it is empty).
     pub(crate) fn read_rail(
         &self,
         track: usize,
         state: &TrackState,
+        rail_tan: &[Tangent],
         point: usize,
         time_s: f64,
         weather: &WeatherState,
-    ) -> (f64, f64) {
+    ) -> Reading {
         let mut m = state.rail_mass_kg[point];
+        let mut tan = rail_tan.get(point).copied().unwrap_or([0.0; SLOTS]);
         let last = state.last_touch_s[point];
         if self.time_effects.any() && !last.is_nan() {
             let rain = weather.precip_mm_at(time_s) - state.precip_at_touch_mm[point];
             m = self.time_effects.apply(m, time_s - last, rain);
+            for x in &mut tan {
+                *x = self.time_effects.apply(*x, time_s - last, rain);
+            }
         }
+        let reading = |value| Reading {
+            value,
+            mass_kg: m,
+            tangent: tan,
+        };
         if self.generic.any_friction() {
             let levels = self.generic.friction_levels(
                 self.product.mu_d,
@@ -1243,9 +1393,9 @@ impl RollContext<'_> {
                 &weather.current,
                 None,
             );
-            return (super::friction_at(self.product, levels, m), m);
+            return reading(super::friction_at(self.product, levels, m));
         }
-        (product::friction(self.product, m), m)
+        reading(product::friction(self.product, m))
     }
 
     /// Runs point event `k` of `track` (a pulse or a reading of the window);
@@ -1264,10 +1414,18 @@ impl RollContext<'_> {
                 applicator,
                 mass_kg,
             } => Ran::Pulse(self.land_pulse(
-                track, state, ev.point, ev.time_s, applicator, mass_kg, weather,
+                track,
+                state,
+                &mut work.rail_tan,
+                ev.point,
+                ev.time_s,
+                applicator,
+                mass_kg,
+                weather,
             )),
             PointEventKind::Reading => {
-                let reading = self.read_rail(track, state, ev.point, ev.time_s, weather);
+                let reading =
+                    self.read_rail(track, state, &work.rail_tan, ev.point, ev.time_s, weather);
                 work.readings.push((ev.buffered, reading));
                 Ran::Reading
             }

@@ -12,6 +12,8 @@
 //! - [`error`]: configuration and usage errors.
 //! - [`role`]: which parameters move the product masses and which only
 //!   read them (what a fit can evaluate without a replay).
+//! - [`tangent`]: the masses' derivatives with respect to the constants
+//!   that move them, stepped beside the masses (one replay for all).
 
 #![warn(unreachable_pub)]
 
@@ -24,5 +26,6 @@ pub mod generic;
 pub mod product;
 mod quantity;
 pub mod role;
+pub mod tangent;
 
 pub use quantity::Quantity;

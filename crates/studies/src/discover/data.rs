@@ -17,6 +17,8 @@ use tortwin_engine::sink::{MeasurementOutput, Sink};
 use tortwin_engine::weather::WeatherState;
 use tortwin_engine::{Engine, EngineOptions, Readout, ReadoutModel};
 use tortwin_model::config::ModelConfig;
+use tortwin_model::product::ProductKey;
+use tortwin_model::tangent;
 use tortwin_recording::{
     BogiePosition, Direction, Event, EventKind, Passage, Quantity, Recording, Section,
 };
@@ -186,14 +188,51 @@ impl Dataset {
     /// The simulated value of every row with `cfg`: one replay of the
     /// in-memory recording through the engine.
     pub fn simulate(&self, cfg: &ModelConfig) -> Result<Vec<f64>> {
-        Ok(self.replay(cfg, false, 0)?.0)
+        Ok(self.replay(cfg, false, false, 0)?.0)
     }
 
     /// [`Dataset::simulate`], and what every row's value was read from
     /// (for [`Dataset::read_out`] at other read-out parameters).
     pub fn simulate_with_readouts(&self, cfg: &ModelConfig) -> Result<(Vec<f64>, Vec<Readout>)> {
-        let (simulated, readouts, _) = self.replay(cfg, true, 0)?;
+        let (simulated, readouts, _) = self.replay(cfg, true, false, 0)?;
         Ok((simulated, complete(readouts)))
+    }
+
+    /// [`Dataset::simulate_with_readouts`] in one replay with tangents
+    /// ([`EngineOptions::tangents`]), and every row's derivative with
+    /// respect to `ln p` of each constant of `keys` (state constants,
+    /// [`tortwin_model::role::Role::State`]): `∂ value / ∂ mass` at the
+    /// mass read ([`ReadoutModel::slope`]) times the mass's tangent. One
+    /// column per key.
+    pub fn simulate_with_tangents(
+        &self,
+        cfg: &ModelConfig,
+        keys: &[ProductKey],
+    ) -> Result<(Vec<f64>, Vec<Readout>, Vec<Vec<f64>>)> {
+        let (simulated, readouts, _) = self.replay(cfg, true, true, 0)?;
+        let readouts = complete(readouts);
+        let model = ReadoutModel::new(&self.section, cfg, self.origin_ns);
+        let slopes: Vec<f64> = self
+            .rows
+            .iter()
+            .zip(&readouts)
+            .map(|(row, r)| model.slope(r, row.site, row.rail, row.quantity))
+            .collect();
+        let columns = keys
+            .iter()
+            .map(|&key| {
+                let slot = tangent::slot(key);
+                readouts
+                    .iter()
+                    .zip(&slopes)
+                    .map(|(r, slope)| match (slot, r.mass_tangent) {
+                        (Some(k), Some(t)) => slope * t[k],
+                        _ => 0.0,
+                    })
+                    .collect()
+            })
+            .collect();
+        Ok((simulated, readouts, columns))
     }
 
     /// The simulated value of every row with `cfg`, read from `readouts`
@@ -218,7 +257,7 @@ impl Dataset {
         cfg: &ModelConfig,
         checkpoints: usize,
     ) -> Result<(Vec<f64>, Vec<Readout>, Checkpoints)> {
-        let (simulated, readouts, cps) = self.replay(cfg, true, checkpoints)?;
+        let (simulated, readouts, cps) = self.replay(cfg, true, false, checkpoints)?;
         Ok((simulated, complete(readouts), cps))
     }
 
@@ -283,12 +322,16 @@ impl Dataset {
         &self,
         cfg: &ModelConfig,
         readouts: bool,
+        tangents: bool,
         checkpoints: usize,
     ) -> Result<(Vec<f64>, Vec<Option<Readout>>, Checkpoints)> {
         let mut engine = Engine::new(
             self.section.clone(),
             cfg.clone(),
-            EngineOptions::default(),
+            EngineOptions {
+                tangents,
+                ..EngineOptions::default()
+            },
             self.origin_ns,
         );
         let mut sink = Collect {

@@ -1,0 +1,359 @@
+//! Tangent-linear stepping: the sensitivity of the product masses to the
+//! constants that move them, carried beside the masses in one replay.
+//!
+//! A fit of the state constants ([`Role::State`](crate::role::Role): `kc`,
+//! `kt`, `cn`, `k0`, `km1`, `m0`, `km2`, `kp`, `cm`, `m_max`) needs every
+//! measurement's derivative with respect to each of them. By differences
+//! that is one replay per constant; here every mass carries a [`Tangent`],
+//! its derivatives with respect to `ln p` of the ten constants, and every
+//! step of "one contact" (model.md) updates the tangents with the exact
+//! derivative of what it does to the masses (forward-mode differentiation
+//! of the stepping, written out by hand). One replay gives the masses and
+//! all ten derivatives.
+//!
+//! The derivative is with respect to `θ = ln p` (a relative change): the
+//! calibration's coordinate (`p ∂/∂p`).
+//!
+//! **Where the model is not smooth** the tangent is the one-sided
+//! derivative of the branch the primal took: the clamps of eq. (2) and (3)
+//! at 0, the transfer fraction's cap at 0.5, `c <= m` and the cap at
+//! `m_max` (a capped surface's mass is `m_max`: derivative 1 in `m_max`, 0
+//! in the rest), and which surface is the donor. A fit that steps across
+//! such a kink sees the other branch at its next evaluation; the tests
+//! compare with central differences away from the kinks.
+//!
+//! The time effects, the wheel edge reservoir, the bands and the generic
+//! terms on transfer, consumption and the pulse mass are linear in the
+//! masses or do not depend on the constants: their tangents follow from
+//! the same multiplications. Their own parameters are not differentiated
+//! here (a fit takes differences for them).
+
+use crate::product::{self, ContactConditions, ContactLosses, ProductKey, ProductParams};
+
+/// How many constants a tangent follows.
+pub const SLOTS: usize = 10;
+
+/// The constants a [`Tangent`] follows, in the order of its slots: every
+/// constant whose role is `State`.
+pub const STATE_KEYS: [ProductKey; SLOTS] = [
+    ProductKey::Kc,
+    ProductKey::Kt,
+    ProductKey::Cn,
+    ProductKey::K0Kg,
+    ProductKey::Km1Kg,
+    ProductKey::M0Kg,
+    ProductKey::Km2,
+    ProductKey::Kp,
+    ProductKey::CmKg,
+    ProductKey::MMaxKg,
+];
+
+const KC: usize = 0;
+const KT: usize = 1;
+const CN: usize = 2;
+const K0: usize = 3;
+const KM1: usize = 4;
+const M0: usize = 5;
+const KM2: usize = 6;
+const KP: usize = 7;
+const CM: usize = 8;
+const M_MAX: usize = 9;
+
+/// `∂ mass / ∂ ln p` for the constants of [`STATE_KEYS`], in kg.
+pub type Tangent = [f64; SLOTS];
+
+/// The slot of `key` in a [`Tangent`]; `None` for a read-out constant.
+pub fn slot(key: ProductKey) -> Option<usize> {
+    STATE_KEYS.iter().position(|&k| k == key)
+}
+
+/// The tangents of what a contact needs besides the masses
+/// ([`ContactConditions`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ConditionTangents {
+    /// Of `fp · fc` (eq. 2 and 3): nonzero in `kp` and `kc`.
+    pub fp_fc: Tangent,
+    /// Of the transfer's `exp(-(N - 1) / cN)` times the effect factor:
+    /// nonzero in `cN`.
+    pub transfer_revolution: Tangent,
+}
+
+/// The tangent of eq. (2) times eq. (3) for a wheel of mean pressure
+/// `pm_pa` and creepages `cx`, `cy`: `fc · ∂fp/∂ln kp` and `fp ·
+/// ∂fc/∂ln kc`, zero where a clamp at 0 holds.
+pub fn fp_fc_tangent(params: &ProductParams, pm_pa: f64, cx: f64, cy: f64) -> Tangent {
+    let fp = product::pressure_factor(params, pm_pa);
+    let fc = product::creepage_factor(params, cx, cy);
+    let mut t = [0.0; SLOTS];
+    if fp > 0.0 {
+        t[KP] = fc * params.kp * (pm_pa / product::PM_REF_PA - 1.0);
+    }
+    if fc > 0.0 {
+        t[KC] = fp * params.kc * ((cx * cx + cy * cy).sqrt() / product::CREEPAGE_REF - 1.0);
+    }
+    t
+}
+
+/// The tangent of a transfer factor `revolution = exp(-n / cN) · g` (`n =
+/// N - 1`): `revolution · n / cN` in `cN`.
+pub fn revolution_tangent(params: &ProductParams, revolution: f64, n: usize) -> Tangent {
+    let mut t = [0.0; SLOTS];
+    t[CN] = revolution * n as f64 / params.cn;
+    t
+}
+
+/// `m_max`'s own tangent: what a capped surface holds.
+pub fn capped(params: &ProductParams) -> Tangent {
+    let mut t = [0.0; SLOTS];
+    t[M_MAX] = params.m_max_kg;
+    t
+}
+
+/// `a + b`, slot by slot.
+#[inline]
+pub fn add(a: &Tangent, b: &Tangent) -> Tangent {
+    std::array::from_fn(|k| a[k] + b[k])
+}
+
+/// [`product::roll`] (steps 3 to 5 of one contact) with the tangents of
+/// the two masses carried: the same masses bit for bit, and `wheel_tan`,
+/// `rail_tan` updated to the masses' tangents after the contact.
+pub fn roll(
+    params: &ProductParams,
+    wheel_kg: &mut f64,
+    rail_kg: &mut f64,
+    conditions: &ContactConditions,
+    tangents: &ConditionTangents,
+    wheel_tan: &mut Tangent,
+    rail_tan: &mut Tangent,
+) -> ContactLosses {
+    let m = *wheel_kg + *rail_kg;
+    let dm = add(wheel_tan, rail_tan);
+    let mut losses = ContactLosses::default();
+    if m > 0.0 {
+        let per_m = 1.0 / m;
+        if let Some(revolution) = conditions.transfer_revolution {
+            transfer(
+                params,
+                revolution,
+                &tangents.transfer_revolution,
+                (wheel_kg, wheel_tan),
+                (rail_kg, rail_tan),
+            );
+        }
+        // Eq. (1), as product::consumption_given computes it.
+        let factor = conditions.consumption_factor;
+        let (saturation, d_saturation) = if params.m0_kg > 0.0 {
+            let scale = params.m0_kg * params.km2;
+            let e = product::saturation_arg(params, m).exp();
+            // ∂(1 - e^(-m / s)) = e · (∂m - m ∂ln s) / s, s = m0 km2.
+            let d: Tangent = std::array::from_fn(|k| {
+                let d_ln_scale = f64::from(u8::from(k == M0 || k == KM2));
+                e * (dm[k] - m * d_ln_scale) / scale
+            });
+            (1.0 - e, d)
+        } else {
+            (1.0, [0.0; SLOTS])
+        };
+        let raw = params.k0_kg * factor + (params.km1_kg * conditions.fp_fc * factor) * saturation;
+        let c = raw.min(m);
+        let dc: Tangent = if raw < m {
+            std::array::from_fn(|k| {
+                let mut d = params.km1_kg
+                    * factor
+                    * (tangents.fp_fc[k] * saturation + conditions.fp_fc * d_saturation[k]);
+                if k == K0 {
+                    d += params.k0_kg * factor;
+                }
+                if k == KM1 {
+                    d += params.km1_kg * conditions.fp_fc * factor * saturation;
+                }
+                d
+            })
+        } else {
+            dm
+        };
+        let f = (m - c) * per_m;
+        let df: Tangent = std::array::from_fn(|k| (dm[k] - dc[k] - f * dm[k]) * per_m);
+        let before = *wheel_kg + *rail_kg;
+        for k in 0..SLOTS {
+            wheel_tan[k] = wheel_tan[k] * f + *wheel_kg * df[k];
+            rail_tan[k] = rail_tan[k] * f + *rail_kg * df[k];
+        }
+        *wheel_kg *= f;
+        *rail_kg *= f;
+        losses.consumed_kg = before - (*wheel_kg + *rail_kg);
+    }
+    losses.capped_kg = cap(params, wheel_kg, wheel_tan) + cap(params, rail_kg, rail_tan);
+    losses
+}
+
+/// Eq. (5) and (6) with tangents: the donor (more product) gives `t (m1 -
+/// m2)`, `t = min(kt (1 - e^(-m1/cm)) R, 0.5)`.
+fn transfer(
+    params: &ProductParams,
+    revolution: f64,
+    d_revolution: &Tangent,
+    wheel: (&mut f64, &mut Tangent),
+    rail: (&mut f64, &mut Tangent),
+) {
+    let (donor, receiver) = match (*wheel.0).partial_cmp(&*rail.0) {
+        Some(std::cmp::Ordering::Greater) => (wheel, rail),
+        Some(std::cmp::Ordering::Less) => (rail, wheel),
+        _ => return,
+    };
+    let (m1, m2) = (*donor.0, *receiver.0);
+    let e = product::transfer_arg(params, m1).exp();
+    let raw = params.kt * (1.0 - e) * revolution;
+    let t = (raw * 1.0).min(product::TRANSFER_FRACTION_MAX);
+    let moved = t * (m1 - m2);
+    let d_moved: Tangent = std::array::from_fn(|k| {
+        let dt = if raw < product::TRANSFER_FRACTION_MAX {
+            // ∂(1 - e^(-m1/cm)) = e (∂m1 - m1 ∂ln cm) / cm.
+            let d_ln_cm = f64::from(u8::from(k == CM));
+            let mut d = params.kt * revolution * e * (donor.1[k] - m1 * d_ln_cm) / params.cm_kg
+                + params.kt * (1.0 - e) * d_revolution[k];
+            if k == KT {
+                d += raw;
+            }
+            d
+        } else {
+            0.0
+        };
+        dt * (m1 - m2) + t * (donor.1[k] - receiver.1[k])
+    });
+    *donor.0 = m1 - moved;
+    *receiver.0 = m2 + moved;
+    for k in 0..SLOTS {
+        donor.1[k] -= d_moved[k];
+        receiver.1[k] += d_moved[k];
+    }
+}
+
+/// [`product::cap`] with the tangent: a capped surface holds `m_max`.
+pub fn cap(params: &ProductParams, mass_kg: &mut f64, tangent: &mut Tangent) -> f64 {
+    let excess = product::cap(params, mass_kg);
+    if excess > 0.0 {
+        *tangent = capped(params);
+    }
+    excess
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::config::ModelConfig;
+    use proptest::prelude::*;
+
+    fn table2() -> ProductParams {
+        ModelConfig::default().product
+    }
+
+    /// One contact from clean tangents at `params` (masses only).
+    fn contact(
+        params: &ProductParams,
+        w: f64,
+        r: f64,
+        pm_pa: f64,
+        creep: f64,
+        n: Option<usize>,
+    ) -> (f64, f64) {
+        let conditions = conditions(params, pm_pa, creep, n);
+        let (mut w, mut r) = (w, r);
+        product::roll(params, &mut w, &mut r, &conditions);
+        (w, r)
+    }
+
+    fn conditions(
+        params: &ProductParams,
+        pm_pa: f64,
+        creep: f64,
+        n: Option<usize>,
+    ) -> ContactConditions {
+        ContactConditions {
+            fp_fc: product::pressure_factor(params, pm_pa)
+                * product::creepage_factor(params, creep, 0.0),
+            transfer_revolution: n.map(|n| product::revolution_factor(params, n as u32 + 1)),
+            consumption_factor: 1.0,
+        }
+    }
+
+    proptest! {
+        /// The tangent stepping gives the masses of the plain stepping bit
+        /// for bit, and derivatives equal to central differences.
+        #[test]
+        fn one_contact_matches_the_plain_step_and_central_differences(
+            w in 0.0f64..2.5e-4,
+            r in 0.0f64..2.5e-4,
+            pm in 600e6f64..1400e6,
+            creep in 0.0f64..0.02,
+            n in prop::option::of(0usize..40),
+            // Tangents the masses arrive with (from earlier contacts), as
+            // shares of the masses.
+            aw in prop::array::uniform10(-1.0f64..1.0),
+            ar in prop::array::uniform10(-1.0f64..1.0),
+        ) {
+            let p = table2();
+            let (dw0, dr0): (Tangent, Tangent) = (aw.map(|a| a * w), ar.map(|a| a * r));
+            let cond = conditions(&p, pm, creep, n);
+            let tangents = ConditionTangents {
+                fp_fc: fp_fc_tangent(&p, pm, creep, 0.0),
+                transfer_revolution: n.map_or([0.0; SLOTS], |n| {
+                    revolution_tangent(&p, cond.transfer_revolution.unwrap(), n)
+                }),
+            };
+            let (mut w1, mut r1, mut dw, mut dr) = (w, r, dw0, dr0);
+            let losses = roll(&p, &mut w1, &mut r1, &cond, &tangents, &mut dw, &mut dr);
+            let (mut w2, mut r2) = (w, r);
+            let plain = product::roll(&p, &mut w2, &mut r2, &cond);
+            prop_assert_eq!((w1.to_bits(), r1.to_bits()), (w2.to_bits(), r2.to_bits()));
+            prop_assert_eq!(losses, plain);
+            // Central differences in ln p for each constant, the incoming
+            // masses moved along their tangents.
+            let h = 1e-6;
+            for (k, key) in STATE_KEYS.into_iter().enumerate() {
+                let at = |s: f64| {
+                    let mut q = p;
+                    key.set(&mut q, key.get(&p) * s.exp());
+                    contact(&q, w + s * dw0[k], r + s * dr0[k], pm, creep, n)
+                };
+                let (hi, lo) = (at(h), at(-h));
+                let fd = ((hi.0 - lo.0) / (2.0 * h), (hi.1 - lo.1) / (2.0 * h));
+                // Only where no branch changes between the two sides.
+                let kinked = |a: (f64, f64), b: (f64, f64)| (a.0 > a.1) != (b.0 > b.1);
+                if kinked(hi, lo) || kinked((w, r), hi) {
+                    continue;
+                }
+                let tol = |x: f64| 1e-6 * x.abs() + 1e-13;
+                prop_assert!((fd.0 - dw[k]).abs() <= tol(fd.0), "{key:?} wheel {} vs {}", dw[k], fd.0);
+                prop_assert!((fd.1 - dr[k]).abs() <= tol(fd.1), "{key:?} rail {} vs {}", dr[k], fd.1);
+            }
+        }
+    }
+
+    #[test]
+    fn a_capped_surface_follows_m_max_alone() {
+        let p = table2();
+        let mut m = 3e-4;
+        let mut t = [1.0; SLOTS];
+        let excess = cap(&p, &mut m, &mut t);
+        assert!(excess > 0.0);
+        assert_eq!(t, capped(&p));
+        let mut m = 1e-4;
+        let mut t = [1.0; SLOTS];
+        assert_eq!(cap(&p, &mut m, &mut t), 0.0);
+        assert_eq!(t, [1.0; SLOTS]);
+    }
+
+    #[test]
+    fn the_slots_are_the_state_constants() {
+        use crate::role::Role;
+        let state: Vec<ProductKey> = ProductKey::ALL
+            .into_iter()
+            .filter(|k| k.role() == Role::State)
+            .collect();
+        assert_eq!(state, STATE_KEYS.to_vec());
+        assert_eq!(slot(ProductKey::MuD), None);
+        assert_eq!(slot(ProductKey::MMaxKg), Some(M_MAX));
+    }
+}
