@@ -224,9 +224,9 @@ fn transfer(
     });
     *donor.0 = m1 - moved;
     *receiver.0 = m2 + moved;
-    for k in 0..SLOTS {
-        donor.1[k] -= d_moved[k];
-        receiver.1[k] += d_moved[k];
+    for ((d, r), dm) in donor.1.iter_mut().zip(receiver.1.iter_mut()).zip(d_moved) {
+        *d -= dm;
+        *r += dm;
     }
 }
 

@@ -15,10 +15,12 @@
 //! (discover's final calibration) moves in its search coordinate `u` in
 //! [0, 1] (`fit.rs`).
 //!
-//! **Sensitivities.** The engine gives every measurement's sensitivity to
-//! every parameter by forward differences (one replay per parameter),
-//! `J = ∂ simulated / ∂ θ`; `JᵀJ / σ²` is the Fisher information, `σ` the
-//! noise estimated from axle-to-axle differences.
+//! **Sensitivities.** `J = ∂ simulated / ∂ θ`: the ten constants that move
+//! the product masses from one replay with tangents (exact derivatives,
+//! `tortwin_model::tangent`), `muD`, `muC` and `km` by differences read
+//! from that replay's read-outs, an effect's parameters by forward
+//! differences (one replay each). `JᵀJ / σ²` is the Fisher information,
+//! `σ` the noise estimated from axle-to-axle differences.
 //!
 //! **1. Everything free.** Levenberg–Marquardt over every constant at once,
 //! each step restricted to the directions the recording determines (the
@@ -55,6 +57,7 @@
 //! The campaign (scripts/calibration-campaign.py) measures the intervals'
 //! coverage on synthetic sites.
 
+use std::sync::Arc;
 use std::time::Instant;
 
 use nalgebra::{DMatrix, DVector};
@@ -67,6 +70,7 @@ use crate::Result;
 use tortwin_model::config::ModelConfig;
 use tortwin_model::error::UsageError;
 use tortwin_model::product::{ProductKey, ProductParams};
+use tortwin_model::role::Role;
 
 /// A constant is determined when the standard error of `ln p` is at most
 /// this: its 95 % interval spans about ±20 %.
@@ -87,6 +91,9 @@ const LM_FLAT: f64 = 0.5;
 const MOVE_TOL: f64 = 0.05;
 /// The 95 % point of the chi-square distribution with one degree of freedom.
 const CHI2_1_95: f64 = 3.841_458_820_694_124;
+/// The damping's factor after a step that does not improve (each trial of
+/// an exact fit is a replay: few, decisive ones).
+const REJECTED: f64 = 10.0;
 /// Rounds of holding representatives (each refits).
 const PIN_ROUNDS: usize = 3;
 
@@ -193,7 +200,15 @@ struct Problem<'e, 'a> {
     replayed: std::sync::Mutex<std::collections::VecDeque<(Vec<u64>, DVector<f64>)>>,
     /// How many of them are kept: a bounded amount of memory.
     keep: usize,
+    /// The state constants' columns at the last `θ` replayed with tangents.
+    sensed: std::sync::Mutex<std::collections::VecDeque<(Vec<u64>, StateColumns)>>,
 }
+
+/// The columns of the state constants among the knobs: (knob, column).
+type StateColumns = Arc<Vec<(usize, DVector<f64>)>>;
+
+/// How many replays with tangents [`Problem`] keeps.
+const SENSED_KEPT: usize = 4;
 
 /// The memory [`Problem`] keeps replays in, at most (in f64 values).
 const REPLAYS_KEPT_VALUES: usize = 8 << 20;
@@ -230,6 +245,7 @@ impl<'e, 'a> Problem<'e, 'a> {
             noise2: 0.0,
             replayed: Default::default(),
             keep,
+            sensed: Default::default(),
         }
     }
 
@@ -295,21 +311,95 @@ impl<'e, 'a> Problem<'e, 'a> {
             return Ok(Some(sim.clone()));
         }
         let all = self.ev.simulate(&cfg)?;
-        let sim = DVector::from_iterator(self.rows.len(), self.rows.iter().map(|&i| all[i]));
-        let mut kept = lock();
+        let sim = self.active(&all);
+        self.remember(key, &sim);
+        Ok(Some(sim))
+    }
+
+    /// The active rows of a column over every row.
+    fn active(&self, all: &[f64]) -> DVector<f64> {
+        DVector::from_iterator(self.rows.len(), self.rows.iter().map(|&i| all[i]))
+    }
+
+    /// Keeps the simulated values at the `θ` with bits `key`.
+    fn remember(&self, key: Vec<u64>, sim: &DVector<f64>) {
+        let mut kept = self.replayed.lock().unwrap_or_else(|e| e.into_inner());
         if kept.len() >= self.keep {
             kept.pop_front();
         }
         kept.push_back((key, sim.clone()));
-        Ok(Some(sim))
     }
 
-    /// Forward differences of the simulated values in the knobs `cols`
-    /// (inwards at a bound), one replay each, in parallel.
+    /// The derivatives of the simulated values in every state constant
+    /// among the knobs at `theta` (knob, column), from one replay with
+    /// tangents (kept: a Jacobian asked for again at the same `θ` costs
+    /// nothing), which also gives the values there; `None` for a
+    /// configuration out of its ranges.
+    fn state_columns(&self, theta: &[f64]) -> Result<Option<StateColumns>> {
+        let key: Vec<u64> = theta.iter().map(|t| t.to_bits()).collect();
+        let lock = || self.sensed.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some((_, columns)) = lock().iter().find(|(k, _)| *k == key) {
+            return Ok(Some(columns.clone()));
+        }
+        let cfg = self.config(theta);
+        if cfg.validate("calibration").is_err() {
+            return Ok(None);
+        }
+        let state: Vec<(usize, ProductKey)> = self
+            .knobs
+            .iter()
+            .enumerate()
+            .filter_map(|(j, knob)| match knob {
+                Knob::Constant(key) if key.role() == Role::State => Some((j, *key)),
+                _ => None,
+            })
+            .collect();
+        let keys: Vec<ProductKey> = state.iter().map(|&(_, key)| key).collect();
+        let (all, columns) = self.ev.sensitivities(&cfg, &keys)?;
+        self.remember(key.clone(), &self.active(&all));
+        let columns: StateColumns = Arc::new(
+            state
+                .iter()
+                .zip(columns)
+                .map(|(&(j, _), column)| (j, self.active(&column)))
+                .collect(),
+        );
+        let mut kept = lock();
+        if kept.len() >= SENSED_KEPT {
+            kept.pop_front();
+        }
+        kept.push_back((key, columns.clone()));
+        Ok(Some(columns))
+    }
+
+    /// The simulated values' derivatives in the knobs `cols`: the state
+    /// constants' from one replay with tangents (exact), the others by
+    /// forward differences (inwards at a bound; a read-out constant's from
+    /// the read-outs that replay kept, an effect parameter's one replay
+    /// each, in parallel).
     fn jacobian(&self, theta: &[f64], at: &DVector<f64>, cols: &[usize]) -> Result<DMatrix<f64>> {
+        let wants_state = cols
+            .iter()
+            .any(|&j| matches!(self.knobs[j], Knob::Constant(key) if key.role() == Role::State));
+        let state = match wants_state {
+            true => self.state_columns(theta)?,
+            false => None,
+        };
+        let exact: Vec<Option<DVector<f64>>> = cols
+            .iter()
+            .map(|&j| {
+                state
+                    .as_ref()
+                    .and_then(|s| s.iter().find(|(k, _)| *k == j).map(|(_, c)| c.clone()))
+            })
+            .collect();
         let columns: Vec<DVector<f64>> = cols
             .par_iter()
-            .map(|&j| {
+            .zip(exact)
+            .map(|(&j, exact)| {
+                if let Some(column) = exact {
+                    return Ok(column);
+                }
                 let (_, hi) = self.bounds(j);
                 let h = if theta[j] + STEP <= hi { STEP } else { -STEP };
                 let mut t = theta.to_vec();
@@ -340,7 +430,9 @@ impl<'e, 'a> Problem<'e, 'a> {
 
     /// [`Problem::fit`], the first Jacobian given (over `free`): computed at
     /// `theta` (`true`), or carried from nearby (`false`: computed again
-    /// before the fit may stop on it).
+    /// before the fit may stop on it). A fit of constants alone takes exact
+    /// Jacobians ([`Problem::fit_exact`]); with an effect's parameters it
+    /// carries one by Broyden's updates.
     fn fit_from(
         &self,
         theta: &[f64],
@@ -348,6 +440,9 @@ impl<'e, 'a> Problem<'e, 'a> {
         truncate: Option<f64>,
         mut first_j: Option<(DMatrix<f64>, bool)>,
     ) -> Result<(Vec<f64>, DVector<f64>)> {
+        if !free.is_empty() && free.iter().all(|&f| self.is_constant(f)) {
+            return self.fit_exact(theta, free, truncate, None);
+        }
         let flat_sse = LM_FLAT * self.noise2;
         let mut theta = theta.to_vec();
         let mut sim = self.simulated(&theta)?.ok_or_else(out_of_range)?;
@@ -377,29 +472,8 @@ impl<'e, 'a> Problem<'e, 'a> {
             if fresh && predicted_gain(&a, &g, eigen.as_ref(), truncate) <= flat_sse {
                 break;
             }
-            // The step for a damping, and the (pseudo-)inverse the moves
-            // are measured with.
-            let step_for = |lambda: f64| -> Option<DVector<f64>> {
-                match (&eigen, truncate) {
-                    (Some(e), Some(floor)) => {
-                        let mut step = DVector::zeros(free.len());
-                        for (k, &l) in e.eigenvalues.iter().enumerate() {
-                            if l >= floor {
-                                let v = e.eigenvectors.column(k);
-                                step += v * (v.dot(&g) / (l * (1.0 + lambda)));
-                            }
-                        }
-                        Some(step)
-                    }
-                    _ => {
-                        let mut m = a.clone();
-                        for d in 0..m.nrows() {
-                            m[(d, d)] += lambda * a[(d, d)].max(1e-30);
-                        }
-                        m.cholesky().map(|c| c.solve(&g))
-                    }
-                }
-            };
+            // The step for a damping.
+            let step_for = |lambda| damped_step(&a, &g, eigen.as_ref(), truncate, lambda, 0.0);
             // Two dampings tried at once (both cores): the current one and
             // four times it; the lighter one that improves is taken.
             let mut improved = None;
@@ -493,6 +567,211 @@ impl<'e, 'a> Problem<'e, 'a> {
             }
         }
         Ok((theta, sim))
+    }
+}
+
+impl Problem<'_, '_> {
+    /// The values and the Jacobian over `free` at `theta`: one replay with
+    /// tangents for the state constants (the values come with it), the
+    /// read-out constants' columns from its read-outs. `None` out of range.
+    fn sensed(
+        &self,
+        theta: &[f64],
+        free: &[usize],
+    ) -> Result<Option<(DVector<f64>, DMatrix<f64>)>> {
+        if self.state_columns(theta)?.is_none() {
+            return Ok(None);
+        }
+        let Some(sim) = self.simulated(theta)? else {
+            return Ok(None);
+        };
+        let j = self.jacobian(theta, &sim, free)?;
+        Ok(Some((sim, j)))
+    }
+
+    /// Levenberg–Marquardt over constants alone, each trial evaluated with
+    /// its exact Jacobian ([`Problem::sensed`]: one replay with tangents
+    /// gives both): a step taken comes with the Jacobian of the next. A
+    /// constant at its bound that the step would push out stays there (the
+    /// step is solved without it). The damping follows the gain ratio
+    /// (Nielsen's rule; Madsen, Nielsen and Tingleff 2004, §3.2). Stops
+    /// when the Gauss–Newton step's predicted gain or a step's actual gain
+    /// is flat (`LM_FLAT` noise variances), when no constant moves by more
+    /// than `MOVE_TOL` of its standard error, or when no damping improves.
+    /// With a `target` SSE (a likelihood-ratio test's), also when the fit
+    /// cannot reach it: twice the Gauss–Newton step's predicted gain (a
+    /// curved valley gives less than the first prediction, not more) still
+    /// leaves it above.
+    fn fit_exact(
+        &self,
+        theta: &[f64],
+        free: &[usize],
+        truncate: Option<f64>,
+        target: Option<f64>,
+    ) -> Result<(Vec<f64>, DVector<f64>)> {
+        let flat_sse = LM_FLAT * self.noise2;
+        let mut theta = theta.to_vec();
+        let (mut sim, mut j) = self.sensed(&theta, free)?.ok_or_else(out_of_range)?;
+        let mut sse = (&self.measured - &sim).norm_squared();
+        let mut lambda = 1e-3;
+        for _ in 0..LM_MAX_ITERS {
+            let r = &self.measured - &sim;
+            let a = j.transpose() * &j;
+            let g = j.transpose() * &r;
+            let Some((on, gain)) = self.unblocked(&theta, free, &a, &g, truncate) else {
+                break;
+            };
+            if gain <= flat_sse || target.is_some_and(|t| sse - 2.0 * gain > t) {
+                break;
+            }
+            let a_on = a.select_rows(&on).select_columns(&on);
+            let g_on = g.select_rows(&on);
+            let eigen = truncate.map(|_| a_on.clone().symmetric_eigen());
+            let mut taken = None;
+            for _ in 0..4 {
+                // Along the determined directions the damping is added to
+                // the eigenvalues (`λ` of the largest), as Marquardt's is to
+                // the diagonal: the poorly determined directions shrink first.
+                let step = match &eigen {
+                    Some(e) => {
+                        let largest = e.eigenvalues.iter().copied().fold(0.0, f64::max);
+                        damped_step(
+                            &a_on,
+                            &g_on,
+                            eigen.as_ref(),
+                            truncate,
+                            0.0,
+                            lambda * largest,
+                        )
+                    }
+                    None => damped_step(&a_on, &g_on, None, None, lambda, 0.0),
+                };
+                let Some(step) = step else {
+                    lambda *= REJECTED;
+                    continue;
+                };
+                let mut trial = theta.clone();
+                for (q, &k) in on.iter().enumerate() {
+                    let (lo, hi) = self.bounds(free[k]);
+                    trial[free[k]] = (theta[free[k]] + step[q]).clamp(lo, hi);
+                }
+                // What the linearised model promised for the step taken.
+                let h =
+                    DVector::from_iterator(free.len(), free.iter().map(|&f| trial[f] - theta[f]));
+                let promised = 2.0 * h.dot(&g) - h.dot(&(&a * &h));
+                let tried = self.sensed(&trial, free)?;
+                let new_sse = tried
+                    .as_ref()
+                    .map_or(f64::INFINITY, |(s, _)| (&self.measured - s).norm_squared());
+                if new_sse < sse && promised > 0.0 {
+                    let rho = (sse - new_sse) / promised;
+                    lambda *= (1.0 - (2.0 * rho - 1.0).powi(3)).max(1.0 / 3.0);
+                    let sigma2 = (sse / self.rows.len() as f64).max(self.noise2);
+                    let moved = standard_moves(&a, &h, sigma2, truncate);
+                    taken = tried.map(|(s, jt)| (trial, s, jt, new_sse, moved));
+                    break;
+                }
+                lambda *= REJECTED;
+            }
+            let Some((trial, s, jt, new_sse, moved)) = taken else {
+                break;
+            };
+            let flat = sse - new_sse <= flat_sse;
+            (theta, sim, j, sse) = (trial, s, jt, new_sse);
+            if flat || moved < MOVE_TOL {
+                break;
+            }
+        }
+        Ok((theta, sim))
+    }
+
+    /// The knobs of `free` (indices into it) a step may move at `theta`:
+    /// those at a bound that the Gauss–Newton step pushes outwards are
+    /// left out, until none is; and that step's predicted gain. `None` when
+    /// every knob is blocked.
+    fn unblocked(
+        &self,
+        theta: &[f64],
+        free: &[usize],
+        a: &DMatrix<f64>,
+        g: &DVector<f64>,
+        truncate: Option<f64>,
+    ) -> Option<(Vec<usize>, f64)> {
+        let mut on: Vec<usize> = (0..free.len()).collect();
+        loop {
+            let a_on = a.select_rows(&on).select_columns(&on);
+            let g_on = g.select_rows(&on);
+            let eigen = truncate.map(|_| a_on.clone().symmetric_eigen());
+            let step = damped_step(&a_on, &g_on, eigen.as_ref(), truncate, 0.0, 0.0)?;
+            let blocked: Vec<usize> = on
+                .iter()
+                .zip(step.iter())
+                .filter(|(&k, &d)| {
+                    let (lo, hi) = self.bounds(free[k]);
+                    (theta[free[k]] >= hi && d > 0.0) || (theta[free[k]] <= lo && d < 0.0)
+                })
+                .map(|(&k, _)| k)
+                .collect();
+            if blocked.is_empty() {
+                let gain = predicted_gain(&a_on, &g_on, eigen.as_ref(), truncate);
+                return Some((on, gain));
+            }
+            on.retain(|k| !blocked.contains(k));
+            if on.is_empty() {
+                return None;
+            }
+        }
+    }
+}
+
+/// The largest move of a step `h` in standard errors (`A = JᵀJ`, `sigma2`
+/// the residual variance): the diagonal of `sigma2 A⁻¹` (with `truncate`,
+/// the pseudo-inverse over the directions above that floor), infinite
+/// where `A` is singular.
+fn standard_moves(a: &DMatrix<f64>, h: &DVector<f64>, sigma2: f64, truncate: Option<f64>) -> f64 {
+    let inverse = match truncate {
+        Some(floor) => Some(pseudo_inverse(&a.clone().symmetric_eigen(), floor)),
+        None => a.clone().try_inverse(),
+    };
+    let Some(inv) = inverse else {
+        return f64::INFINITY;
+    };
+    (0..h.len())
+        .filter(|&k| inv[(k, k)] > 0.0)
+        .map(|k| h[k].abs() / (sigma2 * inv[(k, k)]).sqrt())
+        .fold(0.0, f64::max)
+}
+
+/// The Levenberg–Marquardt step for the damping `lambda` (`A = JᵀJ`, `g =
+/// Jᵀr`): with `truncate` (a floor on the eigenvalues of `A`) along the
+/// directions above the floor only, each eigenvalue `l` damped to `l (1 +
+/// λ) + shift`; else Marquardt's scaled damping.
+fn damped_step(
+    a: &DMatrix<f64>,
+    g: &DVector<f64>,
+    eigen: Option<&nalgebra::SymmetricEigen<f64, nalgebra::Dyn>>,
+    truncate: Option<f64>,
+    lambda: f64,
+    shift: f64,
+) -> Option<DVector<f64>> {
+    match (eigen, truncate) {
+        (Some(e), Some(floor)) => {
+            let mut step = DVector::zeros(g.len());
+            for (k, &l) in e.eigenvalues.iter().enumerate() {
+                if l >= floor {
+                    let v = e.eigenvectors.column(k);
+                    step += v * (v.dot(g) / (l * (1.0 + lambda) + shift));
+                }
+            }
+            Some(step)
+        }
+        _ => {
+            let mut m = a.clone();
+            for d in 0..m.nrows() {
+                m[(d, d)] += lambda * a[(d, d)].max(1e-30);
+            }
+            m.cholesky().map(|c| c.solve(g))
+        }
     }
 }
 
@@ -874,10 +1153,14 @@ pub(super) fn calibrate(
         let rest: Vec<usize> = free.iter().copied().filter(|&f| f != k).collect();
         let mut t = theta.clone();
         t[k] = 0.0;
-        let (t2, s2) =
-            problem.fit_from(&t, &rest, None, Some((j_all.select_columns(&rest), false)))?;
+        let target = sse + CHI2_1_95 * sigma2;
+        let (t2, s2) = if rest.iter().all(|&f| problem.is_constant(f)) {
+            problem.fit_exact(&t, &rest, None, Some(target))?
+        } else {
+            problem.fit_from(&t, &rest, None, Some((j_all.select_columns(&rest), false)))?
+        };
         let sse2 = (&problem.measured - &s2).norm_squared();
-        if sse2 - sse <= CHI2_1_95 * sigma2 {
+        if sse2 <= target {
             if let Some(f) = fits[k].as_mut() {
                 f.determined = false;
                 f.flat = true;
@@ -913,8 +1196,32 @@ pub(super) fn calibrate(
         (theta, sim) = problem.fit_from(&t, &free, None, Some((j.select_columns(&free), false)))?;
         j = problem.jacobian(&theta, &sim, &all)?;
     }
-    let r = &problem.measured - &sim;
-    let cond = conditional(&j, &r, &clusters, &free);
+    // A representative the fit took where the recording no longer sees it
+    // (m_max above every mass: its column vanishes) has no interval: it is
+    // held at its reference value, the weakest first, and the rest fitted
+    // again, until the fit's information is regular. What the report calls
+    // held is what model.toml holds.
+    let mut cond = conditional(&j, &(&problem.measured - &sim), &clusters, &free);
+    while cond.is_none() {
+        let Some(&blind) = free
+            .iter()
+            .filter(|&&k| problem.is_constant(k) && reps.contains(&k))
+            .min_by(|&&a, &&b| {
+                j.column(a)
+                    .norm_squared()
+                    .total_cmp(&j.column(b).norm_squared())
+            })
+        else {
+            break;
+        };
+        held_at.push((blind, theta[blind], f64::NAN));
+        free.retain(|&k| k != blind);
+        let mut t = theta.clone();
+        t[blind] = 0.0;
+        (theta, sim) = problem.fit_from(&t, &free, None, Some((j.select_columns(&free), false)))?;
+        j = problem.jacobian(&theta, &sim, &all)?;
+        cond = conditional(&j, &(&problem.measured - &sim), &clusters, &free);
+    }
     for &k in &reps {
         let slot = free.iter().position(|&f| f == k);
         let fit = match (slot, &cond) {

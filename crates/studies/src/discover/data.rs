@@ -208,7 +208,7 @@ impl Dataset {
         &self,
         cfg: &ModelConfig,
         keys: &[ProductKey],
-    ) -> Result<(Vec<f64>, Vec<Readout>, Vec<Vec<f64>>)> {
+    ) -> Result<Sensitivities> {
         let (simulated, readouts, _) = self.replay(cfg, true, true, 0)?;
         let readouts = complete(readouts);
         let model = ReadoutModel::new(&self.section, cfg, self.origin_ns);
@@ -232,7 +232,11 @@ impl Dataset {
                     .collect()
             })
             .collect();
-        Ok((simulated, readouts, columns))
+        Ok(Sensitivities {
+            simulated,
+            readouts,
+            columns,
+        })
     }
 
     /// The simulated value of every row with `cfg`, read from `readouts`
@@ -421,6 +425,16 @@ impl Checkpoints {
 /// Every row's read-out, given that every row was simulated.
 fn complete(readouts: Vec<Option<Readout>>) -> Vec<Readout> {
     readouts.into_iter().flatten().collect()
+}
+
+/// What [`Dataset::simulate_with_tangents`] gives.
+pub struct Sensitivities {
+    /// Every row's simulated value.
+    pub simulated: Vec<f64>,
+    /// What every row's value was read from.
+    pub readouts: Vec<Readout>,
+    /// Per key asked for: every row's derivative in `ln p`.
+    pub columns: Vec<Vec<f64>>,
 }
 
 /// Keeps each measurement's simulated value, by its row, what it was read

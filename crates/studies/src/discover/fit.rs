@@ -302,6 +302,8 @@ pub(super) struct CostMeter {
     readout_ns: std::sync::atomic::AtomicU64,
     resumed: AtomicUsize,
     resumed_ns: std::sync::atomic::AtomicU64,
+    tangents: AtomicUsize,
+    tangent_ns: std::sync::atomic::AtomicU64,
     /// The stage now running, and what each stage has cost so far.
     stages: Mutex<Stages>,
 }
@@ -359,8 +361,11 @@ pub struct Cost {
     pub resumed_runs: usize,
     /// Evaluations read from a kept replay.
     pub readouts: usize,
-    /// Replays, plus the read-outs' and continued replays' time in
-    /// replays (measured).
+    /// Replays with tangents: every measurement's derivatives in the state
+    /// constants from one replay (`tortwin_model::tangent`).
+    pub tangent_runs: usize,
+    /// Replays, plus the read-outs', continued replays' and replays with
+    /// tangents' time in replays (measured).
     pub run_equivalents: f64,
     #[serde(skip)]
     replay_ns: u64,
@@ -368,6 +373,17 @@ pub struct Cost {
     readout_ns: u64,
     #[serde(skip)]
     resumed_ns: u64,
+    #[serde(skip)]
+    tangent_ns: u64,
+}
+
+/// What one evaluation was, and its time.
+#[derive(Debug, Clone, Copy)]
+enum Spent {
+    Replay(u64),
+    Readout(u64),
+    Resumed(u64),
+    Tangents(u64),
 }
 
 impl CostMeter {
@@ -388,12 +404,7 @@ impl CostMeter {
     }
 
     /// Adds one evaluation to the stage now running.
-    fn add_to_stage(
-        &self,
-        replay_ns: Option<u64>,
-        readout_ns: Option<u64>,
-        resumed_ns: Option<u64>,
-    ) {
+    fn add_to_stage(&self, spent: Spent) {
         let mut lock = self.lock();
         let stage = lock.now.unwrap_or(Stage::Fits);
         let slot = match lock.spent.iter().position(|(s, _)| *s == stage) {
@@ -404,36 +415,26 @@ impl CostMeter {
             }
         };
         let cost = &mut lock.spent[slot].1;
-        if let Some(ns) = replay_ns {
-            cost.engine_runs += 1;
-            cost.replay_ns += ns;
-        }
-        if let Some(ns) = readout_ns {
-            cost.readouts += 1;
-            cost.readout_ns += ns;
-        }
-        if let Some(ns) = resumed_ns {
-            cost.resumed_runs += 1;
-            cost.resumed_ns += ns;
-        }
+        let (count, total, ns) = match spent {
+            Spent::Replay(ns) => (&mut cost.engine_runs, &mut cost.replay_ns, ns),
+            Spent::Readout(ns) => (&mut cost.readouts, &mut cost.readout_ns, ns),
+            Spent::Resumed(ns) => (&mut cost.resumed_runs, &mut cost.resumed_ns, ns),
+            Spent::Tangents(ns) => (&mut cost.tangent_runs, &mut cost.tangent_ns, ns),
+        };
+        *count += 1;
+        *total += ns;
     }
 
-    fn add_replay(&self, ns: u64) {
-        self.replays.fetch_add(1, Ordering::Relaxed);
-        self.replay_ns.fetch_add(ns, Ordering::Relaxed);
-        self.add_to_stage(Some(ns), None, None);
-    }
-
-    fn add_readout(&self, ns: u64) {
-        self.readouts.fetch_add(1, Ordering::Relaxed);
-        self.readout_ns.fetch_add(ns, Ordering::Relaxed);
-        self.add_to_stage(None, Some(ns), None);
-    }
-
-    fn add_resumed(&self, ns: u64) {
-        self.resumed.fetch_add(1, Ordering::Relaxed);
-        self.resumed_ns.fetch_add(ns, Ordering::Relaxed);
-        self.add_to_stage(None, None, Some(ns));
+    fn add(&self, spent: Spent) {
+        let (count, total, ns) = match spent {
+            Spent::Replay(ns) => (&self.replays, &self.replay_ns, ns),
+            Spent::Readout(ns) => (&self.readouts, &self.readout_ns, ns),
+            Spent::Resumed(ns) => (&self.resumed, &self.resumed_ns, ns),
+            Spent::Tangents(ns) => (&self.tangents, &self.tangent_ns, ns),
+        };
+        count.fetch_add(1, Ordering::Relaxed);
+        total.fetch_add(ns, Ordering::Relaxed);
+        self.add_to_stage(spent);
     }
 
     /// Each stage's cost so far, in run-equivalents of the mean replay of
@@ -456,22 +457,24 @@ impl CostMeter {
             engine_runs: self.replays.load(Ordering::Relaxed),
             resumed_runs: self.resumed.load(Ordering::Relaxed),
             readouts: self.readouts.load(Ordering::Relaxed),
+            tangent_runs: self.tangents.load(Ordering::Relaxed),
             run_equivalents: 0.0,
             replay_ns: self.replay_ns.load(Ordering::Relaxed),
             readout_ns: self.readout_ns.load(Ordering::Relaxed),
             resumed_ns: self.resumed_ns.load(Ordering::Relaxed),
+            tangent_ns: self.tangent_ns.load(Ordering::Relaxed),
         };
         c.with_equivalents(c.per_replay_ns())
     }
 }
 
 impl Cost {
-    /// Replays plus the read-outs' and continued replays' time in replays
-    /// of `per_replay_ns`.
+    /// Replays plus the read-outs', continued replays' and replays with
+    /// tangents' time in replays of `per_replay_ns`.
     fn with_equivalents(mut self, per_replay_ns: f64) -> Self {
         self.run_equivalents = self.engine_runs as f64
             + if per_replay_ns > 0.0 {
-                (self.readout_ns + self.resumed_ns) as f64 / per_replay_ns
+                (self.readout_ns + self.resumed_ns + self.tangent_ns) as f64 / per_replay_ns
             } else {
                 0.0
             };
@@ -563,7 +566,8 @@ impl<'a> Evaluator<'a> {
         if let Some(readouts) = kept {
             let start = std::time::Instant::now();
             let simulated = self.data.read_out(cfg, &readouts);
-            self.cost.add_readout(start.elapsed().as_nanos() as u64);
+            self.cost
+                .add(Spent::Readout(start.elapsed().as_nanos() as u64));
             return Ok(simulated);
         }
         crate::progress::check(self.progress)?;
@@ -572,15 +576,35 @@ impl<'a> Evaluator<'a> {
             if let Some(readouts) = self.data.resume(&state, checkpoints, &base.readouts) {
                 let readouts = readouts?;
                 let simulated = self.data.read_out(cfg, &readouts);
-                self.cost.add_resumed(start.elapsed().as_nanos() as u64);
+                self.cost
+                    .add(Spent::Resumed(start.elapsed().as_nanos() as u64));
                 self.keep(state, readouts);
                 return Ok(simulated);
             }
         }
         let (simulated, readouts) = self.data.simulate_with_readouts(cfg)?;
-        self.cost.add_replay(start.elapsed().as_nanos() as u64);
+        self.cost
+            .add(Spent::Replay(start.elapsed().as_nanos() as u64));
         self.keep(state, readouts);
         Ok(simulated)
+    }
+
+    /// Every row's simulated value with `cfg` and its derivatives in `ln p`
+    /// of the state constants `keys` (one column per key), from one replay
+    /// with tangents ([`Dataset::simulate_with_tangents`]), counted at its
+    /// measured time; its read-outs are kept.
+    pub(super) fn sensitivities(
+        &self,
+        cfg: &ModelConfig,
+        keys: &[tortwin_model::product::ProductKey],
+    ) -> Result<(Vec<f64>, Vec<Vec<f64>>)> {
+        crate::progress::check(self.progress)?;
+        let start = std::time::Instant::now();
+        let s = self.data.simulate_with_tangents(cfg, keys)?;
+        self.cost
+            .add(Spent::Tangents(start.elapsed().as_nanos() as u64));
+        self.keep(cfg.state_part(), s.readouts);
+        Ok((s.simulated, s.columns))
     }
 
     /// Keeps `cfg`'s replay with checkpoints: the candidates built on it
@@ -601,7 +625,8 @@ impl<'a> Evaluator<'a> {
         crate::progress::check(self.progress)?;
         let start = std::time::Instant::now();
         let (_, readouts, checkpoints) = self.data.simulate_with_checkpoints(cfg, CHECKPOINTS)?;
-        self.cost.add_replay(start.elapsed().as_nanos() as u64);
+        self.cost
+            .add(Spent::Replay(start.elapsed().as_nanos() as u64));
         let mut bases = lock_ignoring_poison(&self.bases);
         if bases.len() >= BASES_KEPT {
             bases.pop_front();
