@@ -84,5 +84,64 @@ fn discover_3_days(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, discover_3_days);
+/// `tortwin calibrate` end to end on the first case of tests/calibrate.rs
+/// (`mu_d` 0.52 and `kc` 0.80 on the curve, 3 days, seed 31), and what its
+/// Jacobians cost: one replay of the recording, plain and with the
+/// tangents of the ten state constants.
+fn calibrate_3_days(c: &mut Criterion) {
+    use tortwin_model::config::ModelConfig;
+    use tortwin_model::tangent::STATE_KEYS;
+    use tortwin_studies::discover::data::Dataset;
+    use tortwin_studies::jobs::discover::{calibrate, CalibrateArgs};
+    tortwin_studies::jobs::join_rayon_pool();
+    let dir = tempfile::tempdir().expect("a temporary directory");
+    let truth = dir.path().join("truth.toml");
+    std::fs::write(&truth, "[product]\nmu_d = 0.52\nkc = 0.80\n").expect("written");
+    let recording = dir.path().join("site.mcap");
+    let status = Command::new(env!("CARGO_BIN_EXE_tortwin"))
+        .args(["synth", "--days", "3", "--preset", "curve", "--seed", "31"])
+        .args(["--noise-sigma", "0.01", "--rain-events-per-day", "1"])
+        .arg("--truth-config")
+        .arg(&truth)
+        .arg("--out")
+        .arg(&recording)
+        .arg("-q")
+        .status()
+        .expect("tortwin synth runs");
+    assert!(status.success(), "tortwin synth failed");
+    let data = Dataset::read(&recording).expect("the recording reads");
+    let cfg = ModelConfig::default();
+    let args = CalibrateArgs {
+        recording: recording.clone(),
+        config: None,
+        report: dir.path().join("report"),
+        threads: None,
+        quiet: true,
+    };
+    let found = calibrate(&args).expect("calibrate runs");
+    eprintln!(
+        "calibrate: {} replays and {} with tangents, {:.1} run-equivalents in {:.1} s",
+        found.engine_runs,
+        found.tangent_runs(),
+        found.run_equivalents,
+        found.elapsed_s
+    );
+    let mut group = c.benchmark_group("calibrate");
+    group.sample_size(10);
+    group.bench_function("replay_3_days", |b| {
+        b.iter(|| data.simulate(&cfg).expect("replays"))
+    });
+    group.bench_function("replay_3_days_with_tangents", |b| {
+        b.iter(|| {
+            data.simulate_with_tangents(&cfg, &STATE_KEYS)
+                .expect("replays")
+        })
+    });
+    group.bench_function("calibrate_3_days_mu_d_kc", |b| {
+        b.iter(|| calibrate(&args).expect("calibrate runs"))
+    });
+    group.finish();
+}
+
+criterion_group!(benches, calibrate_3_days, discover_3_days);
 criterion_main!(benches);

@@ -449,15 +449,56 @@ fn dry_friction_falling_with_wheel_load_on_one_rail_is_found() {
     );
 }
 
+/// On the curve the creepages span a wide range, and a consumption that
+/// grows with creepage as a power 0.8 is told from eq. (3)'s linear law
+/// (`kc`): the term is found (it beats the constants by 155 BIC units).
 #[test]
-fn consumption_growing_with_creepage_is_found_on_the_tangent() {
+fn consumption_growing_with_creepage_is_found_on_the_curve() {
     generic_case(
-        "tangent",
+        "curve",
         5,
         &["generic:acts_on=consumption,driver=creepage,form=power,n=0.8"],
         &[],
         &["[[effects.generic]]\nacts_on = \"consumption\"\ndriver = \"creepage\"\nform = \"power\"\nn = 0.8\n"],
         &[],
+    );
+}
+
+/// On the tangent the creepages span a narrow range, and there the same
+/// term is `kc` 78 % high with `km1_kg` 17 % low, to the noise (until
+/// 2026-11-28 the calibration's fit stopped at RMSE 1.4 x the noise, so the
+/// term was found; the fit with exact Jacobians reaches the constants'
+/// optimum). A constant is the plainer story: the constants are taken, no
+/// effect is reported, and the verdict names the term the recording cannot
+/// tell from them.
+#[test]
+fn consumption_growing_with_creepage_on_the_tangent_is_told_as_a_rival_of_kc() {
+    let dir = tempfile::tempdir().unwrap();
+    let (rec, _) = synth(
+        dir.path(),
+        5,
+        &[
+            "--preset",
+            "tangent",
+            "--hidden",
+            "generic:acts_on=consumption,driver=creepage,form=power,n=0.8",
+        ],
+    );
+    let report = common::discover_report(&rec, &dir.path().join("report"));
+    assert!(found_list(&report).is_empty(), "{:?}", found_list(&report));
+    let kc = report["site_constants"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|c| c["key"] == "product.kc")
+        .unwrap();
+    assert!(kc["value"].as_f64().unwrap() > 1.3 * 0.57, "{kc}");
+    let noise = report["noise_estimate"].as_f64().unwrap();
+    assert!(report["rmse_after"].as_f64().unwrap() <= 1.02 * noise);
+    let verdict = report["verdict"].as_str().unwrap();
+    assert!(
+        verdict.contains("generic consumption × creepage") && verdict.contains("cannot tell"),
+        "{verdict}"
     );
 }
 

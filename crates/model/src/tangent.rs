@@ -144,12 +144,13 @@ pub fn roll(
         // Eq. (1), as product::consumption_given computes it.
         let factor = conditions.consumption_factor;
         let (saturation, d_saturation) = if params.m0_kg > 0.0 {
-            let scale = params.m0_kg * params.km2;
             let e = product::saturation_arg(params, m).exp();
-            // ∂(1 - e^(-m / s)) = e · (∂m - m ∂ln s) / s, s = m0 km2.
+            // ∂(1 - e^(-m / s)) = e · (∂m - m ∂ln s) / s, s = m0 km2 (the
+            // reciprocal taken once: no division per slot).
+            let e_per_scale = e * (1.0 / (params.m0_kg * params.km2));
             let d: Tangent = std::array::from_fn(|k| {
                 let d_ln_scale = f64::from(u8::from(k == M0 || k == KM2));
-                e * (dm[k] - m * d_ln_scale) / scale
+                e_per_scale * (dm[k] - m * d_ln_scale)
             });
             (1.0 - e, d)
         } else {
@@ -207,12 +208,13 @@ fn transfer(
     let raw = params.kt * (1.0 - e) * revolution;
     let t = (raw * 1.0).min(product::TRANSFER_FRACTION_MAX);
     let moved = t * (m1 - m2);
+    // ∂(1 - e^(-m1/cm)) = e (∂m1 - m1 ∂ln cm) / cm.
+    let per_m1 = params.kt * revolution * e * (1.0 / params.cm_kg);
+    let per_revolution = params.kt * (1.0 - e);
     let d_moved: Tangent = std::array::from_fn(|k| {
         let dt = if raw < product::TRANSFER_FRACTION_MAX {
-            // ∂(1 - e^(-m1/cm)) = e (∂m1 - m1 ∂ln cm) / cm.
             let d_ln_cm = f64::from(u8::from(k == CM));
-            let mut d = params.kt * revolution * e * (donor.1[k] - m1 * d_ln_cm) / params.cm_kg
-                + params.kt * (1.0 - e) * d_revolution[k];
+            let mut d = per_m1 * (donor.1[k] - m1 * d_ln_cm) + per_revolution * d_revolution[k];
             if k == KT {
                 d += raw;
             }

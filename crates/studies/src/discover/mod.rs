@@ -151,6 +151,16 @@ impl EffectParams {
     }
 
     /// `name (p = v, ...)` for people.
+    /// Whether `c` (a candidate of a step) is this effect.
+    fn is_candidate(&self, c: &CandidateResult) -> bool {
+        match (&self.acts_on, &self.driver, &self.form) {
+            (Some(a), Some(d), Some(f)) => {
+                c.name == "generic" && c.label.starts_with(&format!("generic {a} × {d} ({f}"))
+            }
+            _ => c.name == self.name && c.name != "generic",
+        }
+    }
+
     pub fn text(&self) -> String {
         let params: Vec<String> = self
             .params
@@ -305,7 +315,8 @@ pub struct Discovery {
     pub unexplained: Option<Unexplained>,
     pub options: Options,
     pub engine_runs: usize,
-    /// Replays plus read-outs in replays (measured).
+    /// Replays plus read-outs, continued replays and replays with tangents
+    /// in replays (measured).
     pub run_equivalents: f64,
     /// What each stage cost.
     pub cost: Vec<fit::StageCost>,
@@ -324,6 +335,13 @@ pub struct Discovery {
     pub residual_calibrated: Vec<f64>,
     #[serde(skip)]
     pub residual_after: Vec<f64>,
+}
+
+impl Discovery {
+    /// The replays with tangents (the calibration's Jacobians).
+    pub fn tangent_runs(&self) -> usize {
+        self.cost.iter().map(|s| s.cost.tangent_runs).sum()
+    }
 }
 
 /// The effects on in `cfg`, with their parameters: the named ones in the
@@ -1390,6 +1408,7 @@ pub fn discover(
         calibration.as_ref(),
     );
     verdict.push_str(&ties(&steps));
+    verdict.push_str(&constants_or_effect(&steps, &effects_found, options));
     let rmse_after_all_rows = {
         let all: f64 = residual_after.iter().map(|r| r * r).sum();
         rmse(all, residual_after.len())
@@ -2499,6 +2518,51 @@ fn ties(steps: &[Step]) -> String {
                 accepted,
                 equal.join(", ")
             ));
+        }
+    }
+    text
+}
+
+/// Where the site's constants were preferred to an effect that describes
+/// the measurements nearly as well (within the BIC threshold: a constant
+/// is the plainer story), the effect in words: the recording cannot tell
+/// them apart, another might (a wider range of the effect's driver).
+/// Empty otherwise.
+fn constants_or_effect(steps: &[Step], found: &[EffectParams], options: &Options) -> String {
+    let mut text = String::new();
+    for step in steps {
+        let Some(constants) = step.candidates.iter().find(|c| c.name == SITE_CONSTANTS) else {
+            continue;
+        };
+        let rival = step
+            .candidates
+            .iter()
+            .filter(|c| c.name != SITE_CONSTANTS && c.passes_bic && c.passes_share)
+            .filter(|c| !found.iter().any(|e| e.is_candidate(c)))
+            .min_by(|a, b| a.delta_bic.total_cmp(&b.delta_bic));
+        let Some(rival) = rival else {
+            continue;
+        };
+        let apart = rival.delta_bic - constants.delta_bic;
+        let taken = step.accepted.as_deref() != Some(rival.label.as_str());
+        if taken && apart.abs() <= options.bic_threshold.abs() {
+            let params: Vec<String> = rival
+                .params
+                .iter()
+                .map(|(k, v)| format!("{k} = {}", fmt_param(*v)))
+                .collect();
+            text.push_str(&format!(
+                " The candidate {} ({}) describes these measurements nearly as well as the \
+                 site's constants \
+                 ({:.1} BIC units apart, within the threshold of {:.0}): this recording cannot \
+                 tell that effect from the constants, and the constants, the plainer story, are \
+                 taken; a recording over a wider range of its driver could tell them apart.",
+                rival.label,
+                params.join(", "),
+                apart,
+                options.bic_threshold.abs()
+            ));
+            break;
         }
     }
     text

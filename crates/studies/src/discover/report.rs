@@ -429,9 +429,10 @@ pub(crate) fn cost_text(d: &Discovery) -> String {
         })
         .collect();
     format!(
-        "{:.1} run-equivalents: {} replays, {} read-outs; {}",
+        "{:.1} run-equivalents: {} replays, {} with tangents, {} read-outs; {}",
         d.run_equivalents,
         d.engine_runs,
+        d.tangent_runs(),
         d.cost.iter().map(|s| s.cost.readouts).sum::<usize>(),
         stages.join(", ")
     )

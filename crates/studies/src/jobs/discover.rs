@@ -115,8 +115,13 @@ pub fn render_calibration(args: &CalibrateArgs, d: &Discovery, elapsed_s: f64) -
     let _ = writeln!(out, "calibrate {}", args.recording.display());
     let _ = writeln!(
         out,
-        "  {} measurements over {} days; {} engine runs, {:.1} run-equivalents in {elapsed_s:.1} s",
-        d.measurements, d.days, d.engine_runs, d.run_equivalents
+        "  {} measurements over {} days; {} engine runs and {} with tangents, {:.1} \
+         run-equivalents in {elapsed_s:.1} s",
+        d.measurements,
+        d.days,
+        d.engine_runs,
+        d.tangent_runs(),
+        d.run_equivalents
     );
     for c in &d.site_constants {
         let ci = c.ci95.map_or_else(
@@ -241,8 +246,13 @@ pub fn render(args: &DiscoverArgs, d: &Discovery, elapsed_s: f64) -> String {
     let _ = writeln!(out, "discover {}", args.recording.display());
     let _ = writeln!(
         out,
-        "  {} measurements over {} days; {} engine runs, {:.1} run-equivalents in {elapsed_s:.1} s",
-        d.measurements, d.days, d.engine_runs, d.run_equivalents
+        "  {} measurements over {} days; {} engine runs and {} with tangents, {:.1} \
+         run-equivalents in {elapsed_s:.1} s",
+        d.measurements,
+        d.days,
+        d.engine_runs,
+        d.tangent_runs(),
+        d.run_equivalents
     );
     for s in &d.steps {
         // The five best; report.md lists them all.
