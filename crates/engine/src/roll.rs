@@ -87,8 +87,9 @@ struct Roller {
     /// wheel_edge_reservoir's (alpha, r).
     reservoir: Option<(f64, f64)>,
     observe: bool,
-    /// The tangent of `fp_fc` (zero without tangents).
-    fp_fc_tan: Tangent,
+    /// The tangent of `fp_fc` in its slots `kp`, `kc` (zero without
+    /// tangents).
+    fp_fc_tan: [f64; 2],
 }
 
 impl Roller {
@@ -138,6 +139,7 @@ impl Roller {
     /// ([`tortwin_model::tangent`]): the same masses, and the rail's
     /// tangent at `i` (`rail_tan`) and the wheel's updated by each step.
     #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
     fn contact_tangent(
         &self,
         st: &mut WheelRoll,
@@ -156,32 +158,65 @@ impl Roller {
                 .time_effects
                 .exp_args(touch.dt_s, touch.rain_mm)
                 .map(f64::exp);
-            self.age(st, &mut touch, exps);
-            // The time effects multiply the mass: its tangent alike.
-            for x in &mut dr {
-                *x = self.time_effects.apply_given(*x, touch.rain_mm, exps);
-            }
+            self.age_tangent(st, &mut touch, &mut dr, exps);
         }
         self.touched(track, &touch, i);
         let conditions = self.conditions(st, &touch, revolution, i);
+        let exps = product::roll_exp_args(&self.params, st.wheel_kg, touch.rail_kg).map(f64::exp);
+        let tan = (rail_tan, dr);
+        self.finish_tangent(st, track, tan, observed, &touch, &conditions, exps, i)
+    }
+
+    /// [`Roller::age`] with the rail mass's tangent `dr`: the time effects
+    /// multiply the mass, and its tangent alike.
+    #[inline(always)]
+    fn age_tangent(
+        &self,
+        st: &mut WheelRoll,
+        touch: &mut Touch<'_>,
+        dr: &mut Tangent,
+        exps: [f64; 2],
+    ) {
+        let rain_mm = touch.rain_mm;
+        self.age(st, touch, exps);
+        for x in dr {
+            *x = self.time_effects.apply_given(*x, rain_mm, exps);
+        }
+    }
+
+    /// [`Roller::finish`] with the tangents (`dr`: the rail mass's after
+    /// step 1, written back to `rail_tan[i]`), the exponentials given.
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
+    fn finish_tangent(
+        &self,
+        st: &mut WheelRoll,
+        track: &mut TrackState,
+        (rail_tan, mut dr): (&mut [Tangent], Tangent),
+        observed: &mut Observed,
+        touch: &Touch<'_>,
+        conditions: &ContactConditions,
+        exps: [f64; 2],
+        i: usize,
+    ) -> f64 {
         let tangents = ConditionTangents {
             fp_fc: self.fp_fc_tan,
             transfer_revolution: match (conditions.transfer_revolution, st.applicator_point) {
                 (Some(r), Some(ia)) => tangent::revolution_tangent(&self.params, r, i.abs_diff(ia)),
-                _ => [0.0; SLOTS],
+                _ => 0.0,
             },
         };
         let mut rail_kg = touch.rail_kg;
         let m_kg = st.wheel_kg + rail_kg;
         st.seen_tan = tangent::add(&st.wheel_tan, &dr);
-        let losses = tangent::roll(
+        let losses = tangent::roll_given(
             &self.params,
             &mut st.wheel_kg,
             &mut rail_kg,
-            &conditions,
+            conditions,
             &tangents,
-            &mut st.wheel_tan,
-            &mut dr,
+            (&mut st.wheel_tan, &mut dr),
+            exps,
         );
         st.consumed_kg += losses.consumed_kg;
         st.capped_kg += losses.capped_kg;
@@ -947,11 +982,16 @@ impl RollContext<'_> {
         for s in 0..points + n - 1 {
             let lo = s.saturating_sub(points - 1);
             let hi = n.min(s + 1);
-            if lo == 0 && hi == LANES && !self.tangents {
+            if lo == 0 && hi == LANES {
                 let is: [usize; LANES] =
                     std::array::from_fn(|j| if up { s - j } else { points - 1 - (s - j) });
                 if !is.iter().any(|&i| special[i]) {
-                    let seen = self.contacts4(&mut lanes, state, &mut work.observed, is, v);
+                    // Compiled twice: without tangents nothing of them is left.
+                    let seen = if self.tangents {
+                        self.contacts4::<true>(&mut lanes, state, work, is, v)
+                    } else {
+                        self.contacts4::<false>(&mut lanes, state, work, is, v)
+                    };
                     if self.keep_seen {
                         for (lane, (&i, &m)) in lanes.iter().zip(is.iter().zip(&seen)) {
                             work.wheel_seen[lane.row * points + i] = m;
@@ -1064,10 +1104,15 @@ impl RollContext<'_> {
             parts.map(|p| p.map_or(0.0, |(_, rise)| rise)),
             [SECONDS_PER_HOUR; LANES],
         );
-        from_fn(|j| {
+        let touch = |j: usize| {
             let precip_mm = parts[j].map_or(0.0, |(at_since, _)| at_since + rises[j]);
             r(j).touch_at(state, t[j], weather[j], precip_mm, is[j])
-        })
+        };
+        // Written out, not `from_fn`: the compiler outlines that helper for
+        // a `Touch` array, and an outlined call loses this function's AVX2
+        // and the inlining (7 % of a replay, measured 2026-11-28).
+        const _: () = assert!(LANES == 4);
+        [touch(0), touch(1), touch(2), touch(3)]
     }
 
     /// Four ordinary contacts (no special point), one per lane, at the
@@ -1075,16 +1120,23 @@ impl RollContext<'_> {
     /// lane, with each phase's exponentials taken for the four lanes at
     /// once ([`exp4`]; bit for bit `f64::exp` with glibc on an FMA CPU).
     #[inline(always)]
-    fn contacts4(
+    fn contacts4<const TANGENTS: bool>(
         &self,
         lanes: &mut [Lane; LANES],
         state: &mut TrackState,
-        observed: &mut Observed,
+        work: &mut TrackWork,
         is: [usize; LANES],
         v: Vector<impl Exp4, impl Div4>,
     ) -> [f64; LANES] {
         let exp4 = v.exp;
         let mut touches = self.touches4(lanes, state, is, v.div);
+        // With tangents: the rail masses' tangents, aged with them.
+        let mut dr: [Tangent; LANES] = [[0.0; SLOTS]; LANES];
+        if TANGENTS {
+            for (d, &i) in dr.iter_mut().zip(&is) {
+                *d = work.rail_tan[i];
+            }
+        }
         if touches.iter().any(|t| t.aged) {
             let args: [[f64; 2]; LANES] = std::array::from_fn(|j| {
                 self.time_effects
@@ -1098,8 +1150,13 @@ impl RollContext<'_> {
             };
             for (j, (lane, touch)) in lanes.iter_mut().zip(&mut touches).enumerate() {
                 if touch.aged {
-                    lane.roller
-                        .age(&mut lane.st, touch, [ageing[j], washoff[j]]);
+                    let exps = [ageing[j], washoff[j]];
+                    if TANGENTS {
+                        lane.roller
+                            .age_tangent(&mut lane.st, touch, &mut dr[j], exps);
+                    } else {
+                        lane.roller.age(&mut lane.st, touch, exps);
+                    }
                 }
             }
         }
@@ -1118,15 +1175,29 @@ impl RollContext<'_> {
         let consumption = exp4(args.map(|a| a[1]));
         let mut seen = [0.0; LANES];
         for (j, lane) in lanes.iter_mut().enumerate() {
-            seen[j] = lane.roller.finish(
-                &mut lane.st,
-                state,
-                observed,
-                &touches[j],
-                &conditions[j],
-                Some([transfer[j], consumption[j]]),
-                is[j],
-            );
+            let exps = [transfer[j], consumption[j]];
+            seen[j] = if TANGENTS {
+                lane.roller.finish_tangent(
+                    &mut lane.st,
+                    state,
+                    (&mut work.rail_tan, dr[j]),
+                    &mut work.observed,
+                    &touches[j],
+                    &conditions[j],
+                    exps,
+                    is[j],
+                )
+            } else {
+                lane.roller.finish(
+                    &mut lane.st,
+                    state,
+                    &mut work.observed,
+                    &touches[j],
+                    &conditions[j],
+                    Some(exps),
+                    is[j],
+                )
+            };
         }
         seen
     }
@@ -1275,7 +1346,7 @@ impl RollContext<'_> {
                     wheel.creepage.cy,
                 )
             } else {
-                [0.0; SLOTS]
+                [0.0; 2]
             },
         };
         Lane {

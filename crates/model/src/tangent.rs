@@ -68,38 +68,37 @@ pub fn slot(key: ProductKey) -> Option<usize> {
 }
 
 /// The tangents of what a contact needs besides the masses
-/// ([`ContactConditions`]).
+/// ([`ContactConditions`]); every other slot is zero.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ConditionTangents {
-    /// Of `fp · fc` (eq. 2 and 3): nonzero in `kp` and `kc`.
-    pub fp_fc: Tangent,
-    /// Of the transfer's `exp(-(N - 1) / cN)` times the effect factor:
-    /// nonzero in `cN`.
-    pub transfer_revolution: Tangent,
+    /// Of `fp · fc` (eq. 2 and 3): its slots `kp` and `kc`
+    /// ([`fp_fc_tangent`]).
+    pub fp_fc: [f64; 2],
+    /// Of the transfer's `exp(-(N - 1) / cN)` times the effect factor: its
+    /// slot `cN` ([`revolution_tangent`]).
+    pub transfer_revolution: f64,
 }
 
 /// The tangent of eq. (2) times eq. (3) for a wheel of mean pressure
-/// `pm_pa` and creepages `cx`, `cy`: `fc · ∂fp/∂ln kp` and `fp ·
-/// ∂fc/∂ln kc`, zero where a clamp at 0 holds.
-pub fn fp_fc_tangent(params: &ProductParams, pm_pa: f64, cx: f64, cy: f64) -> Tangent {
+/// `pm_pa` and creepages `cx`, `cy`, in its two slots (`kp`, `kc`): `fc ·
+/// ∂fp/∂ln kp` and `fp · ∂fc/∂ln kc`, zero where a clamp at 0 holds.
+pub fn fp_fc_tangent(params: &ProductParams, pm_pa: f64, cx: f64, cy: f64) -> [f64; 2] {
     let fp = product::pressure_factor(params, pm_pa);
     let fc = product::creepage_factor(params, cx, cy);
-    let mut t = [0.0; SLOTS];
+    let mut t = [0.0; 2];
     if fp > 0.0 {
-        t[KP] = fc * params.kp * (pm_pa / product::PM_REF_PA - 1.0);
+        t[0] = fc * params.kp * (pm_pa / product::PM_REF_PA - 1.0);
     }
     if fc > 0.0 {
-        t[KC] = fp * params.kc * ((cx * cx + cy * cy).sqrt() / product::CREEPAGE_REF - 1.0);
+        t[1] = fp * params.kc * ((cx * cx + cy * cy).sqrt() / product::CREEPAGE_REF - 1.0);
     }
     t
 }
 
 /// The tangent of a transfer factor `revolution = exp(-n / cN) · g` (`n =
-/// N - 1`): `revolution · n / cN` in `cN`.
-pub fn revolution_tangent(params: &ProductParams, revolution: f64, n: usize) -> Tangent {
-    let mut t = [0.0; SLOTS];
-    t[CN] = revolution * n as f64 / params.cn;
-    t
+/// N - 1`) in its slot `cN`: `revolution · n / cN`.
+pub fn revolution_tangent(params: &ProductParams, revolution: f64, n: usize) -> f64 {
+    revolution * n as f64 / params.cn
 }
 
 /// `m_max`'s own tangent: what a capped surface holds.
@@ -118,6 +117,7 @@ pub fn add(a: &Tangent, b: &Tangent) -> Tangent {
 /// [`product::roll`] (steps 3 to 5 of one contact) with the tangents of
 /// the two masses carried: the same masses bit for bit, and `wheel_tan`,
 /// `rail_tan` updated to the masses' tangents after the contact.
+#[inline]
 pub fn roll(
     params: &ProductParams,
     wheel_kg: &mut f64,
@@ -127,7 +127,33 @@ pub fn roll(
     wheel_tan: &mut Tangent,
     rail_tan: &mut Tangent,
 ) -> ContactLosses {
+    let exps = product::roll_exp_args(params, *wheel_kg, *rail_kg).map(f64::exp);
+    roll_given(
+        params,
+        wheel_kg,
+        rail_kg,
+        conditions,
+        tangents,
+        (wheel_tan, rail_tan),
+        exps,
+    )
+}
+
+/// [`roll`] with its exponentials given: `exps` is `exp` of
+/// [`product::roll_exp_args`] for the same masses (as
+/// [`product::roll_given`]), so that four contacts can take theirs at once.
+#[inline(always)]
+pub fn roll_given(
+    params: &ProductParams,
+    wheel_kg: &mut f64,
+    rail_kg: &mut f64,
+    conditions: &ContactConditions,
+    tangents: &ConditionTangents,
+    (wheel_tan, rail_tan): (&mut Tangent, &mut Tangent),
+    exps: [f64; 2],
+) -> ContactLosses {
     let m = *wheel_kg + *rail_kg;
+    // The total's tangent: the transfer moves mass, it does not change it.
     let dm = add(wheel_tan, rail_tan);
     let mut losses = ContactLosses::default();
     if m > 0.0 {
@@ -135,51 +161,47 @@ pub fn roll(
         if let Some(revolution) = conditions.transfer_revolution {
             transfer(
                 params,
-                revolution,
-                &tangents.transfer_revolution,
+                (revolution, tangents.transfer_revolution),
+                exps[0],
                 (wheel_kg, wheel_tan),
                 (rail_kg, rail_tan),
             );
         }
         // Eq. (1), as product::consumption_given computes it.
         let factor = conditions.consumption_factor;
-        let (saturation, d_saturation) = if params.m0_kg > 0.0 {
-            let e = product::saturation_arg(params, m).exp();
-            // ∂(1 - e^(-m / s)) = e · (∂m - m ∂ln s) / s, s = m0 km2 (the
-            // reciprocal taken once: no division per slot).
-            let e_per_scale = e * (1.0 / (params.m0_kg * params.km2));
-            let d: Tangent = std::array::from_fn(|k| {
-                let d_ln_scale = f64::from(u8::from(k == M0 || k == KM2));
-                e_per_scale * (dm[k] - m * d_ln_scale)
-            });
-            (1.0 - e, d)
+        let (saturation, e_per_scale) = if params.m0_kg > 0.0 {
+            let e = exps[1];
+            (1.0 - e, e * (1.0 / (params.m0_kg * params.km2)))
         } else {
-            (1.0, [0.0; SLOTS])
+            (1.0, 0.0)
         };
         let raw = params.k0_kg * factor + (params.km1_kg * conditions.fp_fc * factor) * saturation;
         let c = raw.min(m);
-        let dc: Tangent = if raw < m {
-            std::array::from_fn(|k| {
-                let mut d = params.km1_kg
-                    * factor
-                    * (tangents.fp_fc[k] * saturation + conditions.fp_fc * d_saturation[k]);
-                if k == K0 {
-                    d += params.k0_kg * factor;
-                }
-                if k == KM1 {
-                    d += params.km1_kg * conditions.fp_fc * factor * saturation;
-                }
-                d
-            })
+        // ∂c = slope ∂m + own: where c = m, ∂c = ∂m; else ∂c = km1 F (S
+        // ∂(fp fc) + fp fc ∂S) + ∂k0 F + ∂km1 fp fc F S, with ∂S = e/s (∂m
+        // - m ∂ln s), s = m0 km2.
+        let mut own = [0.0; SLOTS];
+        let slope = if raw < m {
+            let on_fp_fc = params.km1_kg * factor * saturation;
+            let on_saturation = params.km1_kg * factor * conditions.fp_fc;
+            own[KP] = on_fp_fc * tangents.fp_fc[0];
+            own[KC] = on_fp_fc * tangents.fp_fc[1];
+            own[M0] -= on_saturation * e_per_scale * m;
+            own[KM2] -= on_saturation * e_per_scale * m;
+            own[K0] += params.k0_kg * factor;
+            own[KM1] += on_saturation * saturation;
+            on_saturation * e_per_scale
         } else {
-            dm
+            1.0
         };
         let f = (m - c) * per_m;
-        let df: Tangent = std::array::from_fn(|k| (dm[k] - dc[k] - f * dm[k]) * per_m);
+        // ∂f = (∂m - ∂c - f ∂m) / m; both surfaces are scaled by f.
+        let keep = (1.0 - f - slope) * per_m;
         let before = *wheel_kg + *rail_kg;
         for k in 0..SLOTS {
-            wheel_tan[k] = wheel_tan[k] * f + *wheel_kg * df[k];
-            rail_tan[k] = rail_tan[k] * f + *rail_kg * df[k];
+            let df = keep * dm[k] - own[k] * per_m;
+            wheel_tan[k] = wheel_tan[k] * f + *wheel_kg * df;
+            rail_tan[k] = rail_tan[k] * f + *rail_kg * df;
         }
         *wheel_kg *= f;
         *rail_kg *= f;
@@ -191,10 +213,11 @@ pub fn roll(
 
 /// Eq. (5) and (6) with tangents: the donor (more product) gives `t (m1 -
 /// m2)`, `t = min(kt (1 - e^(-m1/cm)) R, 0.5)`.
+#[inline]
 fn transfer(
     params: &ProductParams,
-    revolution: f64,
-    d_revolution: &Tangent,
+    (revolution, d_revolution): (f64, f64),
+    e: f64,
     wheel: (&mut f64, &mut Tangent),
     rail: (&mut f64, &mut Tangent),
 ) {
@@ -204,32 +227,30 @@ fn transfer(
         _ => return,
     };
     let (m1, m2) = (*donor.0, *receiver.0);
-    let e = product::transfer_arg(params, m1).exp();
     let raw = params.kt * (1.0 - e) * revolution;
     let t = (raw * 1.0).min(product::TRANSFER_FRACTION_MAX);
     let moved = t * (m1 - m2);
-    // ∂(1 - e^(-m1/cm)) = e (∂m1 - m1 ∂ln cm) / cm.
+    // ∂moved = ∂t (m1 - m2) + t (∂m1 - ∂m2); where t is below its cap, ∂t
+    // = kt R e (∂m1 - m1 ∂ln cm) / cm + kt (1 - e) ∂R + t ∂ln kt.
+    let gap = if raw < product::TRANSFER_FRACTION_MAX {
+        m1 - m2
+    } else {
+        0.0
+    };
     let per_m1 = params.kt * revolution * e * (1.0 / params.cm_kg);
     let per_revolution = params.kt * (1.0 - e);
-    let d_moved: Tangent = std::array::from_fn(|k| {
-        let dt = if raw < product::TRANSFER_FRACTION_MAX {
-            let d_ln_cm = f64::from(u8::from(k == CM));
-            let mut d = per_m1 * (donor.1[k] - m1 * d_ln_cm) + per_revolution * d_revolution[k];
-            if k == KT {
-                d += raw;
-            }
-            d
-        } else {
-            0.0
-        };
-        dt * (m1 - m2) + t * (donor.1[k] - receiver.1[k])
-    });
+    let mut own = [0.0; SLOTS];
+    own[CN] = per_revolution * d_revolution;
+    own[CM] = -per_m1 * m1;
+    own[KT] = raw;
+    let on_donor = per_m1 * gap + t;
+    for k in 0..SLOTS {
+        let d_moved = on_donor * donor.1[k] - t * receiver.1[k] + gap * own[k];
+        donor.1[k] -= d_moved;
+        receiver.1[k] += d_moved;
+    }
     *donor.0 = m1 - moved;
     *receiver.0 = m2 + moved;
-    for ((d, r), dm) in donor.1.iter_mut().zip(receiver.1.iter_mut()).zip(d_moved) {
-        *d -= dm;
-        *r += dm;
-    }
 }
 
 /// [`product::cap`] with the tangent: a capped surface holds `m_max`.
@@ -300,7 +321,7 @@ mod tests {
             let cond = conditions(&p, pm, creep, n);
             let tangents = ConditionTangents {
                 fp_fc: fp_fc_tangent(&p, pm, creep, 0.0),
-                transfer_revolution: n.map_or([0.0; SLOTS], |n| {
+                transfer_revolution: n.map_or(0.0, |n| {
                     revolution_tangent(&p, cond.transfer_revolution.unwrap(), n)
                 }),
             };
