@@ -244,10 +244,10 @@ fn transfer(
     own[CM] = -per_m1 * m1;
     own[KT] = raw;
     let on_donor = per_m1 * gap + t;
-    for k in 0..SLOTS {
-        let d_moved = on_donor * donor.1[k] - t * receiver.1[k] + gap * own[k];
-        donor.1[k] -= d_moved;
-        receiver.1[k] += d_moved;
+    for ((d, r), o) in donor.1.iter_mut().zip(receiver.1.iter_mut()).zip(own) {
+        let d_moved = on_donor * *d - t * *r + gap * o;
+        *d -= d_moved;
+        *r += d_moved;
     }
     *donor.0 = m1 - moved;
     *receiver.0 = m2 + moved;
