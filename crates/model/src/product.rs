@@ -195,7 +195,7 @@ pub fn consumption(params: &ProductParams, m_kg: f64, fp_fc: f64, factor: f64) -
 /// the compiler hoists it); the result differs from the literal quotient
 /// by at most an ulp.
 #[inline(always)]
-pub(crate) fn saturation_arg(params: &ProductParams, m_kg: f64) -> f64 {
+fn saturation_arg(params: &ProductParams, m_kg: f64) -> f64 {
     -m_kg * (1.0 / (params.m0_kg * params.km2))
 }
 
@@ -257,7 +257,7 @@ pub(crate) fn transfer_fraction(
 /// The argument of eq. (6)'s exponential, `-m1 / cm` (`1 / cm` is a
 /// constant the compiler hoists out of the stepping loop).
 #[inline(always)]
-pub(crate) fn transfer_arg(params: &ProductParams, m1_kg: f64) -> f64 {
+fn transfer_arg(params: &ProductParams, m1_kg: f64) -> f64 {
     -m1_kg * (1.0 / params.cm_kg)
 }
 
