@@ -6,7 +6,11 @@
 //! term. A state parameter changed the same way is not a read-out: the
 //! read values then differ from the replay (the check can fail).
 
-use std::path::{Path, PathBuf};
+mod common;
+
+use std::path::PathBuf;
+
+use common::truth_of;
 
 use tortwin_model::config::ModelConfig;
 use tortwin_model::product::ProductKey;
@@ -16,14 +20,6 @@ use tortwin_studies::discover::data::Dataset;
 
 fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-}
-
-/// The truth configuration a bundled recording was written with.
-fn truth_of(recording: &Path) -> ModelConfig {
-    let key = recording.with_extension("key.json");
-    let key: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(&key).unwrap()).unwrap();
-    ModelConfig::from_overlay_str(key["truth_config_toml"].as_str().unwrap(), "truth").unwrap()
 }
 
 /// Read-out terms of every kind, on top of whatever `cfg` has.

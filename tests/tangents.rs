@@ -6,7 +6,11 @@
 //! effect and generic terms of every kind; and the values of the replay
 //! with tangents are those of the plain replay, bit for bit.
 
+mod common;
+
 use std::path::{Path, PathBuf};
+
+use common::truth_of;
 
 use tortwin_model::config::ModelConfig;
 use tortwin_model::tangent::STATE_KEYS;
@@ -14,14 +18,6 @@ use tortwin_studies::discover::data::Dataset;
 
 fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-}
-
-/// The truth configuration a bundled recording was written with.
-fn truth_of(recording: &Path) -> ModelConfig {
-    let key = recording.with_extension("key.json");
-    let key: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(&key).unwrap()).unwrap();
-    ModelConfig::from_overlay_str(key["truth_config_toml"].as_str().unwrap(), "truth").unwrap()
 }
 
 /// The relative step of the central differences in `ln p`.

@@ -235,3 +235,16 @@ impl Sink for Recorder {
         Ok(())
     }
 }
+
+/// The truth configuration a bundled recording was written with (its
+/// `REC.key.json`, `truth_config_toml`).
+pub fn truth_of(recording: &std::path::Path) -> tortwin_model::config::ModelConfig {
+    let key = recording.with_extension("key.json");
+    let key: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&key).unwrap()).unwrap();
+    tortwin_model::config::ModelConfig::from_overlay_str(
+        key["truth_config_toml"].as_str().unwrap(),
+        "truth",
+    )
+    .unwrap()
+}

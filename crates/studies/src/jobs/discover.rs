@@ -109,12 +109,10 @@ pub fn calibrate_with_data(
     study(&args.as_discover(), options, progress)
 }
 
-/// The few lines `tortwin calibrate` prints.
-pub fn render_calibration(args: &CalibrateArgs, d: &Discovery, elapsed_s: f64) -> String {
-    let mut out = String::new();
-    let _ = writeln!(out, "calibrate {}", args.recording.display());
-    let _ = writeln!(
-        out,
+/// What a run read and what its evaluations cost, one line (discover and
+/// calibrate print it alike).
+fn work_line(d: &Discovery, elapsed_s: f64) -> String {
+    format!(
         "  {} measurements over {} days; {} engine runs and {} with tangents, {:.1} \
          run-equivalents in {elapsed_s:.1} s",
         d.measurements,
@@ -122,7 +120,14 @@ pub fn render_calibration(args: &CalibrateArgs, d: &Discovery, elapsed_s: f64) -
         d.engine_runs,
         d.tangent_runs(),
         d.run_equivalents
-    );
+    )
+}
+
+/// The few lines `tortwin calibrate` prints.
+pub fn render_calibration(args: &CalibrateArgs, d: &Discovery, elapsed_s: f64) -> String {
+    let mut out = String::new();
+    let _ = writeln!(out, "calibrate {}", args.recording.display());
+    let _ = writeln!(out, "{}", work_line(d, elapsed_s));
     for c in &d.site_constants {
         let ci = c.ci95.map_or_else(
             || "-".to_string(),
@@ -244,16 +249,7 @@ fn study(
 pub fn render(args: &DiscoverArgs, d: &Discovery, elapsed_s: f64) -> String {
     let mut out = String::new();
     let _ = writeln!(out, "discover {}", args.recording.display());
-    let _ = writeln!(
-        out,
-        "  {} measurements over {} days; {} engine runs and {} with tangents, {:.1} \
-         run-equivalents in {elapsed_s:.1} s",
-        d.measurements,
-        d.days,
-        d.engine_runs,
-        d.tangent_runs(),
-        d.run_equivalents
-    );
+    let _ = writeln!(out, "{}", work_line(d, elapsed_s));
     for s in &d.steps {
         // The five best; report.md lists them all.
         let mut best = s
