@@ -50,9 +50,16 @@
 //! holds its reference value is held there. A determined constant that
 //! moved is tested once more: fitted again at its reference value with the
 //! rest free, if the fit is as good (a likelihood-ratio test at 95 %) it
-//! is not determined after all. A representative whose combination's
+//! is not determined after all (unless it moved by [`LR_SURE`] standard
+//! errors or more, where the linearised test's margin is ten-fold). A representative whose combination's
 //! interval holds its reference value is held there, one at a time, the
 //! others following linearly ([`pin_sequentially`]).
+//!
+//! **Fits.** Levenberg–Marquardt on exact Jacobians ([`Problem::fit_exact`]):
+//! every trial is one replay with tangents, which gives the next step's
+//! Jacobian too; a step stays inside the bounds by an active set
+//! ([`Problem::bounded_step`]); a refit with fewer knobs free starts where
+//! the last Jacobian expects it to end ([`Problem::projected`]).
 //!
 //! The campaign (scripts/calibration-campaign.py) measures the intervals'
 //! coverage on synthetic sites.
@@ -94,6 +101,23 @@ const CHI2_1_95: f64 = 3.841_458_820_694_124;
 /// The damping's factor after a step that does not improve (each trial of
 /// an exact fit is a replay: few, decisive ones).
 const REJECTED: f64 = 10.0;
+/// The most a step lightens the damping (Nielsen's rule takes a third):
+/// where the linearised model predicts the step's gain well, the weakly
+/// determined directions are freed within a few steps rather than a
+/// dozen (the damping is added to the eigenvalues relative to the
+/// largest, which may exceed the smallest by ten orders of magnitude).
+const LIGHTEN: f64 = 0.1;
+/// The standard error of ln p along which [`Problem::projected`] moves a
+/// refit's start: the directions the recording determines (the others'
+/// linear extrapolation is no guide).
+const PROJECT_SD: f64 = 0.1;
+/// A determined constant that moved by at least this many standard errors
+/// (those of the fit with everything free, the larger at the fit and at
+/// the reference values) is not tested by a refit at its reference
+/// value: linearised, that refit's SSE rises by this squared (36 noise
+/// variances, ten times the test's 3.84), more than a curved valley
+/// makes up.
+const LR_SURE: f64 = 6.0;
 /// Rounds of holding representatives (each refits).
 const PIN_ROUNDS: usize = 3;
 
@@ -571,6 +595,38 @@ impl<'e, 'a> Problem<'e, 'a> {
 }
 
 impl Problem<'_, '_> {
+    /// Where a fit over `free` that starts at `start` is expected to end,
+    /// as the sensitivities `j` (over every knob) at a fit `from` see it:
+    /// the knobs of `free` take over, linearly, what the others' change
+    /// from `from` to `start` did to the simulated values. A refit with a
+    /// constant held thus starts near its optimum (a few replays, not a
+    /// dozen); `start` itself when that point is out of its ranges or
+    /// the free knobs' sensitivities are singular.
+    fn projected(&self, j: &DMatrix<f64>, from: &[f64], start: &[f64], free: &[usize]) -> Vec<f64> {
+        if free.is_empty() {
+            return start.to_vec();
+        }
+        let held: Vec<usize> = (0..self.knobs.len())
+            .filter(|k| !free.contains(k))
+            .collect();
+        let moved = DVector::from_iterator(held.len(), held.iter().map(|&k| start[k] - from[k]));
+        let (j_free, j_held) = (j.select_columns(free), j.select_columns(&held));
+        let floor = self.noise2 / PROJECT_SD.powi(2);
+        let eigen = (j_free.transpose() * &j_free).symmetric_eigen();
+        let shift = pseudo_inverse(&eigen, floor) * (j_free.transpose() * (j_held * moved));
+        let mut theta = start.to_vec();
+        for (q, &k) in free.iter().enumerate() {
+            let (lo, hi) = self.bounds(k);
+            theta[k] = (from[k] - shift[q]).clamp(lo, hi);
+        }
+        match theta.iter().all(|t| t.is_finite())
+            && self.config(&theta).validate("calibration").is_ok()
+        {
+            true => theta,
+            false => start.to_vec(),
+        }
+    }
+
     /// The values and the Jacobian over `free` at `theta`: one replay with
     /// tangents for the state constants (the values come with it), the
     /// read-out constants' columns from its read-outs. `None` out of range.
@@ -609,7 +665,6 @@ impl Problem<'_, '_> {
         truncate: Option<f64>,
         target: Option<f64>,
     ) -> Result<(Vec<f64>, DVector<f64>)> {
-        let flat_sse = LM_FLAT * self.noise2;
         let mut theta = theta.to_vec();
         let (mut sim, mut j) = self.sensed(&theta, free)?.ok_or_else(out_of_range)?;
         let mut sse = (&self.measured - &sim).norm_squared();
@@ -618,42 +673,27 @@ impl Problem<'_, '_> {
             let r = &self.measured - &sim;
             let a = j.transpose() * &j;
             let g = j.transpose() * &r;
+            // Flat in the residuals' variance: where the model misses
+            // something (the residuals exceed the noise) the likelihood is
+            // that much flatter.
+            let flat_sse = LM_FLAT * self.noise2.max(sse / self.rows.len().max(1) as f64);
             let Some((on, gain)) = self.unblocked(&theta, free, &a, &g, truncate) else {
                 break;
             };
             if gain <= flat_sse || target.is_some_and(|t| sse - 2.0 * gain > t) {
                 break;
             }
-            let a_on = a.select_rows(&on).select_columns(&on);
-            let g_on = g.select_rows(&on);
-            let eigen = truncate.map(|_| a_on.clone().symmetric_eigen());
             let mut taken = None;
             for _ in 0..4 {
-                // Along the determined directions the damping is added to
-                // the eigenvalues (`λ` of the largest), as Marquardt's is to
-                // the diagonal: the poorly determined directions shrink first.
-                let step = match &eigen {
-                    Some(e) => {
-                        let largest = e.eigenvalues.iter().copied().fold(0.0, f64::max);
-                        damped_step(
-                            &a_on,
-                            &g_on,
-                            eigen.as_ref(),
-                            truncate,
-                            0.0,
-                            lambda * largest,
-                        )
-                    }
-                    None => damped_step(&a_on, &g_on, None, None, lambda, 0.0),
-                };
-                let Some(step) = step else {
+                let Some(step) = self.bounded_step(&theta, free, &on, &a, &g, truncate, lambda)
+                else {
                     lambda *= REJECTED;
                     continue;
                 };
                 let mut trial = theta.clone();
-                for (q, &k) in on.iter().enumerate() {
-                    let (lo, hi) = self.bounds(free[k]);
-                    trial[free[k]] = (theta[free[k]] + step[q]).clamp(lo, hi);
+                for (k, &f) in free.iter().enumerate() {
+                    let (lo, hi) = self.bounds(f);
+                    trial[f] = (theta[f] + step[k]).clamp(lo, hi);
                 }
                 // What the linearised model promised for the step taken.
                 let h =
@@ -665,7 +705,7 @@ impl Problem<'_, '_> {
                     .map_or(f64::INFINITY, |(s, _)| (&self.measured - s).norm_squared());
                 if new_sse < sse && promised > 0.0 {
                     let rho = (sse - new_sse) / promised;
-                    lambda *= (1.0 - (2.0 * rho - 1.0).powi(3)).max(1.0 / 3.0);
+                    lambda *= (1.0 - (2.0 * rho - 1.0).powi(3)).max(LIGHTEN);
                     let sigma2 = (sse / self.rows.len() as f64).max(self.noise2);
                     let moved = standard_moves(&a, &h, sigma2, truncate);
                     taken = tried.map(|(s, jt)| (trial, s, jt, new_sse, moved));
@@ -683,6 +723,62 @@ impl Problem<'_, '_> {
             }
         }
         Ok((theta, sim))
+    }
+
+    /// The damped step over `free` (the knobs `on` may move) that keeps
+    /// within the bounds: a knob the step would take past its bound is
+    /// put on it and the others' step solved again given that move (an
+    /// active set), so that the step is the damped model's best within the
+    /// box rather than a clipped one, which may climb. With `truncate` the
+    /// damping `λ` is added to the eigenvalues relative to the largest
+    /// (the poorly determined directions shrink first), else Marquardt's.
+    #[allow(clippy::too_many_arguments)]
+    fn bounded_step(
+        &self,
+        theta: &[f64],
+        free: &[usize],
+        on: &[usize],
+        a: &DMatrix<f64>,
+        g: &DVector<f64>,
+        truncate: Option<f64>,
+        lambda: f64,
+    ) -> Option<DVector<f64>> {
+        let mut step = DVector::zeros(free.len());
+        let mut on = on.to_vec();
+        let mut fixed: Vec<usize> = Vec::new();
+        loop {
+            if on.is_empty() {
+                return Some(step);
+            }
+            // What the knobs put on their bounds do to the gradient.
+            let g_on = g.select_rows(&on)
+                - a.select_rows(&on).select_columns(&fixed) * step.select_rows(&fixed);
+            let a_on = a.select_rows(&on).select_columns(&on);
+            let eigen = truncate.map(|_| a_on.clone().symmetric_eigen());
+            let solved = match &eigen {
+                Some(e) => {
+                    let largest = e.eigenvalues.iter().copied().fold(0.0, f64::max);
+                    damped_step(&a_on, &g_on, Some(e), truncate, 0.0, lambda * largest)
+                }
+                None => damped_step(&a_on, &g_on, None, None, lambda, 0.0),
+            }?;
+            let mut crossing = Vec::new();
+            for (q, &k) in on.iter().enumerate() {
+                let (lo, hi) = self.bounds(free[k]);
+                let to = theta[free[k]] + solved[q];
+                if to > hi || to < lo {
+                    step[k] = to.clamp(lo, hi) - theta[free[k]];
+                    crossing.push(k);
+                } else {
+                    step[k] = solved[q];
+                }
+            }
+            if crossing.is_empty() {
+                return Some(step);
+            }
+            on.retain(|k| !crossing.contains(k));
+            fixed.extend(crossing);
+        }
     }
 
     /// The knobs of `free` (indices into it) a step may move at `theta`:
@@ -1125,6 +1221,7 @@ pub(super) fn calibrate(
     }
     free.sort_unstable();
     free.dedup();
+    let start = problem.projected(&j_all, &theta_all, &start, &free);
     let (mut theta, mut sim) = problem.fit_from(
         &start,
         &free,
@@ -1144,11 +1241,14 @@ pub(super) fn calibrate(
         .filter_map(|&k| {
             fits[k]
                 .as_ref()
-                .filter(|f| !f.pinned)
+                .filter(|f| !f.pinned && f.theta.abs() < LR_SURE * f.sd)
                 .map(|f| (k, f.theta.abs() / f.sd))
         })
         .collect();
     moved.sort_by(|a, b| a.1.total_cmp(&b.1));
+    // The sensitivities at the fit (its last replay with tangents gave
+    // them): each refit below starts where they expect it to end.
+    let mut j = problem.jacobian(&theta, &sim, &all)?;
     for (k, _) in moved {
         let rest: Vec<usize> = free.iter().copied().filter(|&f| f != k).collect();
         let mut t = theta.clone();
@@ -1169,6 +1269,7 @@ pub(super) fn calibrate(
             determined.retain(|&d| d != k);
             free = rest;
             (theta, sim, sse) = (t2, s2, sse2.min(sse));
+            j = problem.jacobian(&theta, &sim, &all)?;
         }
     }
 
@@ -1179,7 +1280,6 @@ pub(super) fn calibrate(
     //    The linear view of the others' moves is only a view: after the
     //    refit, what now holds its reference value is held too (a few
     //    rounds at most, each holds one more).
-    let mut j = problem.jacobian(&theta, &sim, &all)?;
     let mut held_at: Vec<(usize, f64, f64)> = Vec::new();
     for _ in 0..PIN_ROUNDS {
         let r = &problem.measured - &sim;
@@ -1193,6 +1293,7 @@ pub(super) fn calibrate(
         }
         free.retain(|k| !pinned.iter().any(|p| p.0 == *k));
         held_at.extend(pinned);
+        let t = problem.projected(&j, &theta, &t, &free);
         (theta, sim) = problem.fit_from(&t, &free, None, Some((j.select_columns(&free), false)))?;
         j = problem.jacobian(&theta, &sim, &all)?;
     }
@@ -1218,6 +1319,7 @@ pub(super) fn calibrate(
         free.retain(|&k| k != blind);
         let mut t = theta.clone();
         t[blind] = 0.0;
+        let t = problem.projected(&j, &theta, &t, &free);
         (theta, sim) = problem.fit_from(&t, &free, None, Some((j.select_columns(&free), false)))?;
         j = problem.jacobian(&theta, &sim, &all)?;
         cond = conditional(&j, &(&problem.measured - &sim), &clusters, &free);
