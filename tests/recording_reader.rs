@@ -448,17 +448,29 @@ fn a_train_of_more_than_ten_thousand_axles_is_refused() {
 
 #[test]
 fn a_grid_of_more_than_200000_points_is_refused_before_it_is_made() {
-    // 600 m of 1 mm wheels: 190 986 points passes, 0.9 mm does not.
-    let ok = with(base(), 0, |v| v["nominal_wheel_diameter_m"] = json!(0.001));
-    read_msgs(&ok, Layout::OneChunk).unwrap();
-    let bad = with(base(), 0, |v| v["nominal_wheel_diameter_m"] = json!(1e-9));
+    // The smallest wheels (0.1 m, their physical range's edge): 62 km
+    // make 197 353 points and pass, 62.9 km make 200 217 and do not.
+    // (The messages before the second train, which would enter while the
+    // first is still on so long a section.)
+    let wheels = |length_m: f64| {
+        let mut msgs = with(base(), 0, move |v| {
+            v["nominal_wheel_diameter_m"] = json!(0.1);
+            v["length_m"] = json!(length_m);
+        });
+        let second = msgs
+            .iter()
+            .enumerate()
+            .filter(|(_, m)| m.topic == "/train/passage")
+            .nth(1)
+            .map_or(msgs.len(), |(k, _)| k);
+        msgs.truncate(second);
+        msgs
+    };
+    read_msgs(&wheels(62_000.0), Layout::OneChunk).unwrap();
     expect_error(
-        &bad,
+        &wheels(62_900.0),
         0,
-        &[
-            "make a grid of 190985931711 points a rail",
-            "at most 200000",
-        ],
+        &["make a grid of 200217 points a rail", "at most 200000"],
     );
 }
 

@@ -88,6 +88,25 @@ pub enum EngineError {
         log_time_ns: u64,
         index_in_file: u64,
     },
+    /// The model gave a value that is not a finite number (the invariant
+    /// that no NaN or infinity reaches an output): the recording's or the
+    /// configuration's numbers, each within its range, combine to one the
+    /// arithmetic cannot hold.
+    #[error(
+        "{what} is {value}, not a finite number ({topic} message at log_time {log_time_ns} ns, \
+         message index {index_in_file}{about}); the recording's and the configuration's values \
+         are each within their ranges but together beyond what the model can compute: check \
+         them against docs/spec/recording-format.md \"Limits\" and the configuration's ranges"
+    )]
+    NotFinite {
+        what: String,
+        value: f64,
+        topic: &'static str,
+        log_time_ns: u64,
+        index_in_file: u64,
+        /// The train, rail and point, where there are.
+        about: String,
+    },
 }
 
 impl EngineError {
@@ -110,7 +129,9 @@ impl EngineError {
                     || e.downcast_ref::<std::io::Error>()
                         .is_some_and(tortwin_model::error::is_environment)
             }),
-            EngineError::MeasurementTooLate { .. } | EngineError::UndefinedFactor { .. } => true,
+            EngineError::MeasurementTooLate { .. }
+            | EngineError::UndefinedFactor { .. }
+            | EngineError::NotFinite { .. } => true,
         }
     }
 }
@@ -208,6 +229,8 @@ pub(crate) struct WheelOnRail {
 struct TrainRecord {
     passage: Passage,
     log_time_ns: u64,
+    /// The passage's message index in the file (for errors).
+    index_in_file: u64,
     /// When the last axle leaves the section, time_s (the occupation's end).
     end_s: f64,
     end_ns: u64,
@@ -546,7 +569,9 @@ impl Engine {
             return Ok(());
         }
         match event.kind {
-            EventKind::Passage(passage) => self.start_train(event.log_time_ns, passage, sink),
+            EventKind::Passage(passage) => {
+                self.start_train(event.log_time_ns, event.index_in_file, passage, sink)
+            }
             EventKind::Weather(w) => {
                 self.totals.weather_messages += 1;
                 self.weather = self.weather.after_message(time_s, w);
@@ -733,6 +758,7 @@ impl Engine {
     fn start_train(
         &mut self,
         log_time_ns: u64,
+        index_in_file: u64,
         passage: Passage,
         sink: &mut dyn Sink,
     ) -> Result<(), EngineError> {
@@ -754,6 +780,7 @@ impl Engine {
         .unwrap_or_else(|| TrainRecord {
             passage: passage.clone(),
             log_time_ns,
+            index_in_file,
             end_s,
             end_ns,
             wheels: Vec::new(),
@@ -764,6 +791,7 @@ impl Engine {
         });
         drop(passage);
         record.log_time_ns = log_time_ns;
+        record.index_in_file = index_in_file;
         record.end_s = end_s;
         record.end_ns = end_ns;
         record.wheels.clear();
@@ -1092,6 +1120,20 @@ impl Engine {
             Quantity::Adhesion => 1,
             Quantity::RailMu => 2,
         };
+        // Its square too: it sums into the run's RMSE.
+        if !(m.value - simulated).powi(2).is_finite() {
+            return Err(EngineError::NotFinite {
+                what: format!("the simulated {}", m.quantity().as_str()),
+                value: simulated,
+                topic: "/measurement/friction",
+                log_time_ns: event.log_time_ns,
+                index_in_file: event.index_in_file,
+                about: format!(
+                    "; site `{}`, rail `{}`",
+                    self.section.sites[m.site].id, self.section.rails[m.rail]
+                ),
+            });
+        }
         self.totals.measurements += 1;
         self.totals.sq_residual[q] += (m.value - simulated).powi(2);
         self.totals.residual_n[q] += 1;

@@ -1600,6 +1600,33 @@ impl Engine {
             buf.wheel_mass_kg.push(wheel_mass_kg);
         }
         let info = &self.track_info[track];
+        let rail_mass_kg = &self.tracks[track].rail_mass_kg;
+        let columns: [(&str, &[f64]); 4] = [
+            ("mu", &buf.mu),
+            ("adhesion", &buf.adhesion),
+            ("the rail mass", rail_mass_kg),
+            ("the wheel mass", &buf.wheel_mass_kg),
+        ];
+        if let Some((what, k, value)) = columns.iter().find_map(|(what, values)| {
+            let k = values.iter().position(|x| !x.is_finite())?;
+            Some((what, k, values[k]))
+        }) {
+            let error = EngineError::NotFinite {
+                what: what.to_string(),
+                value,
+                topic: "/train/passage",
+                log_time_ns: record.log_time_ns,
+                index_in_file: record.index_in_file,
+                about: format!(
+                    "; train `{}`, rail `{}`, d = {} m",
+                    record.passage.train_id,
+                    info.rail_name,
+                    self.grid.d_m.get(k).copied().unwrap_or(f64::NAN)
+                ),
+            };
+            self.snapshot = buf;
+            return Err(error);
+        }
         let result = sink.field(&FieldSnapshot {
             kind,
             log_time_ns,

@@ -36,6 +36,10 @@ pub struct EngineState {
     pub weather: WeatherState,
     /// End of the last train's occupation, time_s.
     pub occupied_until_s: Option<f64>,
+    /// time_s of the last event replayed: no time in the state is later
+    /// (absent in states written before 2026-11-28, which are still read).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub last_event_s: Option<f64>,
     /// The effects the state was written with (for the reader's information;
     /// a state can be continued with other effects, but not with another
     /// band layout).
@@ -101,6 +105,10 @@ pub(super) fn capture(engine: &Engine) -> EngineState {
             .occupied_until_s
             .is_finite()
             .then_some(engine.occupied_until_s),
+        last_event_s: engine
+            .last_event_s
+            .is_finite()
+            .then_some(engine.last_event_s),
         effects: engine.cfg.effects.clone(),
     }
 }
@@ -152,6 +160,8 @@ pub(super) fn restore(
             found,
         });
     }
+    let times = Times::of(saved)?;
+    check_weather(&saved.weather, &times)?;
     let points = engine.grid.d_m.len();
     for (track, s) in engine.tracks.iter_mut().zip(&saved.tracks) {
         let lengths = [
@@ -165,16 +175,7 @@ pub(super) fn restore(
                 s.rail, s.band
             )));
         }
-        if let Some(bad) = s
-            .rail_mass_kg
-            .iter()
-            .find(|m| !(m.is_finite() && **m >= 0.0))
-        {
-            return Err(StateError::Inconsistent(format!(
-                "track {}/{} holds a rail mass of {bad} kg",
-                s.rail, s.band
-            )));
-        }
+        check_track(s, &engine.cfg, &times, &saved.weather)?;
         track.rail_mass_kg.clone_from(&s.rail_mass_kg);
         track.last_touch_s = s
             .last_touch_s
@@ -186,5 +187,163 @@ pub(super) fn restore(
     }
     engine.weather = saved.weather;
     engine.occupied_until_s = saved.occupied_until_s.unwrap_or(f64::NEG_INFINITY);
+    engine.last_event_s = saved.last_event_s.unwrap_or(f64::NEG_INFINITY);
     Ok(engine)
+}
+
+/// Wheel passes a track may have counted: every count tortwin writes is
+/// read back exactly by JSON readers that hold numbers as doubles (2^53:
+/// a million wheels a day for 25 million years).
+pub(crate) const MAX_WHEEL_PASS: u64 = 1 << 53;
+
+/// The times a state may hold, in time_s: from the epoch to the last
+/// instant a signed 64-bit nanosecond count holds (2262-04-11), and no
+/// later than the state's own time where the state says it: its last
+/// event, or the end of its last train's occupation (whose wheels touch
+/// the rail until then), whichever is later.
+struct Times {
+    lo_s: f64,
+    hi_s: f64,
+    latest_s: Option<f64>,
+}
+
+impl Times {
+    fn of(saved: &EngineState) -> Result<Self, StateError> {
+        if saved.origin_ns < 0 {
+            return Err(StateError::Inconsistent(format!(
+                "origin_ns = {} is before the epoch; log_times are never negative",
+                saved.origin_ns
+            )));
+        }
+        let origin = saved.origin_ns as f64;
+        let mut times = Self {
+            lo_s: -origin * 1e-9,
+            hi_s: (i64::MAX as f64 - origin) * 1e-9,
+            latest_s: None,
+        };
+        if let Some(t) = saved.last_event_s {
+            times.check("last_event_s", t)?;
+        }
+        if let Some(t) = saved.occupied_until_s {
+            times.check("occupied_until_s", t)?;
+        }
+        times.latest_s = match (saved.last_event_s, saved.occupied_until_s) {
+            (Some(e), Some(o)) => Some(e.max(o)),
+            (Some(e), None) => Some(e),
+            // States written before 2026-11-28 do not say their last event.
+            (None, _) => None,
+        };
+        Ok(times)
+    }
+
+    /// `t` (time_s, named `what`) is finite, within the range and not after
+    /// the state's own time.
+    fn check(&self, what: &str, t: f64) -> Result<(), StateError> {
+        let latest = self.latest_s.unwrap_or(self.hi_s).min(self.hi_s);
+        if t.is_finite() && (self.lo_s..=latest).contains(&t) {
+            return Ok(());
+        }
+        Err(StateError::Inconsistent(format!(
+            "{what} = {t:?} s is outside {} to {latest} s from the time origin (the epoch to \
+             2262-04-11, and no later than the state's last event or train)",
+            self.lo_s
+        )))
+    }
+}
+
+/// The weather a state carries: values within the recording's ranges,
+/// its time within the state's, rain accumulated never negative.
+fn check_weather(w: &WeatherState, times: &Times) -> Result<(), StateError> {
+    use tortwin_recording::limits;
+    let values = [
+        (
+            "air_temperature_c",
+            w.current.air_temperature_c,
+            limits::AIR_TEMPERATURE_C,
+        ),
+        (
+            "relative_humidity",
+            w.current.relative_humidity,
+            limits::RELATIVE_HUMIDITY,
+        ),
+        (
+            "precipitation_mm_h",
+            w.current.precipitation_mm_h,
+            limits::PRECIPITATION_MM_H,
+        ),
+    ];
+    for (name, x, range) in values {
+        if !range.contains(x) {
+            return Err(StateError::Inconsistent(format!(
+                "weather.current.{name} = {x} is outside {} to {} {}",
+                range.lo, range.hi, range.unit
+            )));
+        }
+    }
+    if let Some(t) = w.since_s {
+        times.check("weather.since_s", t)?;
+    }
+    if !(w.precip_at_since_mm.is_finite() && w.precip_at_since_mm >= 0.0) {
+        return Err(StateError::Inconsistent(format!(
+            "weather.precip_at_since_mm = {:?} mm; rain accumulated is a finite amount, never \
+             negative",
+            w.precip_at_since_mm
+        )));
+    }
+    Ok(())
+}
+
+/// One saved track: masses within [0, the configuration's cap], times
+/// within the state's, rain at each touch within what has fallen, a wheel
+/// count that cannot wrap.
+fn check_track(
+    s: &SavedTrack,
+    cfg: &ModelConfig,
+    times: &Times,
+    weather: &WeatherState,
+) -> Result<(), StateError> {
+    let name = format!("track {}/{}", s.rail, s.band);
+    let cap = cfg.product.m_max_kg;
+    if let Some((i, m)) = s
+        .rail_mass_kg
+        .iter()
+        .enumerate()
+        .find(|(_, m)| !(m.is_finite() && **m >= 0.0 && **m <= cap))
+    {
+        return Err(StateError::Inconsistent(format!(
+            "{name} holds a rail mass of {m:?} kg at point {i}; a rail mass lies within 0 and the \
+             cap product.m_max_kg = {cap} kg (a state written with a larger cap cannot be \
+             continued with this one)"
+        )));
+    }
+    for (i, t) in s.last_touch_s.iter().enumerate() {
+        if let Some(t) = t {
+            times.check(&format!("{name} last_touch_s[{i}]"), *t)?;
+        }
+    }
+    // Rain accumulated at a touch: no more than had fallen by the last
+    // event (or by the weather message in effect, for older states).
+    let fallen = times
+        .latest_s
+        .or(weather.since_s)
+        .map_or(weather.precip_at_since_mm, |t| weather.precip_mm_at(t));
+    if let Some((i, p)) = s
+        .precip_at_touch_mm
+        .iter()
+        .enumerate()
+        .find(|(_, p)| !(p.is_finite() && **p >= 0.0 && **p <= fallen * (1.0 + 1e-12)))
+    {
+        return Err(StateError::Inconsistent(format!(
+            "{name} precip_at_touch_mm[{i}] = {p:?} mm; the rain accumulated at a touch lies \
+             within 0 and the {fallen} mm fallen by the state's last event"
+        )));
+    }
+    if s.wheel_pass > MAX_WHEEL_PASS {
+        return Err(StateError::Inconsistent(format!(
+            "{name} wheel_pass = {}; at most 2^53 = {MAX_WHEEL_PASS} (counts are read back as \
+             doubles)",
+            s.wheel_pass
+        )));
+    }
+    Ok(())
 }

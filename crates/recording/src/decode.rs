@@ -20,6 +20,7 @@ use crate::event::{
     Applicator, Axle, AxleRef, Creepage, Measured, Measurement, Passage, Pulse, Quantity, Section,
     Site, Weather,
 };
+use crate::limits::{self, Range};
 use crate::wire::json::FromJson;
 use crate::wire::{MeasurementMsg, PassageMsg, PerRail, PulseMsg, SectionMsg, WeatherMsg};
 
@@ -140,6 +141,37 @@ fn non_negative(name: impl FnOnce() -> String, x: f64) -> Result<f64, DecodeErro
         let message = format!("field `{name}` must not be negative, got {x}");
         Err(DecodeError::at(name, message))
     }
+}
+
+/// `x` within its physical range ([`crate::limits`]).
+fn within(range: &Range, name: impl FnOnce() -> String, x: f64) -> Result<f64, DecodeError> {
+    if range.contains(x) {
+        Ok(x)
+    } else {
+        let name = name();
+        let unit = match range.unit {
+            "" => String::new(),
+            u => format!(" {u}"),
+        };
+        let message = format!(
+            "field `{name}` = {x} is outside its physical range {} to {}{unit} ({})",
+            range.lo, range.hi, range.why
+        );
+        Err(DecodeError::at(name, message))
+    }
+}
+
+/// A message's log_time as the signed nanosecond count every time in
+/// tortwin is: past [`limits::LAST_LOG_TIME_NS`] (2262-04-11) is an error.
+pub fn log_time(log_time_ns: u64) -> Result<i64, DecodeError> {
+    i64::try_from(log_time_ns).map_err(|_| {
+        DecodeError::at(
+            "log_time",
+            format!(
+                "log_time {log_time_ns} ns is after 2262-04-11T23:47:16.854775807Z, the last                  instant a signed 64-bit nanosecond count (every time tortwin reads and writes)                  holds"
+            ),
+        )
+    })
 }
 
 fn non_empty<T>(name: &str, items: &[T]) -> Result<(), DecodeError> {
@@ -286,9 +318,13 @@ pub fn section(msg: &SectionMsg) -> Result<Section, DecodeError> {
             id: a.id.clone(),
             position_m: in_section(&|| format!("applicators[{i}].position_m"), a.position_m)?,
             rails: applicator_rails,
-            nominal_pulse_kg: non_negative(
+            nominal_pulse_kg: within(
+                &limits::PULSE_G,
                 || format!("applicators[{i}].nominal_pulse_g"),
-                a.nominal_pulse_g,
+                non_negative(
+                    || format!("applicators[{i}].nominal_pulse_g"),
+                    a.nominal_pulse_g,
+                )?,
             )? * 1e-3,
         });
     }
@@ -310,9 +346,13 @@ pub fn section(msg: &SectionMsg) -> Result<Section, DecodeError> {
         });
     }
 
-    let nominal_wheel_diameter_m = positive(
+    let nominal_wheel_diameter_m = within(
+        &limits::WHEEL_DIAMETER_M,
         || "nominal_wheel_diameter_m".into(),
-        msg.nominal_wheel_diameter_m,
+        positive(
+            || "nominal_wheel_diameter_m".into(),
+            msg.nominal_wheel_diameter_m,
+        )?,
     )?;
     let points = (length_m / (std::f64::consts::PI * nominal_wheel_diameter_m)).floor() + 1.0;
     if points > MAX_GRID_POINTS as f64 {
@@ -331,7 +371,11 @@ pub fn section(msg: &SectionMsg) -> Result<Section, DecodeError> {
         length_m,
         rails,
         curve_radius_m,
-        rail_head_radius_m: positive(|| "rail_head_radius_m".into(), msg.rail_head_radius_m)?,
+        rail_head_radius_m: within(
+            &limits::RAIL_HEAD_RADIUS_M,
+            || "rail_head_radius_m".into(),
+            positive(|| "rail_head_radius_m".into(), msg.rail_head_radius_m)?,
+        )?,
         nominal_wheel_diameter_m,
         applicators,
         sites,
@@ -393,7 +437,11 @@ impl Decoder {
     /// A `/train/passage` at `log_time_ns`; it becomes the next train.
     pub fn passage(&mut self, msg: PassageMsg, log_time_ns: u64) -> Result<Passage, DecodeError> {
         let rails = &self.section.rails;
-        let speed_mps = positive(|| "speed_mps".into(), msg.speed_mps)?;
+        let speed_mps = within(
+            &limits::SPEED_MPS,
+            || "speed_mps".into(),
+            positive(|| "speed_mps".into(), msg.speed_mps)?,
+        )?;
         non_empty("axles", &msg.axles)?;
         if msg.axles.len() > MAX_AXLES {
             return Err(DecodeError::at(
@@ -406,7 +454,11 @@ impl Decoder {
         }
         let mut axles: Vec<Axle> = Vec::with_capacity(msg.axles.len());
         for (i, a) in msg.axles.iter().enumerate() {
-            let offset_m = non_negative(|| format!("axles[{i}].offset_m"), a.offset_m)?;
+            let offset_m = within(
+                &limits::OFFSET_M,
+                || format!("axles[{i}].offset_m"),
+                non_negative(|| format!("axles[{i}].offset_m"), a.offset_m)?,
+            )?;
             if let Some(previous) = axles.last() {
                 if offset_m < previous.offset_m {
                     return Err(DecodeError::at(
@@ -423,26 +475,38 @@ impl Decoder {
                 &a.wheel_load_kn,
                 rails,
                 || format!("axles[{i}].wheel_load_kN"),
-                |kn, rail| Ok(positive(|| format!("axles[{i}].wheel_load_kN.{rail}"), kn)? * 1e3),
+                |kn, rail| {
+                    let name = || format!("axles[{i}].wheel_load_kN.{rail}");
+                    Ok(within(&limits::WHEEL_LOAD_KN, name, positive(name, kn)?)? * 1e3)
+                },
             )?;
             let creepage = per_rail(
                 &a.creepage,
                 rails,
                 || format!("axles[{i}].creepage"),
-                |c, _| {
+                |c, rail| {
+                    let name = |what: &str| format!("axles[{i}].creepage.{rail}.{what}");
                     Ok(Creepage {
-                        cx: c.cx,
-                        cy: c.cy,
-                        spin_per_m: c.spin_per_m,
+                        cx: within(&limits::CREEPAGE, || name("cx"), c.cx)?,
+                        cy: within(&limits::CREEPAGE, || name("cy"), c.cy)?,
+                        spin_per_m: within(
+                            &limits::SPIN_PER_M,
+                            || name("spin_per_m"),
+                            c.spin_per_m,
+                        )?,
                     })
                 },
             )?;
             axles.push(Axle {
                 offset_m,
                 bogie_position: a.bogie_position,
-                wheel_diameter_m: positive(
+                wheel_diameter_m: within(
+                    &limits::WHEEL_DIAMETER_M,
                     || format!("axles[{i}].wheel_diameter_m"),
-                    a.wheel_diameter_m,
+                    positive(
+                        || format!("axles[{i}].wheel_diameter_m"),
+                        a.wheel_diameter_m,
+                    )?,
                 )?,
                 wheel_load_n,
                 creepage,
@@ -483,7 +547,18 @@ impl Decoder {
             ));
         }
         let last_offset_m = axles.last().map_or(0.0, |a| a.offset_m);
-        self.occupied_until_s = t_passage_s + (self.section.length_m + last_offset_m) / speed_mps;
+        let leaves_s = t_passage_s + (self.section.length_m + last_offset_m) / speed_mps;
+        let leaves_ns = self.origin_ns as f64 + leaves_s * 1e9;
+        if leaves_ns >= limits::LAST_LOG_TIME_NS as f64 {
+            return Err(DecodeError::at(
+                "speed_mps",
+                format!(
+                    "train `{}` at {speed_mps} m/s leaves the section {leaves_s} s after the time                      origin, after 2262-04-11T23:47:16Z, the last instant a signed 64-bit                      nanosecond count holds",
+                    msg.train_id
+                ),
+            ));
+        }
+        self.occupied_until_s = leaves_s;
         self.trains.insert(
             msg.train_id.clone(),
             TrainSeen {
@@ -536,7 +611,11 @@ impl Decoder {
         Ok(Pulse {
             applicator,
             rail,
-            mass_kg: non_negative(|| "mass_g".into(), msg.mass_g)? * 1e-3,
+            mass_kg: within(
+                &limits::PULSE_G,
+                || "mass_g".into(),
+                non_negative(|| "mass_g".into(), msg.mass_g)?,
+            )? * 1e-3,
         })
     }
 
@@ -634,18 +713,27 @@ impl Decoder {
             site,
             rail,
             of,
-            value: msg.value,
+            value: within(&limits::MEASURED_VALUE, || "value".into(), msg.value)?,
         })
     }
 
     /// An `/environment/weather`.
     pub fn weather(&self, msg: &WeatherMsg) -> Result<Weather, DecodeError> {
         Ok(Weather {
-            air_temperature_c: msg.air_temperature_c,
-            relative_humidity: msg.relative_humidity,
-            precipitation_mm_h: non_negative(
+            air_temperature_c: within(
+                &limits::AIR_TEMPERATURE_C,
+                || "air_temperature_c".into(),
+                msg.air_temperature_c,
+            )?,
+            relative_humidity: within(
+                &limits::RELATIVE_HUMIDITY,
+                || "relative_humidity".into(),
+                msg.relative_humidity,
+            )?,
+            precipitation_mm_h: within(
+                &limits::PRECIPITATION_MM_H,
                 || "precipitation_mm_h".into(),
-                msg.precipitation_mm_h,
+                non_negative(|| "precipitation_mm_h".into(), msg.precipitation_mm_h)?,
             )?,
         })
     }

@@ -27,6 +27,7 @@
 mod decode;
 pub mod error;
 pub mod event;
+pub mod limits;
 pub mod reader;
 pub mod recording;
 pub mod schema;

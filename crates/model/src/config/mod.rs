@@ -316,6 +316,10 @@ impl Default for ModelConfig {
     }
 }
 
+/// The largest friction level (`product.mu_d`, and so `mu_c`) accepted:
+/// no wheel-rail contact reaches 1.
+pub const MAX_FRICTION: f64 = 2.0;
+
 impl ModelConfig {
     fn from_default_toml() -> Result<Self, ConfigError> {
         let cfg: ModelConfig = toml::from_str(DEFAULT_TOML).map_err(|e| ConfigError {
@@ -377,7 +381,11 @@ impl ModelConfig {
         toml::to_string(self).unwrap_or_else(|e| unreachable!("ModelConfig serializes: {e}"))
     }
 
-    /// Checks every value's range; the error names the first bad key.
+    /// Checks every value's range; the error names the first bad key. A
+    /// physical bound says its reason (docs/spec/interfaces.md,
+    /// "Configuration"); a value within every range that still takes the
+    /// model's arithmetic beyond finite numbers is caught by the engine
+    /// (`EngineError::NotFinite`).
     pub fn validate(&self, source_name: &str) -> Result<(), ConfigError> {
         let bad = |key: &str, message: String| ConfigError {
             source_name: source_name.into(),
@@ -430,8 +438,8 @@ impl ModelConfig {
         check(
             "product.mu_d",
             p.mu_d,
-            fin(p.mu_d) && p.mu_d >= p.mu_c,
-            "finite and >= product.mu_c",
+            fin(p.mu_d) && p.mu_d >= p.mu_c && p.mu_d <= MAX_FRICTION,
+            "finite, >= product.mu_c and <= 2 (no wheel-rail contact reaches 1)",
         )?;
         check(
             "product.km_kg",
@@ -467,8 +475,8 @@ impl ModelConfig {
         check(
             "contact.e_pa",
             c.e_pa,
-            fin(c.e_pa) && c.e_pa > 0.0,
-            "finite and > 0",
+            (1e6..=1e13).contains(&c.e_pa),
+            "within 1e6 and 1e13 Pa (rubber to diamond; steel is 2.1e11)",
         )?;
         check(
             "contact.nu",
@@ -480,8 +488,8 @@ impl ModelConfig {
         check(
             "contact.wheel_profile_radius_m",
             r,
-            r > 0.0,
-            "> 0 (inf = flat)",
+            r >= 0.01,
+            ">= 0.01 m (inf = flat)",
         )?;
         let k = &self.polach;
         check(

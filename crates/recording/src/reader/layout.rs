@@ -316,7 +316,8 @@ fn walk(
                 ))
             })?;
         match opcode {
-            op::DATA_END | op::FOOTER => break,
+            op::FOOTER => return footer_ends_file(path, offset, end, file_len),
+            op::DATA_END => return walk_summary(path, file, end, file_len),
             op::CHUNK => {
                 run_open = false;
                 // Reading the framing again keeps the chunk record whole for
@@ -385,7 +386,68 @@ fn walk(
         }
         offset = end;
     }
-    Ok(())
+}
+
+/// The summary section after the DataEnd at `offset`, frame by frame (the
+/// records are not read), up to the Footer, which must end where the
+/// file's closing magic begins.
+fn walk_summary(
+    path: &Path,
+    file: &mut BufReader<File>,
+    mut offset: u64,
+    file_len: u64,
+) -> Result<(), InputError> {
+    let corrupt = |what: String| InputError::file(path, what);
+    let io_error = |e: std::io::Error| InputError::file(path, format!("cannot read: {e}"));
+    file.seek(SeekFrom::Start(offset)).map_err(io_error)?;
+    loop {
+        if file_len - offset < RECORD_HEADER_BYTES {
+            return Err(corrupt(format!(
+                "truncated MCAP file: the summary section ends at byte {offset} without a \
+                 Footer record"
+            )));
+        }
+        let mut frame = [0u8; RECORD_HEADER_BYTES as usize];
+        file.read_exact(&mut frame).map_err(io_error)?;
+        let (opcode, body_len) = record_frame(&frame);
+        let end = (offset + RECORD_HEADER_BYTES)
+            .checked_add(body_len)
+            .filter(|&end| end <= file_len)
+            .ok_or_else(|| {
+                corrupt(format!(
+                    "truncated or corrupt MCAP file: the record at byte {offset} \
+                     (opcode {opcode:#04x}) claims {body_len} bytes, past the end of the file"
+                ))
+            })?;
+        if opcode == op::FOOTER {
+            return footer_ends_file(path, offset, end, file_len);
+        }
+        let skip = i64::try_from(body_len)
+            .map_err(|_| corrupt(format!("record at byte {offset} is too long")))?;
+        file.seek_relative(skip).map_err(io_error)?;
+        offset = end;
+    }
+}
+
+/// A Footer record at `offset` ending at `end` is the file's last record:
+/// only the closing magic follows it. Anything more is refused rather than
+/// ignored: two MCAP files joined into one would otherwise replay as the
+/// first alone.
+fn footer_ends_file(path: &Path, offset: u64, end: u64, file_len: u64) -> Result<(), InputError> {
+    let magic_len = mcap::MAGIC.len() as u64;
+    if end + magic_len == file_len {
+        return Ok(());
+    }
+    Err(InputError::file(
+        path,
+        format!(
+            "{} bytes follow the MCAP file's Footer record (at byte {offset}) and its closing \
+             magic: two MCAP files joined into one, or data appended after the end? A \
+             recording is one MCAP file (replay the files one after the other with \
+             --state-out and --state-in)",
+            file_len.saturating_sub(end + magic_len)
+        ),
+    ))
 }
 
 /// A chunk's Channel and Message records in file order (a message by its

@@ -247,6 +247,10 @@ impl RecordingReader {
         let log_time_ns = message.key.log_time_ns;
         let data = message.data.as_slice();
         let decoder = &mut self.decoder;
+        if let Err(e) = decode::log_time(log_time_ns) {
+            let location = self.queue.location(&message);
+            return Err(InputError::at(self.queue.path(), location, e.message));
+        }
         let keep = |wire: Wire| keep_wire.then_some(wire);
         let decoded = match topic {
             Topic::Section => Err(format!(

@@ -299,6 +299,17 @@ impl Table {
                 format!("column `{}` appears twice in the header", twice.1),
             ));
         }
+        if let (Some(_), Some(&second)) = (columns.get(TIME_UTC), columns.get(LOG_TIME_NS)) {
+            return Err(InputError::cell(
+                path,
+                1,
+                second + 1,
+                format!(
+                    "both `{TIME_UTC}` and `{LOG_TIME_NS}` are columns; a table gives its \
+                     times in one of them"
+                ),
+            ));
+        }
         let time = if columns.contains_key(TIME_UTC) {
             TIME_UTC
         } else if columns.contains_key(LOG_TIME_NS) {
@@ -386,13 +397,16 @@ impl Table {
         let name = self.info.time;
         let (text, column) = self.cell(row, name);
         if name == LOG_TIME_NS {
-            text.parse::<u64>().map_err(|_| {
+            let ns = text.parse::<u64>().map_err(|_| {
                 self.fail(
                     row,
                     column,
                     format!("`{LOG_TIME_NS}` = `{text}` is not a whole number of ns"),
                 )
-            })
+            })?;
+            crate::decode::log_time(ns)
+                .map_err(|e| self.fail(row, column, format!("`{LOG_TIME_NS}`: {}", e.message)))?;
+            Ok(ns)
         } else {
             parse_time(text).map_err(|m| self.fail(row, column, format!("`{TIME_UTC}`: {m}")))
         }
