@@ -175,13 +175,22 @@ fn run(command: Command) -> Result<()> {
 
 /// Prints a command's summary on stdout. A reader that has gone (`tortwin
 /// replay | head`) is not an error of the run: the rest is dropped.
-fn say(text: &str) -> std::io::Result<()> {
+/// Any other failure names standard output; a full device is the user's
+/// to fix (exit status 2, as for a full disk under an output file).
+fn say(text: &str) -> Result<()> {
     use std::io::Write as _;
     let mut out = std::io::stdout().lock();
     let text = jobs::printable(text, true);
     match out.write_all(text.as_bytes()).and_then(|()| out.flush()) {
         Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => Ok(()),
-        result => result,
+        Err(e) if tortwin_model::error::is_environment(&e) => Err(tortwin_studies::Error::from(
+            tortwin_model::error::UsageError(format!(
+                "writing the summary to standard output: {e}"
+            )),
+        )
+        .into()),
+        Err(e) => Err(anyhow::Error::new(e).context("writing the summary to standard output")),
+        Ok(()) => Ok(()),
     }
 }
 

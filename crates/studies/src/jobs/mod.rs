@@ -103,12 +103,24 @@ pub(crate) fn load_config(source: Option<&ConfigSource>) -> Result<ModelConfig, 
     })
 }
 
+/// The most worker threads `--threads` asks for: a worker per core of the
+/// largest machines; each costs a stack and the replays' buffers, so ten
+/// thousand would only spend memory and start-up time.
+pub const MAX_THREADS: usize = 1024;
+
 /// Runs `work` on a pool of `threads` workers, or on rayon's global pool
 /// (one per core) when `None`.
 pub(crate) fn with_threads<T: Send>(
     threads: Option<usize>,
     work: impl FnOnce() -> Result<T> + Send,
 ) -> Result<T> {
+    if let Some(n) = threads.filter(|n| !(1..=MAX_THREADS).contains(n)) {
+        let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+        return Err(tortwin_model::error::UsageError(format!(
+            "--threads {n}: give 1 to {MAX_THREADS} (a worker per core; this machine has {cores})"
+        ))
+        .into());
+    }
     match threads {
         Some(threads) => rayon::ThreadPoolBuilder::new()
             .num_threads(threads.max(1))

@@ -191,7 +191,7 @@ pub fn run_with(args: &StrategyArgs, progress: &dyn Progress) -> Result<(Traffic
         p.days = args.synth_days;
         p.seed = args.synth_seed;
         p.trains_per_day = args.synth_trains_per_day;
-        p.validate()?;
+        p.validate_as("synth-")?;
         std::fs::create_dir_all(&args.out).map_err(|source| Error::Io {
             what: "creating",
             path: args.out.clone(),

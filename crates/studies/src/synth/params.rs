@@ -128,6 +128,11 @@ pub struct LocalFriction {
 /// 2024-04-08T00:00:00Z, the default start.
 pub(crate) const DEFAULT_START_NS: u64 = 1_712_534_400_000_000_000;
 
+/// The most days one synthetic recording spans: ten years (its size and
+/// generation time grow with the days; longer spans are replayed day by
+/// day with a state).
+pub(crate) const MAX_DAYS: u32 = 3660;
+
 impl SynthParams {
     /// The defaults for a section of `length_m`: sites at 60, 210 and 460 m
     /// of 600 m, scaled with the length; applicator A1 at 10 m on both rails.
@@ -200,7 +205,14 @@ impl SynthParams {
     /// Checks that the parameters describe a recording the format allows;
     /// the error names the parameter as a command-line option.
     pub(crate) fn validate(&self) -> Result<(), UsageError> {
+        self.validate_as("")
+    }
+
+    /// [`SynthParams::validate`] with the options named as a command that
+    /// prefixes them gives them (`strategy --synth-days`: `"synth-"`).
+    pub(crate) fn validate_as(&self, prefix: &str) -> Result<(), UsageError> {
         let bad = |what: &str, v: &dyn std::fmt::Display, must: &str| {
+            let what = what.replacen("--", &format!("--{prefix}"), 1);
             Err(UsageError(format!("{what} is {v}; it must be {must}")))
         };
         let share = |what: &str, v: f64| {
@@ -213,8 +225,22 @@ impl SynthParams {
         if self.days == 0 {
             return bad("--days", &self.days, "at least 1");
         }
-        if self.end_ns() >= i64::MAX as u64 || self.start_ns >= i64::MAX as u64 {
+        if self.days > MAX_DAYS {
+            return bad(
+                "--days",
+                &self.days,
+                &format!("at most {MAX_DAYS} (ten years; replay longer spans day by day)"),
+            );
+        }
+        if self.start_ns >= i64::MAX as u64 {
             return bad("--start", &self.start_ns, "a time before 2262");
+        }
+        if self.end_ns() >= i64::MAX as u64 {
+            return bad(
+                "--days",
+                &self.days,
+                "few enough to end before 2262 from the start",
+            );
         }
         if !(self.length_m.is_finite() && self.length_m > 0.0) {
             return bad("--length-m", &self.length_m, "finite and > 0");
