@@ -437,3 +437,46 @@ fn a_full_standard_output_is_named() {
         .unwrap();
     refused(&o, &["standard output", "No space left on device"]);
 }
+
+/// A configuration, strategy space or state far larger than any tortwin
+/// writes (here sparse files of 2 GiB and 300 MiB, named by mistake) is
+/// refused with its size after reading at most its limit, not read whole.
+#[test]
+fn oversized_text_inputs_are_refused_by_their_size() {
+    let dir = tempfile::tempdir().unwrap();
+    let sparse = |name: &str, bytes: u64| {
+        let path = dir.path().join(name);
+        std::fs::File::create(&path)
+            .unwrap()
+            .set_len(bytes)
+            .unwrap();
+        path
+    };
+    let config = sparse("huge.toml", 2 << 30);
+    let o = tortwin()
+        .arg("replay")
+        .arg(demo_day())
+        .arg("--config")
+        .arg(&config)
+        .output()
+        .unwrap();
+    refused(&o, &["huge.toml", "2147483648 bytes", "at most 1048576"]);
+    let space = sparse("space.toml", 2 << 30);
+    let o = tortwin()
+        .args(["strategy", "--synth", "--space"])
+        .arg(&space)
+        .arg("--out")
+        .arg(dir.path().join("s"))
+        .output()
+        .unwrap();
+    refused(&o, &["--space", "2147483648 bytes", "at most 1048576"]);
+    let state = sparse("state.json", 300 << 20);
+    let o = tortwin()
+        .arg("replay")
+        .arg(demo_day())
+        .arg("--state-in")
+        .arg(&state)
+        .output()
+        .unwrap();
+    refused(&o, &["state.json", "314572800 bytes", "at most 268435456"]);
+}

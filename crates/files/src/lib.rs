@@ -284,6 +284,34 @@ pub fn open_input(path: &Path) -> std::io::Result<File> {
     Ok(file)
 }
 
+/// The most bytes a text input (a configuration, a strategy space, a
+/// section description) may hold: the longest written by hand or by
+/// tortwin are a few kB; a file of gigabytes named by mistake is refused
+/// before it is read.
+pub const MAX_TEXT_INPUT_BYTES: u64 = 1 << 20;
+
+/// The most bytes a state file may hold: a section at the grid limit
+/// (200 000 points) writes about 14 MB a rail and band.
+pub const MAX_STATE_BYTES: u64 = 256 << 20;
+
+/// The text of the input `path` (checked as [`open_input`] does), at most
+/// `limit` bytes: a longer file is refused with its size, and only
+/// `limit + 1` bytes of it are read.
+pub fn read_text_input(path: &Path, limit: u64) -> std::io::Result<String> {
+    use std::io::Read as _;
+    let file = open_input(path)?;
+    let mut text = String::new();
+    file.take(limit + 1).read_to_string(&mut text)?;
+    if text.len() as u64 > limit {
+        let size = std::fs::metadata(path).map_or(text.len() as u64, |m| m.len());
+        return Err(std::io::Error::new(
+            std::io::ErrorKind::InvalidInput,
+            format!("{size} bytes; a file of this kind holds at most {limit}"),
+        ));
+    }
+    Ok(text)
+}
+
 /// Refuses what is not a regular file, and records one as an input.
 fn remember_input(path: &Path, metadata: &std::fs::Metadata) -> std::io::Result<()> {
     if !metadata.is_file() {

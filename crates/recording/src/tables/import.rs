@@ -714,8 +714,7 @@ fn line_column(text: &str, offset: usize) -> (u64, usize) {
 }
 
 fn read_section(path: &Path) -> Result<Section, InputError> {
-    let text = tortwin_files::check_input(path)
-        .and_then(|()| std::fs::read_to_string(path))
+    let text = tortwin_files::read_text_input(path, tortwin_files::MAX_TEXT_INPUT_BYTES)
         .map_err(|e| InputError::file(path, format!("cannot read the section description: {e}")))?;
     let file: SectionFile = toml::from_str(&text).map_err(|e| {
         let (line, column) = e.span().map_or((1, 1), |s| line_column(&text, s.start));

@@ -69,12 +69,16 @@ impl ConfigSource {
     pub fn load(&self) -> Result<ModelConfig, ConfigError> {
         match self {
             ConfigSource::File(p) => {
-                tortwin_outputs::files::check_input(p).map_err(|e| ConfigError {
+                let text = tortwin_outputs::files::read_text_input(
+                    p,
+                    tortwin_outputs::files::MAX_TEXT_INPUT_BYTES,
+                )
+                .map_err(|e| ConfigError {
                     source_name: p.display().to_string(),
                     key: "-".into(),
                     message: format!("cannot read: {e}"),
                 })?;
-                ModelConfig::from_file(p)
+                ModelConfig::from_overlay_str(&text, &p.display().to_string())
             }
             ConfigSource::Text { text, name } => ModelConfig::from_overlay_str(text, name),
         }

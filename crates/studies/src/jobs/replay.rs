@@ -76,9 +76,9 @@ impl ReplayArgs {
 
 /// Reads a state written by `--state-out`.
 pub fn read_state(path: &Path) -> Result<EngineState, InputError> {
-    let text = tortwin_outputs::files::check_input(path)
-        .and_then(|()| std::fs::read_to_string(path))
-        .map_err(|e| InputError::file(path, format!("cannot read the state: {e}")))?;
+    let text =
+        tortwin_outputs::files::read_text_input(path, tortwin_outputs::files::MAX_STATE_BYTES)
+            .map_err(|e| InputError::file(path, format!("cannot read the state: {e}")))?;
     let state: EngineState = serde_json::from_str(&text)
         .map_err(|e| InputError::file(path, format!("not a tortwin state: {e}")))?;
     Ok(state)

@@ -152,9 +152,11 @@ impl Default for SearchConfig {
 
 impl StrategyFile {
     pub(crate) fn read(path: &Path) -> Result<Self, UsageError> {
-        let text = tortwin_outputs::files::check_input(path)
-            .and_then(|()| std::fs::read_to_string(path))
-            .map_err(|e| UsageError(format!("--space {}: {e}", path.display())))?;
+        let text = tortwin_outputs::files::read_text_input(
+            path,
+            tortwin_outputs::files::MAX_TEXT_INPUT_BYTES,
+        )
+        .map_err(|e| UsageError(format!("--space {}: {e}", path.display())))?;
         Self::parse(&text).map_err(|e| UsageError(format!("--space {}: {e}", path.display())))
     }
 
