@@ -480,3 +480,35 @@ fn oversized_text_inputs_are_refused_by_their_size() {
         .unwrap();
     refused(&o, &["state.json", "314572800 bytes", "at most 268435456"]);
 }
+
+/// A strategy space of a billion steps, or a grid of more strategies than
+/// replays anyone can wait for: refused with the dimension and the limit
+/// (a billion steps aborted on an 8 GB allocation).
+#[test]
+fn strategy_spaces_are_bounded() {
+    let dir = tempfile::tempdir().unwrap();
+    for (k, (text, says)) in [
+        (
+            "[space]\npulse_g = { min = 0.05, max = 0.8, steps = 1000000000 }\n",
+            "space.pulse_g: 1000000000 values; a dimension has at most 1000",
+        ),
+        (
+            "[search]\nmax_grid = 1000000000000\n",
+            "search.max_grid = 1000000000000",
+        ),
+    ]
+    .iter()
+    .enumerate()
+    {
+        let space = dir.path().join(format!("space{k}.toml"));
+        std::fs::write(&space, text).unwrap();
+        let o = tortwin()
+            .args(["strategy", "--synth", "--space"])
+            .arg(&space)
+            .arg("--out")
+            .arg(dir.path().join(format!("s{k}")))
+            .output()
+            .unwrap();
+        refused(&o, &[says]);
+    }
+}

@@ -32,6 +32,16 @@ use crate::{Error, Result};
 use tortwin_model::config::ModelConfig;
 use tortwin_model::error::UsageError;
 
+/// The most values one dimension of a space may have (a list's length, a
+/// range's `steps`, the candidate positions): a thousand is finer than any
+/// applicator is set; a billion steps once asked for 8 GB.
+pub const MAX_VALUES: usize = 1000;
+
+/// The most strategies the grid method evaluates, one replay each (and
+/// the most `[search] max_grid` may say): a larger space is searched by the
+/// optimiser.
+pub const MAX_GRID: usize = 100_000;
+
 /// Values of one dimension: a list, or `steps` log-spaced values from
 /// `min` to `max` (both included).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -43,6 +53,15 @@ pub enum Values {
 
 impl Values {
     fn expand(&self, key: &str) -> Result<Vec<f64>, UsageError> {
+        let count = match self {
+            Values::List(v) => v.len(),
+            Values::Range { steps, .. } => *steps,
+        };
+        if count > MAX_VALUES {
+            return Err(UsageError(format!(
+                "space.{key}: {count} values; a dimension has at most {MAX_VALUES}"
+            )));
+        }
         let v = match self {
             Values::List(v) => v.clone(),
             Values::Range { min, max, steps } => {
@@ -148,6 +167,18 @@ impl Space {
         every.sort_unstable();
         every.dedup();
         let mut positions = c.positions_m.clone();
+        if positions.len() > MAX_VALUES {
+            return Err(UsageError(format!(
+                "space.positions_m: {} positions; at most {MAX_VALUES}",
+                positions.len()
+            )));
+        }
+        if c.rails.len() > MAX_VALUES {
+            return Err(UsageError(format!(
+                "space.rails: {} rail sets; at most {MAX_VALUES}",
+                c.rails.len()
+            )));
+        }
         if positions.is_empty() {
             return Err(UsageError(
                 "space.positions_m: needs at least one position".into(),
@@ -223,7 +254,9 @@ impl Space {
 
     /// Strategies in the space.
     pub fn size(&self) -> usize {
-        self.pulse_kg.len() * self.every_axles.len() * self.layouts.len() * self.rails.len()
+        [self.every_axles.len(), self.layouts.len(), self.rails.len()]
+            .into_iter()
+            .fold(self.pulse_kg.len(), usize::saturating_mul)
     }
 
     pub fn keys(&self) -> Vec<Key> {
@@ -419,8 +452,22 @@ impl<'a> Searcher<'a> {
 
     /// Runs the search and returns the recommendation's key.
     pub fn run(&self, method: Method, max_grid: usize) -> Result<Method> {
+        if max_grid > MAX_GRID {
+            return Err(UsageError(format!(
+                "search.max_grid = {max_grid}; at most {MAX_GRID} (a replay each)"
+            ))
+            .into());
+        }
+        let size = self.space.size();
         let grid = match method {
-            Method::Auto => self.space.size() <= max_grid,
+            Method::Auto => size <= max_grid,
+            Method::Grid if size > MAX_GRID => {
+                return Err(UsageError(format!(
+                    "--method grid: the space holds {size} strategies, a replay each; the grid \
+                     evaluates at most {MAX_GRID} (the optimiser searches larger spaces)"
+                ))
+                .into())
+            }
             Method::Grid => true,
             Method::Optimiser => false,
         };
