@@ -512,3 +512,31 @@ fn strategy_spaces_are_bounded() {
         refused(&o, &[says]);
     }
 }
+
+/// A section of a thousand and one applicators (a hundred thousand made a
+/// replay superlinear and discover run past 400 s): refused, the limit
+/// said; a thousand are read.
+#[test]
+fn a_section_has_at_most_a_thousand_applicators() {
+    let dir = tempfile::tempdir().unwrap();
+    let with = |n: usize| {
+        edited(dir.path(), &format!("apps{n}"), "/section", 0, |v, _| {
+            let first = v["applicators"][0].clone();
+            let mut many = vec![first];
+            for k in 1..n {
+                let mut a = many[0].clone();
+                a["id"] = serde_json::json!(format!("X{k}"));
+                many.push(a);
+            }
+            v["applicators"] = Value::Array(many);
+        })
+    };
+    check(&replay(&with(1000), &["--quiet"]), "a thousand applicators");
+    refused(
+        &replay(&with(1001), &[]),
+        &[
+            "1001 entries in `applicators`; a section has at most 1000",
+            "/section",
+        ],
+    );
+}

@@ -265,6 +265,27 @@ pub fn section(msg: &SectionMsg) -> Result<Section, DecodeError> {
     let length_m = positive(|| "length_m".into(), msg.length_m)?;
 
     non_empty("rails", &msg.rails)?;
+    let counts = [
+        ("rails", msg.rails.len(), limits::MAX_RAILS),
+        (
+            "applicators",
+            msg.applicators.len(),
+            limits::MAX_APPLICATORS,
+        ),
+        (
+            "measurement_sites",
+            msg.measurement_sites.len(),
+            limits::MAX_SITES,
+        ),
+    ];
+    for (field, n, most) in counts {
+        if n > most {
+            return Err(DecodeError::at(
+                field,
+                format!("{n} entries in `{field}`; a section has at most {most}"),
+            ));
+        }
+    }
     let mut rails: Vec<String> = Vec::with_capacity(msg.rails.len());
     for (j, name) in msg.rails.iter().enumerate() {
         if rails.contains(name) {

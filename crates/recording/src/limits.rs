@@ -124,6 +124,18 @@ pub const PRECIPITATION_MM_H: Range = Range {
     why: "the heaviest rain measured fell at about 400 mm/h over an hour",
 };
 
+/// Rails of a section: two, four on dual gauge; each is a grid of its own.
+pub const MAX_RAILS: usize = 16;
+
+/// Applicators of a section: a few a curve, a few dozen on a long line
+/// (every pulse looks its applicator up, and the engine keeps one entry
+/// per applicator and rail).
+pub const MAX_APPLICATORS: usize = 1000;
+
+/// Measurement sites of a section (every contact at a site is kept until
+/// its train's measurements are read).
+pub const MAX_SITES: usize = 1000;
+
 /// The last instant a log_time can stand for: `i64::MAX` ns after the
 /// epoch, 2262-04-11T23:47:16.854775807Z (the time origin and every time
 /// tortwin writes are signed 64-bit nanosecond counts, as the MCAP tools'
