@@ -540,3 +540,80 @@ fn a_section_has_at_most_a_thousand_applicators() {
         ],
     );
 }
+
+/// Ten chunks that all span the same hours, each holding 100 MiB of an
+/// unknown topic (zeros: a few kB compressed): the replay holds every
+/// chunk that overlaps the time frontier at once, and held their unknown
+/// messages too (an 83 kB file took 2.7 GB). Unknown topics are skipped
+/// whatever their size: the peak stays that of one decompressed chunk.
+#[test]
+fn unknown_topics_in_overlapping_chunks_are_not_held() {
+    let Ok(time) = std::process::Command::new("/usr/bin/time")
+        .arg("-f")
+        .arg("%M")
+        .arg("true")
+        .output()
+    else {
+        return; // no GNU time to measure the peak with
+    };
+    if !time.status.success() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let rec = dir.path().join("overlap.mcap");
+    let demo = common::recording::read_messages(&demo_day());
+    let section = demo.iter().find(|m| m.topic == "/section").unwrap();
+    let weather = demo
+        .iter()
+        .find(|m| m.topic == "/environment/weather")
+        .unwrap();
+    let t0 = section.log_time;
+    let file = std::io::BufWriter::new(std::fs::File::create(&rec).unwrap());
+    let options = mcap::WriteOptions::new()
+        .use_chunks(true)
+        .compression(Some(mcap::Compression::Zstd));
+    let mut writer = tortwin_recording::RecordingWriter::new(file, options, None).unwrap();
+    writer
+        .write_json(tortwin_recording::Topic::Section, t0, &section.data)
+        .unwrap();
+    writer.end_chunk().unwrap();
+    let blob = writer.add_channel("/camera/raw", "raw").unwrap();
+    let zeros = vec![0u8; 100 << 20];
+    for k in 0..10u64 {
+        writer.write_to_channel(blob, t0 + 1, &zeros).unwrap();
+        writer
+            .write_json(
+                tortwin_recording::Topic::Weather,
+                t0 + 3_600_000_000_000 - k,
+                &weather.data,
+            )
+            .unwrap();
+        writer.end_chunk().unwrap();
+    }
+    drop(zeros);
+    writer.finish().unwrap();
+    assert!(std::fs::metadata(&rec).unwrap().len() < 1 << 20);
+    let o = std::process::Command::new("/usr/bin/time")
+        .arg("-f")
+        .arg("%M")
+        .arg(env!("CARGO_BIN_EXE_tortwin"))
+        .arg("replay")
+        .arg(&rec)
+        .output()
+        .unwrap();
+    check(&o, "replay of overlapping chunks");
+    let text = stderr(&o);
+    let peak_kb: u64 = text.lines().last().unwrap().trim().parse().unwrap();
+    assert!(
+        stdout_has(&o, "ignored 10 messages on unknown topics"),
+        "{}",
+        String::from_utf8_lossy(&o.stdout)
+    );
+    // One chunk decompressed (100 MiB) and the replay itself; ten held at
+    // once would be over a GiB.
+    assert!(peak_kb < 400_000, "peak {peak_kb} kB");
+}
+
+fn stdout_has(o: &Output, needle: &str) -> bool {
+    String::from_utf8_lossy(&o.stdout).contains(needle)
+}

@@ -504,13 +504,23 @@ fn read_chunk(record: &[u8], keep: bool) -> Result<ChunkContents, String> {
     })
 }
 
-/// The messages of a chunk record (given whole), decompressed.
-pub(super) fn chunk_messages(record: &[u8]) -> Result<ChunkMessages, String> {
+/// The messages of a chunk record (given whole), decompressed; the bytes
+/// of a message whose channel `keep` refuses (an unknown topic) are not
+/// kept (its header is: it counts in the file's order). Memory: the
+/// format's messages of the chunk, whatever the unknown ones weigh.
+pub(super) fn chunk_messages(
+    record: &[u8],
+    keep: impl Fn(u16) -> bool,
+) -> Result<ChunkMessages, String> {
     let header = chunk_header(record)?;
-    let mut kept = ChunkMessages::with_capacity(&header);
+    let mut kept = ChunkMessages {
+        bytes: Vec::new(),
+        messages: Vec::new(),
+    };
     for_each_chunk_record(record, &header, |opcode, body| {
         if let Record::Message { header, data } = record::parse(opcode, body)? {
-            kept.push(header, &data);
+            let data: &[u8] = if keep(header.channel_id) { &data } else { &[] };
+            kept.push(header, data);
         }
         Ok(())
     })?;

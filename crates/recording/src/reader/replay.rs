@@ -295,7 +295,14 @@ impl ReplayQueue {
                         chunk.record_offset
                     ))
                 })?;
-                chunk_messages(&record).map_err(|e| {
+                let (channels, keep_unknown) = (&self.channels, self.keep_unknown);
+                let keep = |channel: u16| {
+                    keep_unknown
+                        || channels
+                            .get(&channel)
+                            .is_some_and(|c| TopicRank::of(&c.topic) != TopicRank::Unknown)
+                };
+                chunk_messages(&record, keep).map_err(|e| {
                     self.corrupt(format!(
                         "unreadable chunk at byte {}: {e}",
                         chunk.record_offset
