@@ -336,6 +336,7 @@ proptest! {
             snapshot_every_wheel: true,
             every_wheel_contacts: true,
             tangents: false,
+            non_finite_allowed: false,
         };
         let contacts = EngineOptions { every_wheel_contacts: true, ..EngineOptions::default() };
         let run = |opts, threads| {

@@ -159,6 +159,11 @@ pub struct EngineOptions {
     /// wheels at once); the masses are the same. A replay from a saved
     /// state starts with zero tangents: the saved masses are taken as given.
     pub tangents: bool,
+    /// Let values that are not finite numbers through to the sink instead
+    /// of stopping with [`EngineError::NotFinite`]: for a study's own
+    /// replays, where a candidate whose arithmetic overflows is a worst
+    /// cost to be ranked last, not an output.
+    pub non_finite_allowed: bool,
 }
 
 /// The calculation grid: `d_i = i * C`, `C = pi * nominal wheel diameter`,
@@ -1121,7 +1126,7 @@ impl Engine {
             Quantity::RailMu => 2,
         };
         // Its square too: it sums into the run's RMSE.
-        if !(m.value - simulated).powi(2).is_finite() {
+        if !self.opts.non_finite_allowed && !(m.value - simulated).powi(2).is_finite() {
             return Err(EngineError::NotFinite {
                 what: format!("the simulated {}", m.quantity().as_str()),
                 value: simulated,

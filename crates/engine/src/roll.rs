@@ -1607,10 +1607,14 @@ impl Engine {
             ("the rail mass", rail_mass_kg),
             ("the wheel mass", &buf.wheel_mass_kg),
         ];
-        if let Some((what, k, value)) = columns.iter().find_map(|(what, values)| {
-            let k = values.iter().position(|x| !x.is_finite())?;
-            Some((what, k, values[k]))
-        }) {
+        let non_finite = match self.opts.non_finite_allowed {
+            true => None,
+            false => columns.iter().find_map(|(what, values)| {
+                let k = values.iter().position(|x| !x.is_finite())?;
+                Some((what, k, values[k]))
+            }),
+        };
+        if let Some((what, k, value)) = non_finite {
             let error = EngineError::NotFinite {
                 what: what.to_string(),
                 value,

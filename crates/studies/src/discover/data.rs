@@ -334,6 +334,9 @@ impl Dataset {
             cfg.clone(),
             EngineOptions {
                 tangents,
+                // A candidate whose arithmetic overflows ranks last (its
+                // SSE is NaN), as before the engine checked its outputs.
+                non_finite_allowed: true,
                 ..EngineOptions::default()
             },
             self.origin_ns,

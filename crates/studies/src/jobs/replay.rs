@@ -205,6 +205,7 @@ pub fn replay_from(
         snapshot_every_wheel: args.every_wheel,
         every_wheel_contacts: args.per_train,
         tangents: false,
+        non_finite_allowed: false,
     };
     let section = reader.section().clone();
     let source = args.config.as_ref().map_or_else(
