@@ -201,8 +201,9 @@ fn two_recordings_joined_into_one_file_are_refused() {
     check(&replay(&alone, &["--quiet"]), "the demo day alone");
 }
 
-/// `tortwin import` refuses a `log_time_ns` past 2262 at its cell, and a
-/// table that gives both time columns (one of them was ignored).
+/// `tortwin import` refuses a `log_time_ns` past 2262 at its cell, a
+/// table that gives both time columns (one of them was ignored), and a
+/// line of more than 1 MiB.
 #[test]
 fn import_refuses_times_past_2262_and_two_time_columns() {
     let dir = tempfile::tempdir().unwrap();
@@ -239,6 +240,19 @@ fn import_refuses_times_past_2262_and_two_time_columns() {
     refused(
         &o,
         &["pulses.csv:1:5: ", "both `time_utc` and `log_time_ns`"],
+    );
+    // A cell of 2 MiB in a column import does not read: refused at its
+    // line, not held whole (a 300 MB one was).
+    let o = import(
+        "long",
+        &format!(
+            "time_utc,applicator_id,rail,mass_g,note\n2024-04-08T05:58:03Z,A1,high,0.2,{}\n",
+            "x".repeat(2 << 20)
+        ),
+    );
+    refused(
+        &o,
+        &["pulses.csv:2:1: ", "line 2 is longer than 1048576 bytes"],
     );
 }
 

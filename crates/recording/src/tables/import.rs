@@ -263,8 +263,61 @@ impl Origin {
 /// A CSV file with its header resolved.
 struct Table {
     info: std::rc::Rc<TableInfo>,
-    reader: csv::Reader<File>,
+    reader: csv::Reader<RowLimit<File>>,
     columns: HashMap<String, usize>,
+}
+
+/// The most bytes a line of a table may hold: a passage row is about 200;
+/// a cell of hundreds of megabytes (in a column tortwin does not even
+/// read) would otherwise be held whole by the CSV reader.
+pub const MAX_LINE_BYTES: u64 = 1 << 20;
+
+/// A reader that fails on a line longer than [`MAX_LINE_BYTES`], saying
+/// which (1-based), before the CSV reader has buffered more of it.
+struct RowLimit<R> {
+    inner: R,
+    /// Bytes since the last line feed, and lines ended so far.
+    since_newline: u64,
+    lines: u64,
+}
+
+/// The error [`RowLimit`] gives, found again by [`csv_error`].
+#[derive(Debug)]
+struct LineTooLong {
+    line: u64,
+}
+
+impl std::fmt::Display for LineTooLong {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "line {} is longer than {MAX_LINE_BYTES} bytes; a table's line holds one row of a \
+             few hundred",
+            self.line
+        )
+    }
+}
+
+impl std::error::Error for LineTooLong {}
+
+impl<R: std::io::Read> std::io::Read for RowLimit<R> {
+    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+        let n = self.inner.read(buf)?;
+        for &b in &buf[..n] {
+            if b == b'\n' {
+                self.lines += 1;
+                self.since_newline = 0;
+            } else {
+                self.since_newline += 1;
+                if self.since_newline > MAX_LINE_BYTES {
+                    return Err(std::io::Error::other(LineTooLong {
+                        line: self.lines + 1,
+                    }));
+                }
+            }
+        }
+        Ok(n)
+    }
 }
 
 impl Table {
@@ -274,7 +327,11 @@ impl Table {
         let mut reader = csv::ReaderBuilder::new()
             .trim(csv::Trim::All)
             .has_headers(true)
-            .from_reader(file);
+            .from_reader(RowLimit {
+                inner: file,
+                since_newline: 0,
+                lines: 0,
+            });
         let header: Vec<String> = reader
             .headers()
             .map_err(|e| csv_error(path, e))?
@@ -426,6 +483,11 @@ struct Row {
 }
 
 fn csv_error(path: &Path, e: csv::Error) -> InputError {
+    if let csv::ErrorKind::Io(io) = e.kind() {
+        if let Some(long) = io.get_ref().and_then(|e| e.downcast_ref::<LineTooLong>()) {
+            return InputError::cell(path, long.line, 1, long.to_string());
+        }
+    }
     let line = e.position().map_or(0, |p| p.line());
     let message = match e.kind() {
         csv::ErrorKind::UnequalLengths {
