@@ -141,28 +141,3 @@ pub const MAX_SITES: usize = 1000;
 /// tortwin writes are signed 64-bit nanosecond counts, as the MCAP tools'
 /// and rerun's are).
 pub const LAST_LOG_TIME_NS: u64 = i64::MAX as u64;
-
-/// The physical ranges as the spec's table lists them: (field, range).
-pub const ALL: [(&str, Range); 12] = [
-    ("/section rail_head_radius_m", RAIL_HEAD_RADIUS_M),
-    (
-        "/section nominal_wheel_diameter_m, /train/passage axles[].wheel_diameter_m",
-        WHEEL_DIAMETER_M,
-    ),
-    ("/train/passage speed_mps", SPEED_MPS),
-    ("/train/passage axles[].offset_m", OFFSET_M),
-    ("/train/passage axles[].wheel_load_kN", WHEEL_LOAD_KN),
-    ("/train/passage creepage cx, cy", CREEPAGE),
-    ("/train/passage creepage spin_per_m", SPIN_PER_M),
-    (
-        "/applicator/pulse mass_g, /section applicators[].nominal_pulse_g",
-        PULSE_G,
-    ),
-    ("/measurement/friction value", MEASURED_VALUE),
-    ("/environment/weather air_temperature_c", AIR_TEMPERATURE_C),
-    ("/environment/weather relative_humidity", RELATIVE_HUMIDITY),
-    (
-        "/environment/weather precipitation_mm_h",
-        PRECIPITATION_MM_H,
-    ),
-];

@@ -296,25 +296,8 @@ fn walk(
     let mut run_open = false;
     file.seek(SeekFrom::Start(offset)).map_err(io_error)?;
     loop {
-        if file_len - offset < RECORD_HEADER_BYTES {
-            return Err(corrupt(format!(
-                "truncated MCAP file: the data section ends at byte {offset} without a \
-                 DataEnd record"
-            )));
-        }
-        let mut frame = [0u8; RECORD_HEADER_BYTES as usize];
-        file.read_exact(&mut frame).map_err(io_error)?;
-        let (opcode, body_len) = record_frame(&frame);
-        let body_offset = offset + RECORD_HEADER_BYTES;
-        let end = body_offset
-            .checked_add(body_len)
-            .filter(|&end| end <= file_len)
-            .ok_or_else(|| {
-                corrupt(format!(
-                    "truncated or corrupt MCAP file: the record at byte {offset} \
-                     (opcode {opcode:#04x}) claims {body_len} bytes, past the end of the file"
-                ))
-            })?;
+        let (opcode, body_len, end) =
+            next_frame(path, file, offset, file_len, "data section", "DataEnd")?;
         match opcode {
             op::FOOTER => return footer_ends_file(path, offset, end, file_len),
             op::DATA_END => return walk_summary(path, file, end, file_len),
@@ -401,24 +384,8 @@ fn walk_summary(
     let io_error = |e: std::io::Error| InputError::file(path, format!("cannot read: {e}"));
     file.seek(SeekFrom::Start(offset)).map_err(io_error)?;
     loop {
-        if file_len - offset < RECORD_HEADER_BYTES {
-            return Err(corrupt(format!(
-                "truncated MCAP file: the summary section ends at byte {offset} without a \
-                 Footer record"
-            )));
-        }
-        let mut frame = [0u8; RECORD_HEADER_BYTES as usize];
-        file.read_exact(&mut frame).map_err(io_error)?;
-        let (opcode, body_len) = record_frame(&frame);
-        let end = (offset + RECORD_HEADER_BYTES)
-            .checked_add(body_len)
-            .filter(|&end| end <= file_len)
-            .ok_or_else(|| {
-                corrupt(format!(
-                    "truncated or corrupt MCAP file: the record at byte {offset} \
-                     (opcode {opcode:#04x}) claims {body_len} bytes, past the end of the file"
-                ))
-            })?;
+        let (opcode, body_len, end) =
+            next_frame(path, file, offset, file_len, "summary section", "Footer")?;
         if opcode == op::FOOTER {
             return footer_ends_file(path, offset, end, file_len);
         }
@@ -427,6 +394,39 @@ fn walk_summary(
         file.seek_relative(skip).map_err(io_error)?;
         offset = end;
     }
+}
+
+/// The framing of the record at `offset` (the file positioned there):
+/// its opcode, body length and end, checked to lie within the file. A
+/// `section` that ends first lacks its closing `record`.
+fn next_frame(
+    path: &Path,
+    file: &mut BufReader<File>,
+    offset: u64,
+    file_len: u64,
+    section: &str,
+    record: &str,
+) -> Result<(u8, u64, u64), InputError> {
+    let corrupt = |what: String| InputError::file(path, what);
+    if file_len - offset < RECORD_HEADER_BYTES {
+        return Err(corrupt(format!(
+            "truncated MCAP file: the {section} ends at byte {offset} without a {record} record"
+        )));
+    }
+    let mut frame = [0u8; RECORD_HEADER_BYTES as usize];
+    file.read_exact(&mut frame)
+        .map_err(|e| InputError::file(path, format!("cannot read: {e}")))?;
+    let (opcode, body_len) = record_frame(&frame);
+    let end = (offset + RECORD_HEADER_BYTES)
+        .checked_add(body_len)
+        .filter(|&end| end <= file_len)
+        .ok_or_else(|| {
+            corrupt(format!(
+                "truncated or corrupt MCAP file: the record at byte {offset} \
+                 (opcode {opcode:#04x}) claims {body_len} bytes, past the end of the file"
+            ))
+        })?;
+    Ok((opcode, body_len, end))
 }
 
 /// A Footer record at `offset` ending at `end` is the file's last record:
