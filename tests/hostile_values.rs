@@ -292,17 +292,17 @@ fn a_state_is_checked_like_a_recording() {
         (
             "/tracks/0/rail_mass_kg/40",
             serde_json::json!(1.0),
-            "rail mass of 1.0 kg",
+            "tracks[0] (track high/top) rail_mass_kg[40] = 1.0 kg",
         ),
         (
             "/tracks/1/rail_mass_kg/3",
             serde_json::json!(1e308),
-            "rail mass of 1e308 kg",
+            "tracks[1] (track low/top) rail_mass_kg[3] = 1e308 kg",
         ),
         (
             "/tracks/0/rail_mass_kg/3",
             serde_json::json!(-1e-9),
-            "rail mass of -1e-9 kg",
+            "rail_mass_kg[3] = -1e-9 kg",
         ),
         (
             "/weather/precip_at_since_mm",
@@ -361,7 +361,8 @@ fn configuration_values_beyond_their_physical_ranges_are_refused() {
 }
 
 /// Values each within their ranges whose combination the model cannot
-/// compute (Polach's `k_a` at the edge of a double): the engine stops
+/// compute (27 generic terms on the dry friction, each a factor 1e12 within
+/// its range, multiply to 1e324 = infinity): the engine stops
 /// before a NaN or an infinity reaches an output, naming the message that
 /// caused it (a measurement's simulated value; without measurements, the
 /// train whose friction field it would have been), and leaves no output
@@ -370,7 +371,9 @@ fn configuration_values_beyond_their_physical_ranges_are_refused() {
 fn no_nan_or_infinity_reaches_an_output() {
     let dir = tempfile::tempdir().unwrap();
     let cfg = dir.path().join("overflow.toml");
-    std::fs::write(&cfg, "[polach]\nk_a = 1e308\n").unwrap();
+    let term = "[[effects.generic]]\nacts_on = \"friction_dry\"\ndriver = \"wheel_load_kN\"\n\
+                form = \"step\"\nx0 = 0\nf = 1e12\n";
+    std::fs::write(&cfg, term.repeat(27)).unwrap();
     let measured = dir.path().join("measured.mcap");
     std::fs::copy(demo_day(), &measured).unwrap();
     let unmeasured = dir.path().join("unmeasured.mcap");
@@ -388,16 +391,17 @@ fn no_nan_or_infinity_reaches_an_output() {
         }
         m.topic != "/measurement/friction"
     });
+    // The friction field after the first train is the first output the
+    // infinity would reach, with measurements or without.
     for (rec, says) in [
-        (&measured, ["/measurement/friction", "site `"]),
+        (&measured, ["/train/passage", "train `"]),
         (&unmeasured, ["/train/passage", "train `"]),
     ] {
         let o = replay(rec, &["--config", cfg.to_str().unwrap()]);
         refused(
             &o,
             &[
-                "adhesion",
-                "is NaN, not a finite number",
+                "mu is inf, not a finite number",
                 "message index",
                 says[0],
                 says[1],

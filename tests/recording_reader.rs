@@ -731,7 +731,7 @@ bad_input! {
         => 2, ["`axles[1].wheel_diameter_m`", "-0.92"];
     zero_section_length:
         with(base(), 0, |v| v["length_m"] = json!(0.0))
-        => 0, ["`length_m`", "positive"];
+        => 0, ["`length_m`", "physical range 1 to"];
     zero_rail_head_radius:
         with(base(), 0, |v| v["rail_head_radius_m"] = json!(0.0))
         => 0, ["`rail_head_radius_m`", "positive"];
@@ -740,7 +740,7 @@ bad_input! {
         => 0, ["`nominal_wheel_diameter_m`", "positive"];
     zero_curve_radius:
         with(base(), 0, |v| v["curve_radius_m"] = json!(0.0))
-        => 0, ["`curve_radius_m`", "positive"];
+        => 0, ["`curve_radius_m`", "physical range 10 to"];
     negative_pulse_mass:
         with(base(), 3, |v| v["mass_g"] = json!(-0.1))
         => 3, ["`mass_g`", "negative", "-0.1"];

@@ -118,7 +118,8 @@ impl GenericSet {
         set
     }
 
-    /// The first factor that is not a finite number where `value` gives its
+    /// The first factor that is not a finite number (or is beyond
+    /// [`tortwin_model::generic::FACTOR_MAX`]) where `value` gives its
     /// driver a value (`None` for drivers the event does not carry), e.g. a
     /// `power` of a temperature below 0 °C or of a creepage of 0 with a
     /// negative exponent: effects.md's formula has no value there, and a NaN
@@ -130,12 +131,14 @@ impl GenericSet {
         self.by_acts_on.iter().flatten().find_map(|t| {
             let x = value(t.driver)?;
             let g = t.form.g(x, t.x_ref);
-            (!g.is_finite()).then_some(UndefinedFactor {
-                term: t.index,
-                driver: t.driver,
-                x,
-                g,
-            })
+            (!(g.is_finite() && g <= tortwin_model::generic::FACTOR_MAX)).then_some(
+                UndefinedFactor {
+                    term: t.index,
+                    driver: t.driver,
+                    x,
+                    g,
+                },
+            )
         })
     }
 

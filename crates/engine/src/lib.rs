@@ -77,9 +77,10 @@ pub enum EngineError {
     /// A generic term's factor has no finite value at what the recording
     /// gives its driver.
     #[error(
-        "effects.generic[{}]: g({} = {}) = {} is not a finite number (the {topic} message at \
-         log_time {log_time_ns} ns, message index {index_in_file}); choose a form defined over \
-         the values the recording shows (a power needs x > 0)",
+        "effects.generic[{}]: g({} = {}) = {} is not a finite number of at most 1e12 (the \
+         {topic} message at log_time {log_time_ns} ns, message index {index_in_file}); choose \
+         a form and parameter defined over the values the recording shows (a power needs x > \
+         0) that changes the quantity by no more than a factor 1e12",
         .factor.term, .factor.driver.name(), .factor.x, .factor.g
     )]
     UndefinedFactor {

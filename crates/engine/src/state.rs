@@ -163,7 +163,7 @@ pub(super) fn restore(
     let times = Times::of(saved)?;
     check_weather(&saved.weather, &times)?;
     let points = engine.grid.d_m.len();
-    for (track, s) in engine.tracks.iter_mut().zip(&saved.tracks) {
+    for (k, (track, s)) in engine.tracks.iter_mut().zip(&saved.tracks).enumerate() {
         let lengths = [
             s.rail_mass_kg.len(),
             s.last_touch_s.len(),
@@ -171,11 +171,11 @@ pub(super) fn restore(
         ];
         if lengths.iter().any(|&n| n != points) {
             return Err(StateError::Inconsistent(format!(
-                "track {}/{} has {lengths:?} values for a grid of {points} points",
+                "tracks[{k}] (track {}/{}) has {lengths:?} values for a grid of {points} points",
                 s.rail, s.band
             )));
         }
-        check_track(s, &engine.cfg, &times, &saved.weather)?;
+        check_track(k, s, &engine.cfg, &times, &saved.weather)?;
         track.rail_mass_kg.clone_from(&s.rail_mass_kg);
         track.last_touch_s = s
             .last_touch_s
@@ -245,7 +245,8 @@ impl Times {
         }
         Err(StateError::Inconsistent(format!(
             "{what} = {t:?} s is outside {} to {latest} s from the time origin (the epoch to \
-             2262-04-11, and no later than the state's last event or train)",
+             2262-04-11, and no later than the state's last event or train: last_event_s, \
+             occupied_until_s)",
             self.lo_s
         )))
     }
@@ -297,12 +298,13 @@ fn check_weather(w: &WeatherState, times: &Times) -> Result<(), StateError> {
 /// within the state's, rain at each touch within what has fallen, a wheel
 /// count that cannot wrap.
 fn check_track(
+    k: usize,
     s: &SavedTrack,
     cfg: &ModelConfig,
     times: &Times,
     weather: &WeatherState,
 ) -> Result<(), StateError> {
-    let name = format!("track {}/{}", s.rail, s.band);
+    let name = format!("tracks[{k}] (track {}/{})", s.rail, s.band);
     let cap = cfg.product.m_max_kg;
     if let Some((i, m)) = s
         .rail_mass_kg
@@ -311,8 +313,8 @@ fn check_track(
         .find(|(_, m)| !(m.is_finite() && **m >= 0.0 && **m <= cap))
     {
         return Err(StateError::Inconsistent(format!(
-            "{name} holds a rail mass of {m:?} kg at point {i}; a rail mass lies within 0 and the \
-             cap product.m_max_kg = {cap} kg (a state written with a larger cap cannot be \
+            "{name} rail_mass_kg[{i}] = {m:?} kg; a rail mass lies within 0 and the cap \
+             product.m_max_kg = {cap} kg (a state written with a larger cap cannot be \
              continued with this one)"
         )));
     }

@@ -120,6 +120,9 @@ pub fn judge(target: &Target, input: &[u8]) -> (Verdict, meter::Reading, Duratio
         Ok(Err(e)) => Verdict::Finding("harness", format!("{e:#}")),
         Ok(Ok(Outcome::NotInput(m))) => Verdict::Finding("not-input", m),
         Ok(Ok(Outcome::Rejected(m))) if !target.names_a_file(&m) => Verdict::Finding("unclear", m),
+        Ok(Ok(Outcome::Rejected(m))) if !names_the_field(&target.field_names(input), &m) => {
+            Verdict::Finding("unnamed-field", m)
+        }
         Ok(Ok(_)) if reading.largest > meter::FINDING_BYTES => Verdict::Finding(
             "allocation",
             format!("a single allocation of {} bytes", reading.largest),
@@ -131,6 +134,12 @@ pub fn judge(target: &Target, input: &[u8]) -> (Verdict, meter::Reading, Duratio
         Ok(Ok(Outcome::Accepted)) => Verdict::Accepted,
     };
     (verdict, reading, elapsed)
+}
+
+/// Whether a refusal names the field a `values` mutant changed (any of
+/// its names; no names: nothing to check).
+fn names_the_field(names: &[String], message: &str) -> bool {
+    names.is_empty() || names.iter().any(|n| message.contains(n.as_str()))
 }
 
 /// The worker loop: `runs` mutants of `target`'s seeds from `seed`.

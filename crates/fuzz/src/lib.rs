@@ -17,3 +17,4 @@ pub mod meter;
 pub mod mutate;
 pub mod seeds;
 pub mod targets;
+pub mod values;

@@ -8,13 +8,15 @@ use std::sync::Arc;
 
 use anyhow::{Context, Result};
 use rand::Rng;
-use tortwin_studies::jobs::replay::{replay_run, ReplayArgs};
+use serde_json::Value;
+use tortwin_studies::jobs::replay::{replay_run, ReplayArgs, Replayed};
 use tortwin_studies::jobs::tables::{import, ImportArgs};
 use tortwin_studies::jobs::ConfigSource;
 use tortwin_studies::Silent;
 
 use crate::mutate;
 use crate::seeds::Seeds;
+use crate::values;
 
 /// What tortwin reads.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, clap::ValueEnum)]
@@ -34,15 +36,21 @@ pub enum Kind {
     State,
     /// CSV tables and section.toml (`tortwin import`).
     Csv,
+    /// Well-formed inputs of every kind with one value at the edge of its
+    /// type or range (0, -0, subnormals, 1e308, 2^53, 2^63, u64::MAX, NaN
+    /// and infinities however spelled): replayed with finite results or
+    /// refused naming the field ([`crate::values`]).
+    Values,
 }
 
 impl Kind {
-    pub const ALL: [Kind; 5] = [
+    pub const ALL: [Kind; 6] = [
         Kind::Mcap,
         Kind::Messages,
         Kind::Config,
         Kind::State,
         Kind::Csv,
+        Kind::Values,
     ];
 
     pub fn name(self) -> &'static str {
@@ -52,6 +60,7 @@ impl Kind {
             Kind::Config => "config",
             Kind::State => "state",
             Kind::Csv => "csv",
+            Kind::Values => "values",
         }
     }
 
@@ -68,7 +77,7 @@ impl Kind {
 /// How a run ended.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Outcome {
-    /// Accepted and replayed.
+    /// Accepted and replayed, with finite results.
     Accepted,
     /// Refused as bad input (exit status 2), with the message.
     Rejected(String),
@@ -116,7 +125,7 @@ impl Target {
                     write_recording(&parsed, Layout::Unchunked)?,
                 ]
             }
-            Kind::Messages => {
+            Kind::Messages | Kind::Values => {
                 recording = Some(read_recording(&day1)?);
                 vec![Vec::new()]
             }
@@ -162,6 +171,7 @@ impl Target {
                 mutate::text(rng, &mut v, other);
                 v
             }
+            Kind::Values => self.value_mutant(rng)?,
             Kind::Csv => {
                 // The first line names the file; only its content mutates.
                 let split = seed.iter().position(|&b| b == b'\n').map_or(0, |i| i + 1);
@@ -198,8 +208,177 @@ impl Target {
                 replay(args)
             }
             Kind::Csv => self.run_csv(input)?,
+            Kind::Values => self.run_value(input)?,
         };
         Ok(result)
+    }
+
+    /// A `values` mutant: one number of one seed (a message of day 1, a
+    /// configuration, the state after day 1, a table) at an edge.
+    fn value_mutant(&self, rng: &mut impl Rng) -> Result<Vec<u8>> {
+        loop {
+            let choice = rng.random_range(0..20);
+            let made = match choice {
+                0..=9 => self.message_value(rng)?,
+                10..=12 => {
+                    let config =
+                        &self.fixtures.configs[rng.random_range(0..self.fixtures.configs.len())];
+                    let v: toml::Value = toml::from_str(std::str::from_utf8(config)?)?;
+                    let leaves = values::toml_numbers(&v);
+                    pick(rng, &leaves).and_then(|path| {
+                        let literal =
+                            values::TOML_EDGES[rng.random_range(0..values::TOML_EDGES.len())];
+                        values::toml_with(&v, path, literal).map(|text| {
+                            values::encode(
+                                "config",
+                                &values::names(path),
+                                &values::describe(path),
+                                text.as_bytes(),
+                            )
+                        })
+                    })
+                }
+                13..=15 => {
+                    let v: Value = serde_json::from_slice(&self.fixtures.state1)?;
+                    let leaves = values::json_numbers(&v);
+                    pick(rng, &leaves).and_then(|path| {
+                        let literal =
+                            values::JSON_EDGES[rng.random_range(0..values::JSON_EDGES.len())];
+                        values::json_with(&v, path, literal).map(|text| {
+                            values::encode(
+                                "state",
+                                &values::names(path),
+                                &values::describe(path),
+                                text.as_bytes(),
+                            )
+                        })
+                    })
+                }
+                _ => {
+                    let files = self.fixtures.table_files()?;
+                    let (name, content) = &files[rng.random_range(0..files.len())];
+                    if name.ends_with(".toml") {
+                        let v: toml::Value = toml::from_str(std::str::from_utf8(content)?)?;
+                        let leaves = values::toml_numbers(&v);
+                        pick(rng, &leaves).and_then(|path| {
+                            let literal =
+                                values::TOML_EDGES[rng.random_range(0..values::TOML_EDGES.len())];
+                            values::toml_with(&v, path, literal).map(|text| {
+                                values::encode(
+                                    &format!("csv:{name}"),
+                                    &values::names(path),
+                                    &values::describe(path),
+                                    text.as_bytes(),
+                                )
+                            })
+                        })
+                    } else {
+                        values::csv_with(rng, content).map(|(text, column)| {
+                            values::encode(
+                                &format!("csv:{name}"),
+                                std::slice::from_ref(&column),
+                                &column,
+                                &text,
+                            )
+                        })
+                    }
+                }
+            };
+            if let Some(m) = made {
+                return Ok(m);
+            }
+        }
+    }
+
+    /// One message of day 1 with a number of its JSON, or its `log_time`,
+    /// at an edge; written back as MCAP.
+    fn message_value(&self, rng: &mut impl Rng) -> Result<Option<Vec<u8>>> {
+        let recording = self.recording.as_ref().context("no seed recording")?;
+        let mut messages = recording.messages.clone();
+        let i = rng.random_range(0..messages.len());
+        let topic = recording
+            .channels
+            .get(&messages[i].channel)
+            .map_or("?", |c| c.0.as_str())
+            .to_string();
+        let (names, path) = if rng.random_range(0..8) == 0 {
+            messages[i].log_time =
+                values::TIME_EDGES[rng.random_range(0..values::TIME_EDGES.len())];
+            (vec!["log_time".to_string()], format!("{topic} log_time"))
+        } else {
+            let Ok(v) = serde_json::from_slice::<Value>(&messages[i].data) else {
+                return Ok(None);
+            };
+            let leaves = values::json_numbers(&v);
+            let Some(path) = pick(rng, &leaves) else {
+                return Ok(None);
+            };
+            let literal = values::JSON_EDGES[rng.random_range(0..values::JSON_EDGES.len())];
+            let Some(text) = values::json_with(&v, path, literal) else {
+                return Ok(None);
+            };
+            messages[i].data = text.into_bytes();
+            (
+                values::names(path),
+                format!("{topic} {}", values::describe(path)),
+            )
+        };
+        let layout = [Layout::Uncompressed, Layout::Unchunked][rng.random_range(0..2)];
+        let mcap = write_recording(
+            &SeedRecording {
+                channels: recording.channels.clone(),
+                messages,
+            },
+            layout,
+        )?;
+        Ok(Some(values::encode("mcap", &names, &path, &mcap)))
+    }
+
+    /// Runs a `values` mutant where its header says it belongs.
+    fn run_value(&self, input: &[u8]) -> Result<Outcome> {
+        let (place, _, content) =
+            values::decode(input).context("a values input without its header line")?;
+        let scratch = self.scratch.path();
+        Ok(match place.as_str() {
+            "mcap" => {
+                let path = scratch.join("input.mcap");
+                std::fs::write(&path, content)?;
+                replay(ReplayArgs::new(&path))
+            }
+            "config" => {
+                let path = scratch.join("fuzz.toml");
+                std::fs::write(&path, content)?;
+                let mut args = ReplayArgs::new(&self.fixtures.day1);
+                args.config = Some(ConfigSource::File(path));
+                replay(args)
+            }
+            "state" => {
+                let path = scratch.join("state.json");
+                std::fs::write(&path, content)?;
+                let mut args = ReplayArgs::new(&self.fixtures.day2);
+                args.state_in = Some(path);
+                replay(args)
+            }
+            other => {
+                let name = other
+                    .strip_prefix("csv:")
+                    .context("an unknown place in a values header")?;
+                let mut csv_input = format!("{name}\n").into_bytes();
+                csv_input.extend_from_slice(content);
+                self.run_csv(&csv_input)?
+            }
+        })
+    }
+
+    /// For a `values` mutant, the names a refusal may give for the field
+    /// it changed (empty for the other kinds).
+    pub fn field_names(&self, input: &[u8]) -> Vec<String> {
+        if self.kind != Kind::Values {
+            return Vec::new();
+        }
+        values::decode(input)
+            .map(|(_, names, _)| names)
+            .unwrap_or_default()
     }
 
     fn run_csv(&self, input: &[u8]) -> Result<Outcome> {
@@ -242,8 +421,53 @@ impl Target {
 
 fn replay(args: ReplayArgs) -> Outcome {
     match replay_run(&args, None, &mut [], &Silent) {
-        Ok(_) => Outcome::Accepted,
+        Ok(run) => match not_finite(&run) {
+            None => Outcome::Accepted,
+            Some(what) => {
+                Outcome::NotInput(format!("accepted with a result that is not finite: {what}"))
+            }
+        },
         Err(e) => classify(&e),
+    }
+}
+
+/// What of an accepted run is not finite: a number of its summary, or a
+/// state that would not read back (a NaN is written as `null`).
+fn not_finite(run: &Replayed) -> Option<String> {
+    let s = &run.summary;
+    for (quantity, n, rmse) in &s.rmse {
+        if *n > 0 && !rmse.is_finite() {
+            return Some(format!("RMSE of {quantity} {rmse}"));
+        }
+    }
+    let b = &s.mass_balance;
+    let balance = [
+        ("on_rail_start_kg", b.on_rail_start_kg),
+        ("applied_kg", b.applied_kg),
+        ("on_rail_end_kg", b.on_rail_end_kg),
+        ("carried_out_kg", b.carried_out_kg),
+        ("consumed_kg", b.consumed_kg),
+        ("capped_kg", b.capped_kg),
+        ("effects_lost_kg", b.effects_lost_kg),
+    ];
+    if let Some((name, v)) = balance.iter().find(|(_, v)| !v.is_finite()) {
+        return Some(format!("mass balance {name} {v}"));
+    }
+    let text = match serde_json::to_string(&run.state) {
+        Ok(t) => t,
+        Err(e) => return Some(format!("the state does not write: {e}")),
+    };
+    if let Err(e) = serde_json::from_str::<tortwin_engine::EngineState>(&text) {
+        return Some(format!("the state does not read back: {e}"));
+    }
+    None
+}
+
+fn pick<'a, T>(rng: &mut impl Rng, items: &'a [T]) -> Option<&'a T> {
+    if items.is_empty() {
+        None
+    } else {
+        Some(&items[rng.random_range(0..items.len())])
     }
 }
 

@@ -17,7 +17,7 @@ fn a_short_campaign_finds_nothing() {
     let summary: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.path().join("summary.json")).unwrap())
             .unwrap();
-    for target in ["mcap", "messages", "config", "state", "csv"] {
+    for target in ["mcap", "messages", "config", "state", "csv", "values"] {
         let s = &summary[target];
         assert_eq!(s["executions"], 2000, "{target}: {s}");
         assert_eq!(s["findings"], 0, "{target}: {s}");

@@ -10,6 +10,16 @@
 
 use serde::{Deserialize, Serialize};
 
+/// The largest factor a generic term may put on a quantity, anywhere the
+/// recording drives it: a factor of 10^12 is beyond any effect a rail shows
+/// (discover searches up to e^20 = 4.9e8 at the data's extremes), and
+/// everything the model computes from it stays finite.
+pub const FACTOR_MAX: f64 = 1e12;
+
+/// The largest measurement offset (`offset` of a `measurement` term): no
+/// reading lies beyond +-10 (docs/spec/recording-format.md "Limits").
+pub const OFFSET_MAX: f64 = 10.0;
+
 /// The quantity a generic term multiplies (or, for `Measurement`, offsets).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]

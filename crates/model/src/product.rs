@@ -395,7 +395,13 @@ fn roll_core(
             conditions.consumption_factor,
             consumption_exp,
         );
-        let f = (m - c) * per_m;
+        // A subnormal m (below 2.2e-308 kg, left by ageing over years) has
+        // no finite reciprocal: divide instead (0 * inf would be NaN).
+        let f = if per_m.is_finite() {
+            (m - c) * per_m
+        } else {
+            (m - c) / m
+        };
         let before = *wheel_kg + *rail_kg;
         *wheel_kg *= f;
         *rail_kg *= f;
@@ -531,6 +537,25 @@ mod tests {
         );
         assert!(r <= p.m_max_kg && w == 0.0);
         assert!((l.consumed_kg + l.capped_kg + r - 3e-4).abs() < 1e-18);
+    }
+
+    /// A subnormal mass (ageing leaves one after years untouched) is
+    /// consumed like any other, not turned into NaN by 0 · (1 / m) = 0 ·
+    /// inf (found by the semantic fuzzer: a state holding 5e-324 kg).
+    #[test]
+    fn a_subnormal_mass_is_consumed_not_made_nan() {
+        let p = table2();
+        let cond = ContactConditions {
+            fp_fc: 1.0,
+            transfer_revolution: Some(1.0),
+            consumption_factor: 1.0,
+        };
+        for (w0, r0) in [(0.0, 5e-324), (5e-324, 1e-310), (1e-310, 0.0)] {
+            let (mut w, mut r) = (w0, r0);
+            let l = roll(&p, &mut w, &mut r, &cond);
+            assert_eq!((w, r), (0.0, 0.0), "{w0:e} {r0:e}");
+            assert_eq!(l.consumed_kg, w0 + r0);
+        }
     }
 
     fn mass() -> impl Strategy<Value = f64> {

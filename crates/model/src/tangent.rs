@@ -194,12 +194,20 @@ pub fn roll_given(
         } else {
             1.0
         };
-        let f = (m - c) * per_m;
+        // As product::roll_core: a subnormal m has no finite reciprocal.
+        let over_m = |x: f64| {
+            if per_m.is_finite() {
+                x * per_m
+            } else {
+                x / m
+            }
+        };
+        let f = over_m(m - c);
         // ∂f = (∂m - ∂c - f ∂m) / m; both surfaces are scaled by f.
-        let keep = (1.0 - f - slope) * per_m;
+        let keep = over_m(1.0 - f - slope);
         let before = *wheel_kg + *rail_kg;
         for k in 0..SLOTS {
-            let df = keep * dm[k] - own[k] * per_m;
+            let df = keep * dm[k] - over_m(own[k]);
             wheel_tan[k] = wheel_tan[k] * f + *wheel_kg * df;
             rail_tan[k] = rail_tan[k] * f + *rail_kg * df;
         }

@@ -86,8 +86,15 @@ pub fn parse<'de, T: FromJson<'de>>(data: &'de [u8]) -> Result<T, DecodeError> {
 /// The sentence for a message that does not parse as its wire struct.
 fn describe(data: &[u8], path: &serde_path_to_error::Path, e: serde_json::Error) -> String {
     if !e.is_data() {
+        // The path still says where the reader was: the field whose value
+        // is not JSON (a NaN, an infinity, a number that overflows).
+        let at = if path.iter().next().is_some() {
+            format!("field `{path}`: ")
+        } else {
+            String::new()
+        };
         return format!(
-            "the message is not valid JSON ({e}); NaN and infinity are not JSON numbers"
+            "{at}the message is not valid JSON ({e}); NaN and infinity are not JSON numbers"
         );
     }
     // serde names an array or object only by its kind ("sequence", "map"):
@@ -128,7 +135,7 @@ fn positive(name: impl FnOnce() -> String, x: f64) -> Result<f64, DecodeError> {
         Ok(x)
     } else {
         let name = name();
-        let message = format!("field `{name}` must be positive, got {x}");
+        let message = format!("field `{name}` must be positive, got {x:?}");
         Err(DecodeError::at(name, message))
     }
 }
@@ -138,7 +145,7 @@ fn non_negative(name: impl FnOnce() -> String, x: f64) -> Result<f64, DecodeErro
         Ok(x)
     } else {
         let name = name();
-        let message = format!("field `{name}` must not be negative, got {x}");
+        let message = format!("field `{name}` must not be negative, got {x:?}");
         Err(DecodeError::at(name, message))
     }
 }
@@ -154,7 +161,7 @@ fn within(range: &Range, name: impl FnOnce() -> String, x: f64) -> Result<f64, D
             u => format!(" {u}"),
         };
         let message = format!(
-            "field `{name}` = {x} is outside its physical range {} to {}{unit} ({})",
+            "field `{name}` = {x:?} is outside its physical range {} to {}{unit} ({})",
             range.lo, range.hi, range.why
         );
         Err(DecodeError::at(name, message))
@@ -262,7 +269,11 @@ pub const MAX_AXLES: usize = 10_000;
 
 /// The `/section` message as the typed [`Section`].
 pub fn section(msg: &SectionMsg) -> Result<Section, DecodeError> {
-    let length_m = positive(|| "length_m".into(), msg.length_m)?;
+    let length_m = within(
+        &limits::SECTION_LENGTH_M,
+        || "length_m".into(),
+        msg.length_m,
+    )?;
 
     non_empty("rails", &msg.rails)?;
     let counts = [
@@ -299,7 +310,7 @@ pub fn section(msg: &SectionMsg) -> Result<Section, DecodeError> {
 
     let curve_radius_m = msg
         .curve_radius_m
-        .map(|r| positive(|| "curve_radius_m".into(), r))
+        .map(|r| within(&limits::CURVE_RADIUS_M, || "curve_radius_m".into(), r))
         .transpose()?;
 
     let in_section = |name: &dyn Fn() -> String, x: f64| -> Result<f64, DecodeError> {
@@ -308,7 +319,7 @@ pub fn section(msg: &SectionMsg) -> Result<Section, DecodeError> {
         } else {
             let name = name();
             let message =
-                format!("field `{name}` = {x} is outside the section (0 to {length_m} m)");
+                format!("field `{name}` = {x:?} is outside the section (0 to {length_m:?} m)");
             Err(DecodeError::at(name, message))
         }
     };

@@ -50,6 +50,24 @@ pub const WHEEL_LOAD_KN: Range = Range {
           (40 t: 200 kN a wheel)",
 };
 
+/// `length_m` of a `/section`: a point to a line; the grid's limit (200 000
+/// points a rail, a point per 0.1 m of wheel circumference or more) is
+/// reached first on long sections.
+pub const SECTION_LENGTH_M: Range = Range {
+    lo: 1.0,
+    hi: 1_000_000.0,
+    unit: "m",
+    why: "a metre (a wheel's contact with one grid point) to 1000 km",
+};
+
+/// `curve_radius_m` of a `/section` (absent on tangent track).
+pub const CURVE_RADIUS_M: Range = Range {
+    lo: 10.0,
+    hi: 1e7,
+    unit: "m",
+    why: "tram curves of 12 m to a tangent's 10 000 km",
+};
+
 /// `axles[].offset_m`.
 pub const OFFSET_M: Range = Range {
     lo: 0.0,

@@ -6,7 +6,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::generic::{ActsOn, Driver, Form, FormKind};
+use crate::generic::{ActsOn, Driver, Form, FormKind, FACTOR_MAX, OFFSET_MAX};
 use crate::Quantity;
 
 /// What a term does: a factor `g(x)` or, on `measurement`, an offset.
@@ -174,10 +174,22 @@ impl GenericTerm {
     pub(crate) fn check(&self) -> Result<(), TermError> {
         for (name, v) in self.params() {
             if !v.is_finite() {
-                return Err(err(name, format!("is {v}; a finite number is required")));
+                return Err(err(name, format!("is {v:?}; a finite number is required")));
             }
-            if name == "f" && v < 0.0 {
-                return Err(err(name, format!("is {v}; it must be >= 0")));
+            if name == "f" && !(0.0..=FACTOR_MAX).contains(&v) {
+                return Err(err(
+                    name,
+                    format!("is {v:?}; it must be within 0 and {FACTOR_MAX:e} (a factor)"),
+                ));
+            }
+            if name == "offset" && v.abs() > OFFSET_MAX {
+                return Err(err(
+                    name,
+                    format!(
+                        "is {v:?}; it must be within -{OFFSET_MAX} and {OFFSET_MAX} (no reading \
+                         lies beyond +-10: docs/spec/recording-format.md \"Limits\")"
+                    ),
+                ));
             }
         }
         if let TermEffect::Factor {

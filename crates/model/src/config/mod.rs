@@ -19,7 +19,7 @@ use serde::{Deserialize, Serialize};
 use crate::contact::PolachParams;
 use crate::effects::Named;
 use crate::error::ConfigError;
-use crate::product::ProductParams;
+use crate::product::{ProductKey, ProductParams};
 
 pub use generic::{format_utc, GenericTerm, TermEffect};
 
@@ -396,80 +396,35 @@ impl ModelConfig {
             if v.is_nan() {
                 Err(bad(key, "is NaN; a finite number is required".into()))
             } else if !ok {
-                Err(bad(key, format!("is {v}; it must be {what}")))
+                Err(bad(key, format!("is {v:?}; it must be {what}")))
             } else {
                 Ok(())
             }
         };
-        let fin = |v: f64| v.is_finite();
         let p = &self.product;
-        check(
-            "product.k0_kg",
-            p.k0_kg,
-            fin(p.k0_kg) && p.k0_kg >= 0.0,
-            "finite and >= 0",
-        )?;
-        check(
-            "product.km1_kg",
-            p.km1_kg,
-            fin(p.km1_kg) && p.km1_kg >= 0.0,
-            "finite and >= 0",
-        )?;
-        check(
-            "product.km2",
-            p.km2,
-            fin(p.km2) && p.km2 > 0.0,
-            "finite and > 0",
-        )?;
-        check(
-            "product.m0_kg",
-            p.m0_kg,
-            fin(p.m0_kg) && p.m0_kg >= 0.0,
-            "finite and >= 0",
-        )?;
-        check("product.kp", p.kp, fin(p.kp), "finite")?;
-        check("product.kc", p.kc, fin(p.kc), "finite")?;
-        check(
-            "product.mu_c",
-            p.mu_c,
-            fin(p.mu_c) && p.mu_c >= 0.0,
-            "finite and >= 0",
-        )?;
+        // Physical ranges (docs/spec/interfaces.md "Configuration ranges").
+        let within = |key: &str, v: f64, (lo, hi): (f64, f64), why: &str| {
+            check(
+                key,
+                v,
+                (lo..=hi).contains(&v),
+                &format!("within {lo:e} and {hi:e} ({why})"),
+            )
+        };
+        for key in ProductKey::ALL {
+            let v = key.get(p);
+            let (lo, hi, why) = key.physical_range();
+            let name = format!("product.{}", key.name());
+            if key == ProductKey::M0Kg && v == 0.0 {
+                continue; // no saturation term (model.md)
+            }
+            within(&name, v, (lo, hi), why)?;
+        }
         check(
             "product.mu_d",
             p.mu_d,
-            fin(p.mu_d) && p.mu_d >= p.mu_c && p.mu_d <= MAX_FRICTION,
-            "finite, >= product.mu_c and <= 2 (no wheel-rail contact reaches 1)",
-        )?;
-        check(
-            "product.km_kg",
-            p.km_kg,
-            fin(p.km_kg) && p.km_kg > 0.0,
-            "finite and > 0",
-        )?;
-        check(
-            "product.kt",
-            p.kt,
-            fin(p.kt) && p.kt >= 0.0,
-            "finite and >= 0",
-        )?;
-        check(
-            "product.cm_kg",
-            p.cm_kg,
-            fin(p.cm_kg) && p.cm_kg > 0.0,
-            "finite and > 0",
-        )?;
-        check(
-            "product.cn",
-            p.cn,
-            fin(p.cn) && p.cn > 0.0,
-            "finite and > 0",
-        )?;
-        check(
-            "product.m_max_kg",
-            p.m_max_kg,
-            fin(p.m_max_kg) && p.m_max_kg > 0.0,
-            "finite and > 0",
+            p.mu_d >= p.mu_c,
+            ">= product.mu_c (dry friction above boundary friction)",
         )?;
         let c = &self.contact;
         check(
@@ -498,23 +453,23 @@ impl ModelConfig {
             (0.0..=1.0).contains(&k.p_a),
             "in [0, 1]",
         )?;
-        check(
+        within(
             "polach.p_b_s_per_m",
             k.p_b_s_per_m,
-            fin(k.p_b_s_per_m) && k.p_b_s_per_m >= 0.0,
-            "finite and >= 0",
+            (0.0, 1e3),
+            "Polach's B is 0.6 s/m; at 1000 s/m friction is at its asymptote below 1 mm/s of slip",
         )?;
         check(
             "polach.k_a",
             k.k_a,
-            fin(k.k_a) && k.k_a > 0.0,
-            "finite and > 0",
+            k.k_a > 0.0 && k.k_a <= 10.0,
+            "> 0 and <= 10 (Polach's reduction factors are at most 1)",
         )?;
         check(
             "polach.k_s",
             k.k_s,
-            fin(k.k_s) && k.k_s > 0.0,
-            "finite and > 0",
+            k.k_s > 0.0 && k.k_s <= 10.0,
+            "> 0 and <= 10 (Polach's reduction factors are at most 1)",
         )?;
         let e = &self.effects;
         for (effect, values) in &e.named {
@@ -529,6 +484,44 @@ impl ModelConfig {
                 .map_err(|(key, message)| bad(&format!("effects.generic[{k}].{key}"), message))?;
         }
         Ok(())
+    }
+}
+
+/// The largest mass a configuration constant may be: a kilogram on one
+/// contact patch is 5000 times the laboratory's cap (0.2 g).
+pub const MASS_MAX_KG: f64 = 1.0;
+/// The smallest positive mass constant: a picogram, below what a balance or
+/// a film measurement resolves (and 1 / x stays finite).
+pub const MASS_MIN_KG: f64 = 1e-15;
+const MASS_WHY: &str = "kg: a picogram to a kilogram, 5000 times the laboratory's cap of 0.2 g";
+const SLOPE_WHY: &str =
+    "a hundredfold change per reference pressure or creepage; Table 2 has 1.84 and 0.57";
+
+impl ProductKey {
+    /// The physical range of the constant, `lo ..= hi`, and why (`m0_kg`
+    /// may also be 0: no saturation term). A calibration stays inside it.
+    pub fn physical_range(self) -> (f64, f64, &'static str) {
+        match self {
+            ProductKey::MuD | ProductKey::MuC => {
+                (0.0, MAX_FRICTION, "no wheel-rail contact reaches 1")
+            }
+            ProductKey::K0Kg | ProductKey::Km1Kg => (0.0, MASS_MAX_KG, MASS_WHY),
+            ProductKey::M0Kg | ProductKey::KmKg | ProductKey::CmKg | ProductKey::MMaxKg => {
+                (MASS_MIN_KG, MASS_MAX_KG, MASS_WHY)
+            }
+            ProductKey::Km2 => (1e-3, 1e3, "a dimensionless scale of m0; Table 2 has 0.53"),
+            ProductKey::Kp | ProductKey::Kc => (-100.0, 100.0, SLOPE_WHY),
+            ProductKey::Kt => (
+                0.0,
+                100.0,
+                "the transfer fraction is capped at 0.5; Table 2 has 0.5",
+            ),
+            ProductKey::Cn => (
+                1e-2,
+                1e9,
+                "wheel revolutions: a hundredth to a billion; Table 2 has 12.1",
+            ),
+        }
     }
 }
 

@@ -245,14 +245,31 @@ impl Origin {
                     .unwrap_or(first);
                 let column = match rest.split_once('.') {
                     Some(("wheel_load_kN", rail)) => format!("wheel_load_kN_{rail}"),
-                    Some(("creepage", rail)) => format!("cx_{rail}"),
+                    // `creepage.RAIL.cx` is the column `cx_RAIL` (the
+                    // creepage as a whole: its `cx_RAIL`).
+                    Some(("creepage", tail)) => match tail.split_once('.') {
+                        Some((rail, part)) => format!("{part}_{rail}"),
+                        None => format!("cx_{tail}"),
+                    },
                     _ => match rest {
                         "log_time" => info.time.to_string(),
                         "offset_m" => "axle_offset_m".to_string(),
                         other => other.to_string(),
                     },
                 };
-                (line, info.column(&column))
+                // The column by its name too: the message speaks of the
+                // wire field (`axles[3].creepage.high.cy`).
+                match info.header.iter().position(|h| *h == column) {
+                    Some(i) if !message.contains(&format!("`{column}`")) => {
+                        return InputError::cell(
+                            &info.path,
+                            line,
+                            i + 1,
+                            format!("column `{column}`: {message}"),
+                        );
+                    }
+                    _ => (line, info.column(&column)),
+                }
             }
             None => (first, 1),
         };
@@ -779,8 +796,21 @@ fn read_section(path: &Path) -> Result<Section, InputError> {
     let text = tortwin_files::read_text_input(path, tortwin_files::MAX_TEXT_INPUT_BYTES)
         .map_err(|e| InputError::file(path, format!("cannot read the section description: {e}")))?;
     let file: SectionFile = toml::from_str(&text).map_err(|e| {
-        let (line, column) = e.span().map_or((1, 1), |s| line_column(&text, s.start));
-        InputError::cell(path, line, column, e.message().trim().to_string())
+        let start = e.span().map_or(0, |s| s.start);
+        let (line, column) = line_column(&text, start);
+        // The key on that line, for a value TOML cannot hold (1e309).
+        let line_text = text[..start.min(text.len())]
+            .rsplit('\n')
+            .next()
+            .unwrap_or_default();
+        let message = e.message().trim();
+        let message = match line_text.split_once('=') {
+            Some((key, _)) if !key.trim().is_empty() && !message.contains('`') => {
+                format!("`{}`: {message}", key.trim().trim_matches('"'))
+            }
+            _ => message.to_string(),
+        };
+        InputError::cell(path, line, column, message)
     })?;
     let mut spans = Vec::new();
     let mut span = |name: String, range: std::ops::Range<usize>| spans.push((name, range));

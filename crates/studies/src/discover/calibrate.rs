@@ -293,11 +293,29 @@ impl<'e, 'a> Problem<'e, 'a> {
             .collect()
     }
 
+    /// A constant within [`THETA_MAX`] of its reference and within its
+    /// physical range (`ProductKey::physical_range`: a model.toml written
+    /// from the fit reads back); an effect's coordinate in [0, 1].
     fn bounds(&self, j: usize) -> (f64, f64) {
-        if self.is_constant(j) {
-            (-THETA_MAX, THETA_MAX)
-        } else {
-            (0.0, 1.0)
+        match self.knobs[j] {
+            Knob::Constant(key) => {
+                let (lo, hi, _) = key.physical_range();
+                let r = key.get(&self.reference);
+                if r == 0.0 {
+                    // 0 scaled stays 0.
+                    return (-THETA_MAX, THETA_MAX);
+                }
+                // r e^θ within [lo, hi]: for r > 0, θ within [ln(lo / r),
+                // ln(hi / r)]; for r < 0 the ends swap.
+                let (a, b) = if r > 0.0 {
+                    (lo / r, hi / r)
+                } else {
+                    (hi / r, lo / r)
+                };
+                let ln = |x: f64| if x > 0.0 { x.ln() } else { f64::NEG_INFINITY };
+                (ln(a).max(-THETA_MAX), ln(b).min(THETA_MAX))
+            }
+            Knob::Effect(..) => (0.0, 1.0),
         }
     }
 

@@ -1,5 +1,6 @@
 //! `tortwin replay`: a recording in, the friction field out.
 
+use serde::Deserialize;
 use std::path::{Path, PathBuf};
 
 use tortwin_engine::sink::{
@@ -79,8 +80,22 @@ pub fn read_state(path: &Path) -> Result<EngineState, InputError> {
     let text =
         tortwin_outputs::files::read_text_input(path, tortwin_outputs::files::MAX_STATE_BYTES)
             .map_err(|e| InputError::file(path, format!("cannot read the state: {e}")))?;
-    let state: EngineState = serde_json::from_str(&text)
-        .map_err(|e| InputError::file(path, format!("not a tortwin state: {e}")))?;
+    // The path names the field a value that does not read sits in.
+    let mut json = serde_json::Deserializer::from_str(&text);
+    let mut track = serde_path_to_error::Track::new();
+    let state = EngineState::deserialize(serde_path_to_error::Deserializer::new(
+        &mut json, &mut track,
+    ))
+    .and_then(|state| json.end().map(|()| state))
+    .map_err(|e| {
+        let at = track.path();
+        let field = if at.iter().next().is_some() {
+            format!("field `{at}`: ")
+        } else {
+            String::new()
+        };
+        InputError::file(path, format!("not a tortwin state: {field}{e}"))
+    })?;
     Ok(state)
 }
 
