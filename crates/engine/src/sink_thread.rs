@@ -26,7 +26,14 @@ use crate::sink::{
 
 /// Calls in one hand-over.
 const BATCH: usize = 512;
-/// Batches in flight.
+/// A batch is also handed over once the arrays its calls own reach this
+/// many bytes: on a section at the grid limit (200 000 points) one field
+/// snapshot holds 6.4 MB and one wheel's contacts 1.6 MB, and 512 of them
+/// held at once took the replay to 2-3 GB.
+const BATCH_BYTES: usize = 8 << 20;
+/// Batches in flight. With [`BATCH_BYTES`], the calls waiting for the
+/// output hold at most `(QUEUE + 1) * (BATCH_BYTES + the largest call)`:
+/// 132 MB at the grid limit, whatever the recording's length.
 const QUEUE: usize = 8;
 
 /// One call to the sink, owning its data.
@@ -85,6 +92,24 @@ enum Call {
     Finish(RunSummary),
 }
 
+impl Call {
+    /// The bytes of the arrays the call owns (what grows with the grid).
+    fn array_bytes(&self) -> usize {
+        let f64s = match self {
+            Call::Begin { grid_d_m, .. } => grid_d_m.len(),
+            Call::Field { values, .. } => values.len(),
+            Call::WheelContacts {
+                seen_mass_kg, mu, ..
+            } => seen_mass_kg.len() + mu.as_ref().map_or(0, Vec::len),
+            Call::Train { .. }
+            | Call::Pulse { .. }
+            | Call::Measurement { .. }
+            | Call::Finish(_) => 0,
+        };
+        f64s * std::mem::size_of::<f64>()
+    }
+}
+
 /// A [`Sink`] that runs another on a thread of its own.
 pub struct SinkThread {
     batch: Vec<Call>,
@@ -95,6 +120,8 @@ pub struct SinkThread {
     thread: Option<JoinHandle<SinkResult>>,
     /// The train id of the latest calls, shared by them.
     train_id: Option<Arc<str>>,
+    /// The bytes the arrays of `batch`'s calls hold.
+    batch_bytes: usize,
 }
 
 impl SinkThread {
@@ -120,6 +147,7 @@ impl SinkThread {
             failed,
             thread: Some(thread),
             train_id: None,
+            batch_bytes: 0,
         })
     }
 
@@ -127,8 +155,9 @@ impl SinkThread {
         if self.failed.load(Ordering::Acquire) {
             return Err(self.join());
         }
+        self.batch_bytes += call.array_bytes();
         self.batch.push(call);
-        if self.batch.len() >= BATCH {
+        if self.batch.len() >= BATCH || self.batch_bytes >= BATCH_BYTES {
             self.hand_over()?;
         }
         Ok(())
@@ -140,6 +169,7 @@ impl SinkThread {
             .try_recv()
             .unwrap_or_else(|_| Vec::with_capacity(BATCH));
         let batch = std::mem::replace(&mut self.batch, next);
+        self.batch_bytes = 0;
         let sent = self.to_thread.as_ref().map(|tx| tx.send(batch));
         match sent {
             Some(Ok(())) => Ok(()),
