@@ -19,6 +19,38 @@ fn stderr(o: &Output) -> String {
     String::from_utf8_lossy(&o.stderr).into_owned()
 }
 
+/// Runs `cmd` under GNU time and checks its peak resident memory is below
+/// `limit_mb` (the documented bound of what it was given); the output
+/// without time's line. Without /usr/bin/time, the command alone.
+fn within_memory(cmd: &mut std::process::Command, limit_mb: u64) -> Output {
+    let timed = std::process::Command::new("/usr/bin/time")
+        .args(["-f", "%M"])
+        .arg("true")
+        .output()
+        .is_ok_and(|o| o.status.success());
+    if !timed {
+        return cmd.output().unwrap();
+    }
+    let mut o = std::process::Command::new("/usr/bin/time")
+        .args(["-f", "%M"])
+        .arg(cmd.get_program())
+        .args(cmd.get_args())
+        .output()
+        .unwrap();
+    let text = stderr(&o);
+    let (rest, last) = text
+        .trim_end()
+        .rsplit_once('\n')
+        .unwrap_or(("", text.trim_end()));
+    let peak_kb: u64 = last.trim().parse().unwrap();
+    assert!(
+        peak_kb < limit_mb * 1000,
+        "peak {peak_kb} kB, over {limit_mb} MB: {rest}"
+    );
+    o.stderr = format!("{rest}\n").into_bytes();
+    o
+}
+
 /// Exit status 2 with every one of `needles` in the message, no panic.
 fn refused(o: &Output, needles: &[&str]) {
     let text = stderr(o);
@@ -217,13 +249,11 @@ fn import_refuses_times_past_2262_and_two_time_columns() {
         }
         std::fs::write(tables.join("pulses.csv"), pulses).unwrap();
         let out = dir.path().join(format!("{name}.mcap"));
-        let o = tortwin()
-            .arg("import")
-            .arg(&tables)
-            .arg("--out")
-            .arg(&out)
-            .output()
-            .unwrap();
+        // Whatever the table holds, import reads a line at a time.
+        let o = within_memory(
+            tortwin().arg("import").arg(&tables).arg("--out").arg(&out),
+            100,
+        );
         assert!(!out.exists() || o.status.success());
         o
     };
@@ -471,31 +501,34 @@ fn oversized_text_inputs_are_refused_by_their_size() {
         path
     };
     let config = sparse("huge.toml", 2 << 30);
-    let o = tortwin()
-        .arg("replay")
-        .arg(demo_day())
-        .arg("--config")
-        .arg(&config)
-        .output()
-        .unwrap();
+    let o = within_memory(
+        tortwin()
+            .arg("replay")
+            .arg(demo_day())
+            .arg("--config")
+            .arg(&config),
+        100,
+    );
     refused(&o, &["huge.toml", "2147483648 bytes", "at most 1048576"]);
     let space = sparse("space.toml", 2 << 30);
-    let o = tortwin()
-        .args(["strategy", "--synth", "--space"])
-        .arg(&space)
-        .arg("--out")
-        .arg(dir.path().join("s"))
-        .output()
-        .unwrap();
+    let o = within_memory(
+        tortwin()
+            .args(["strategy", "--synth", "--space"])
+            .arg(&space)
+            .arg("--out")
+            .arg(dir.path().join("s")),
+        100,
+    );
     refused(&o, &["--space", "2147483648 bytes", "at most 1048576"]);
     let state = sparse("state.json", 300 << 20);
-    let o = tortwin()
-        .arg("replay")
-        .arg(demo_day())
-        .arg("--state-in")
-        .arg(&state)
-        .output()
-        .unwrap();
+    let o = within_memory(
+        tortwin()
+            .arg("replay")
+            .arg(demo_day())
+            .arg("--state-in")
+            .arg(&state),
+        100,
+    );
     refused(&o, &["state.json", "314572800 bytes", "at most 268435456"]);
 }
 
@@ -520,13 +553,14 @@ fn strategy_spaces_are_bounded() {
     {
         let space = dir.path().join(format!("space{k}.toml"));
         std::fs::write(&space, text).unwrap();
-        let o = tortwin()
-            .args(["strategy", "--synth", "--space"])
-            .arg(&space)
-            .arg("--out")
-            .arg(dir.path().join(format!("s{k}")))
-            .output()
-            .unwrap();
+        let o = within_memory(
+            tortwin()
+                .args(["strategy", "--synth", "--space"])
+                .arg(&space)
+                .arg("--out")
+                .arg(dir.path().join(format!("s{k}"))),
+            100,
+        );
         refused(&o, &[says]);
     }
 }
