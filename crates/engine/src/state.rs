@@ -205,6 +205,7 @@ struct Times {
     lo_s: f64,
     hi_s: f64,
     latest_s: Option<f64>,
+    origin_ns: i64,
 }
 
 impl Times {
@@ -220,6 +221,7 @@ impl Times {
             lo_s: -origin * 1e-9,
             hi_s: (i64::MAX as f64 - origin) * 1e-9,
             latest_s: None,
+            origin_ns: saved.origin_ns,
         };
         if let Some(t) = saved.last_event_s {
             times.check("last_event_s", t)?;
@@ -244,10 +246,10 @@ impl Times {
             return Ok(());
         }
         Err(StateError::Inconsistent(format!(
-            "{what} = {t:?} s is outside {} to {latest} s from the time origin (the epoch to \
-             2262-04-11, and no later than the state's last event or train: last_event_s, \
-             occupied_until_s)",
-            self.lo_s
+            "{what} = {t:?} s is outside {} to {latest} s from the time origin origin_ns = {} \
+             (the epoch to 2262-04-11, and no later than the state's last event or train: \
+             last_event_s, occupied_until_s)",
+            self.lo_s, self.origin_ns
         )))
     }
 }

@@ -318,8 +318,9 @@ pub fn section(msg: &SectionMsg) -> Result<Section, DecodeError> {
             Ok(x)
         } else {
             let name = name();
-            let message =
-                format!("field `{name}` = {x:?} is outside the section (0 to {length_m:?} m)");
+            let message = format!(
+                "field `{name}` = {x:?} is outside the section (0 to length_m = {length_m:?} m)"
+            );
             Err(DecodeError::at(name, message))
         }
     };
