@@ -99,35 +99,31 @@ fn escape_sequences_and_long_ids_reach_stderr_escaped_and_short() {
         "{err}"
     );
 
+    // The import's error with the first pulse's applicator id set to
+    // `id`: exit 2, and short whatever the id.
+    let refused_with_id = |id: &str| {
+        set_first_pulse(&tables, "applicator_id", id);
+        let o = tortwin()
+            .arg("import")
+            .arg(&tables)
+            .arg("--out")
+            .arg(work.path().join("x.mcap"))
+            .output()
+            .unwrap();
+        assert_eq!(o.status.code(), Some(2));
+        let err = String::from_utf8(o.stderr).unwrap();
+        assert!(err.len() < 4096, "{} bytes on stderr", err.len());
+        err
+    };
     // A 900 kB id (a line under the 1 MiB a table's line may hold): the
     // error names it by its start and its length.
     let long = "x".repeat(900 << 10);
-    set_first_pulse(&tables, "applicator_id", &long);
-    let o = tortwin()
-        .arg("import")
-        .arg(&tables)
-        .arg("--out")
-        .arg(work.path().join("x.mcap"))
-        .output()
-        .unwrap();
-    assert_eq!(o.status.code(), Some(2));
-    let err = String::from_utf8(o.stderr).unwrap();
-    assert!(err.len() < 4096, "{} bytes on stderr", err.len());
+    let err = refused_with_id(&long);
     assert!(err.contains("bytes in all)"), "{err}");
 
     // A 15 MB id: the line is refused by its length, as short.
     let long = "x".repeat(15 << 20);
-    set_first_pulse(&tables, "applicator_id", &long);
-    let o = tortwin()
-        .arg("import")
-        .arg(&tables)
-        .arg("--out")
-        .arg(work.path().join("x.mcap"))
-        .output()
-        .unwrap();
-    assert_eq!(o.status.code(), Some(2));
-    let err = String::from_utf8(o.stderr).unwrap();
-    assert!(err.len() < 4096, "{} bytes on stderr", err.len());
+    let err = refused_with_id(&long);
     assert!(
         err.contains("pulses.csv:2:1: line 2 is longer than"),
         "{err}"

@@ -8,7 +8,6 @@ use std::sync::Arc;
 
 use anyhow::{Context, Result};
 use rand::Rng;
-use serde_json::Value;
 use tortwin_studies::jobs::replay::{replay_run, ReplayArgs, Replayed};
 use tortwin_studies::jobs::tables::{import, ImportArgs};
 use tortwin_studies::jobs::ConfigSource;
@@ -223,63 +222,20 @@ impl Target {
                 10..=12 => {
                     let config =
                         &self.fixtures.configs[rng.random_range(0..self.fixtures.configs.len())];
-                    let v: toml::Value = toml::from_str(std::str::from_utf8(config)?)?;
-                    let leaves = values::toml_numbers(&v);
-                    pick(rng, &leaves).and_then(|path| {
-                        let literal =
-                            values::TOML_EDGES[rng.random_range(0..values::TOML_EDGES.len())];
-                        values::toml_with(&v, path, literal).map(|text| {
-                            values::encode(
-                                "config",
-                                &values::names(path),
-                                &values::describe(path),
-                                text.as_bytes(),
-                            )
-                        })
-                    })
+                    values::toml_edge(rng, config).map(|e| values::saved("config", e))
                 }
                 13..=15 => {
-                    let v: Value = serde_json::from_slice(&self.fixtures.state1)?;
-                    let leaves = values::json_numbers(&v);
-                    pick(rng, &leaves).and_then(|path| {
-                        let literal =
-                            values::JSON_EDGES[rng.random_range(0..values::JSON_EDGES.len())];
-                        values::json_with(&v, path, literal).map(|text| {
-                            values::encode(
-                                "state",
-                                &values::names(path),
-                                &values::describe(path),
-                                text.as_bytes(),
-                            )
-                        })
-                    })
+                    values::json_edge(rng, &self.fixtures.state1).map(|e| values::saved("state", e))
                 }
                 _ => {
                     let files = self.fixtures.table_files()?;
                     let (name, content) = &files[rng.random_range(0..files.len())];
+                    let place = format!("csv:{name}");
                     if name.ends_with(".toml") {
-                        let v: toml::Value = toml::from_str(std::str::from_utf8(content)?)?;
-                        let leaves = values::toml_numbers(&v);
-                        pick(rng, &leaves).and_then(|path| {
-                            let literal =
-                                values::TOML_EDGES[rng.random_range(0..values::TOML_EDGES.len())];
-                            values::toml_with(&v, path, literal).map(|text| {
-                                values::encode(
-                                    &format!("csv:{name}"),
-                                    &values::names(path),
-                                    &values::describe(path),
-                                    text.as_bytes(),
-                                )
-                            })
-                        })
+                        values::toml_edge(rng, content).map(|e| values::saved(&place, e))
                     } else {
                         values::csv_with(rng, content).map(|(text, column)| {
-                            values::encode(
-                                &format!("csv:{name}"),
-                                std::slice::from_ref(&column),
-                                &column,
-                                &text,
-                            )
+                            values::encode(&place, std::slice::from_ref(&column), &column, &text)
                         })
                     }
                 }
@@ -306,21 +262,13 @@ impl Target {
                 values::TIME_EDGES[rng.random_range(0..values::TIME_EDGES.len())];
             (vec!["log_time".to_string()], format!("{topic} log_time"))
         } else {
-            let Ok(v) = serde_json::from_slice::<Value>(&messages[i].data) else {
-                return Ok(None);
-            };
-            let leaves = values::json_numbers(&v);
-            let Some(path) = pick(rng, &leaves) else {
-                return Ok(None);
-            };
-            let literal = values::JSON_EDGES[rng.random_range(0..values::JSON_EDGES.len())];
-            let Some(text) = values::json_with(&v, path, literal) else {
+            let Some((text, path)) = values::json_edge(rng, &messages[i].data) else {
                 return Ok(None);
             };
             messages[i].data = text.into_bytes();
             (
-                values::names(path),
-                format!("{topic} {}", values::describe(path)),
+                values::names(&path),
+                format!("{topic} {}", values::describe(&path)),
             )
         };
         let layout = [Layout::Uncompressed, Layout::Unchunked][rng.random_range(0..2)];
@@ -461,14 +409,6 @@ fn not_finite(run: &Replayed) -> Option<String> {
         return Some(format!("the state does not read back: {e}"));
     }
     None
-}
-
-fn pick<'a, T>(rng: &mut impl Rng, items: &'a [T]) -> Option<&'a T> {
-    if items.is_empty() {
-        None
-    } else {
-        Some(&items[rng.random_range(0..items.len())])
-    }
 }
 
 fn classify(e: &tortwin_studies::Error) -> Outcome {

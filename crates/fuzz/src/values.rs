@@ -273,6 +273,41 @@ pub fn csv_with(rng: &mut impl Rng, text: &[u8]) -> Option<(Vec<u8>, String)> {
     Some((writer.into_inner().ok()?, column))
 }
 
+/// A leaf of `leaves` at random (`None` when there is none).
+fn pick<'a>(rng: &mut impl Rng, leaves: &'a [Vec<Step>]) -> Option<&'a [Step]> {
+    if leaves.is_empty() {
+        None
+    } else {
+        Some(&leaves[rng.random_range(0..leaves.len())])
+    }
+}
+
+/// A JSON document with one number leaf, chosen at random, written as a
+/// random edge of [`JSON_EDGES`]: the text and the leaf's path (`None` for
+/// text that is not JSON or holds no number).
+pub fn json_edge(rng: &mut impl Rng, text: &[u8]) -> Option<(String, Vec<Step>)> {
+    let v: Value = serde_json::from_slice(text).ok()?;
+    let leaves = json_numbers(&v);
+    let path = pick(rng, &leaves)?;
+    let literal = JSON_EDGES[rng.random_range(0..JSON_EDGES.len())];
+    Some((json_with(&v, path, literal)?, path.to_vec()))
+}
+
+/// [`json_edge`] for TOML, with [`TOML_EDGES`].
+pub fn toml_edge(rng: &mut impl Rng, text: &[u8]) -> Option<(String, Vec<Step>)> {
+    let v: toml::Value = toml::from_str(std::str::from_utf8(text).ok()?).ok()?;
+    let leaves = toml_numbers(&v);
+    let path = pick(rng, &leaves)?;
+    let literal = TOML_EDGES[rng.random_range(0..TOML_EDGES.len())];
+    Some((toml_with(&v, path, literal)?, path.to_vec()))
+}
+
+/// A document changed by [`json_edge`] or [`toml_edge`], saved as a mutant
+/// for `place`.
+pub fn saved(place: &str, (text, path): (String, Vec<Step>)) -> Vec<u8> {
+    encode(place, &names(&path), &describe(&path), text.as_bytes())
+}
+
 /// A saved mutant: header line and input.
 pub fn encode(place: &str, names: &[String], path: &str, input: &[u8]) -> Vec<u8> {
     let clean = |s: &str| s.replace(['\t', '\n', '|'], " ");
