@@ -73,17 +73,24 @@ fn set_first_pulse(dir: &Path, column: &str, value: &str) {
 fn escape_sequences_and_long_ids_reach_stderr_escaped_and_short() {
     let work = tempfile::tempdir().unwrap();
     let tables = input_tables(&demo_day(), &work.path().join("tables"));
+    // The import's error with the first pulse's `column` set to `value`:
+    // exit 2, and short whatever the value.
+    let refused_with = |column: &str, value: &str| {
+        set_first_pulse(&tables, column, value);
+        let o = tortwin()
+            .arg("import")
+            .arg(&tables)
+            .arg("--out")
+            .arg(work.path().join("x.mcap"))
+            .output()
+            .unwrap();
+        assert_eq!(o.status.code(), Some(2));
+        let err = String::from_utf8(o.stderr).unwrap();
+        assert!(err.len() < 4096, "{} bytes on stderr", err.len());
+        err
+    };
     let evil = "high\u{1b}]0;owned\u{7}\u{1b}[2J\u{202e}\0";
-    set_first_pulse(&tables, "rail", evil);
-    let o = tortwin()
-        .arg("import")
-        .arg(&tables)
-        .arg("--out")
-        .arg(work.path().join("x.mcap"))
-        .output()
-        .unwrap();
-    assert_eq!(o.status.code(), Some(2));
-    let err = String::from_utf8(o.stderr).unwrap();
+    let err = refused_with("rail", evil);
     assert!(
         err.contains("high\\u{1b}]0;owned\\u{7}\\u{1b}[2J\\u{202e}\\u{0}"),
         "{err}"
@@ -99,31 +106,15 @@ fn escape_sequences_and_long_ids_reach_stderr_escaped_and_short() {
         "{err}"
     );
 
-    // The import's error with the first pulse's applicator id set to
-    // `id`: exit 2, and short whatever the id.
-    let refused_with_id = |id: &str| {
-        set_first_pulse(&tables, "applicator_id", id);
-        let o = tortwin()
-            .arg("import")
-            .arg(&tables)
-            .arg("--out")
-            .arg(work.path().join("x.mcap"))
-            .output()
-            .unwrap();
-        assert_eq!(o.status.code(), Some(2));
-        let err = String::from_utf8(o.stderr).unwrap();
-        assert!(err.len() < 4096, "{} bytes on stderr", err.len());
-        err
-    };
     // A 900 kB id (a line under the 1 MiB a table's line may hold): the
     // error names it by its start and its length.
     let long = "x".repeat(900 << 10);
-    let err = refused_with_id(&long);
+    let err = refused_with("applicator_id", &long);
     assert!(err.contains("bytes in all)"), "{err}");
 
     // A 15 MB id: the line is refused by its length, as short.
     let long = "x".repeat(15 << 20);
-    let err = refused_with_id(&long);
+    let err = refused_with("applicator_id", &long);
     assert!(
         err.contains("pulses.csv:2:1: line 2 is longer than"),
         "{err}"
