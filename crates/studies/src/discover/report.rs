@@ -570,7 +570,7 @@ fn markdown(data: &Dataset, d: &Discovery, residual_file: Option<&str>, distance
     let _ = writeln!(
         md,
         "Each effect of effects.md not yet in the model is fitted by re-running the engine on \
-         the recording (bounded search: grid, then Brent or Nelder–Mead). It is added only if \
+         the recording (bounded search: a coarse grid, then Gauss–Newton steps on the residuals). It is added only if \
          the BIC drops by more than {} (ΔBIC = n ln(SSE1/SSE0) + Δk ln n), it removes at \
          least {:.0} % of what the current model leaves above the noise (SSE0 − n σ̂²), **and** \
          cross-validation blocked by day, then by measurement site, predicts the held-out \
