@@ -1195,7 +1195,8 @@ fn levenberg_marquardt(
         };
         jac.set_column(i, &((ri - &r) / *h));
     }
-    // The best difference point may already be better than the start.
+    // (A difference point better than the start counts as the fit's result
+    // through the objective's best point, whatever the steps do.)
     let mut lambda = LM_LAMBDA0;
     let mut misses = 0;
     for _ in 0..max_steps {
