@@ -979,6 +979,7 @@ fn fit_with(
             Start::Warm(u) if u.iter().all(|&x| x > BOUND_PROBE && x < 1.0 - BOUND_PROBE) => {
                 let u0 = u.first().copied().unwrap_or(0.5);
                 Some((
+                    u0,
                     (u0 - limits.warm_half_width).max(0.0),
                     (u0 + limits.warm_half_width).min(1.0),
                 ))
@@ -986,8 +987,7 @@ fn fit_with(
             Start::Warm(_) | Start::Fresh => None,
         };
         let mut done = false;
-        if let Some((lo, hi)) = bracket {
-            let u0 = start_u(&start).clamp(lo, hi);
+        if let Some((u0, lo, hi)) = bracket {
             let u = line_search(&obj, u0, lo, hi)?;
             // On an inner edge of the bracket: the optimum has moved away.
             let edge = 3.0 * LINE_TOL + 1e-3;
@@ -1052,14 +1052,6 @@ fn finish(obj: &Objective<'_, '_>) -> Result<Fit> {
         eval,
         runs: obj.runs.load(Ordering::Relaxed),
     })
-}
-
-/// Where a one-parameter fit starts in its bracket.
-fn start_u(start: &Start) -> f64 {
-    match start {
-        Start::Warm(u) => u.first().copied().unwrap_or(0.5),
-        Start::Fresh => 0.5,
-    }
 }
 
 /// A point of [`line_search`]: where, its SSE and the residuals it counts.
