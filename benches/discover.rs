@@ -90,7 +90,8 @@ fn discover_3_days(c: &mut Criterion) {
 /// tangents of the ten state constants.
 fn calibrate_3_days(c: &mut Criterion) {
     use tortwin_model::config::ModelConfig;
-    use tortwin_model::tangent::STATE_KEYS;
+    use tortwin_model::effects::Named;
+    use tortwin_model::tangent::{EffectParam, STATE_KEYS};
     use tortwin_studies::discover::data::Dataset;
     use tortwin_studies::jobs::discover::{calibrate, CalibrateArgs};
     tortwin_studies::jobs::join_rayon_pool();
@@ -133,7 +134,32 @@ fn calibrate_3_days(c: &mut Criterion) {
     });
     group.bench_function("replay_3_days_with_tangents", |b| {
         b.iter(|| {
-            data.simulate_with_tangents(&cfg, &STATE_KEYS)
+            data.simulate_with_tangents(&cfg, &STATE_KEYS, &[])
+                .expect("replays")
+        })
+    });
+    // Two effects on, their parameters in the tangents' effect slots.
+    let mut with_effects = cfg.clone();
+    with_effects.effects.set(Named::RailAgeing, &[7200.0]);
+    with_effects
+        .effects
+        .set(Named::TemperatureConsumption, &[0.05]);
+    let followed = [
+        EffectParam::Named {
+            effect: Named::RailAgeing,
+            param: 0,
+        },
+        EffectParam::Named {
+            effect: Named::TemperatureConsumption,
+            param: 0,
+        },
+    ];
+    group.bench_function("replay_3_days_with_effects", |b| {
+        b.iter(|| data.simulate(&with_effects).expect("replays"))
+    });
+    group.bench_function("replay_3_days_with_effect_tangents", |b| {
+        b.iter(|| {
+            data.simulate_with_tangents(&with_effects, &STATE_KEYS, &followed)
                 .expect("replays")
         })
     });

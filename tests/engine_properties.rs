@@ -335,8 +335,7 @@ proptest! {
         let serial = EngineOptions {
             snapshot_every_wheel: true,
             every_wheel_contacts: true,
-            tangents: false,
-            non_finite_allowed: false,
+            ..EngineOptions::default()
         };
         let contacts = EngineOptions { every_wheel_contacts: true, ..EngineOptions::default() };
         let run = |opts, threads| {

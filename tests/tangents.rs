@@ -4,7 +4,9 @@
 //! constants. Checked against central differences of full replays, column
 //! by column, on recordings with every kind of measurement, every named
 //! effect and generic terms of every kind; and the values of the replay
-//! with tangents are those of the plain replay, bit for bit.
+//! with tangents are those of the plain replay, bit for bit. The same for
+//! the effects' own parameters that act on the mass, two at a time in the
+//! tangents' effect slots (`tortwin_model::tangent::EffectParam`).
 
 mod common;
 
@@ -12,8 +14,10 @@ use std::path::{Path, PathBuf};
 
 use common::truth_of;
 
-use tortwin_model::config::ModelConfig;
-use tortwin_model::tangent::STATE_KEYS;
+use tortwin_model::config::{ModelConfig, TermEffect};
+use tortwin_model::effects::Named;
+use tortwin_model::generic::{ActsOn, Form};
+use tortwin_model::tangent::{EffectParam, EFFECT_SLOTS, STATE_KEYS};
 use tortwin_studies::discover::data::Dataset;
 
 fn root() -> PathBuf {
@@ -27,7 +31,7 @@ const H: f64 = 1e-5;
 /// returns the worst column's relative error.
 fn check(rec: &Path, cfg: &ModelConfig) -> f64 {
     let data = Dataset::read(rec).unwrap();
-    let s = data.simulate_with_tangents(cfg, &STATE_KEYS).unwrap();
+    let s = data.simulate_with_tangents(cfg, &STATE_KEYS, &[]).unwrap();
     let (values, columns) = (s.simulated, s.columns);
     let plain = data.simulate(cfg).unwrap();
     assert!(
@@ -97,4 +101,141 @@ fn tangents_equal_central_differences_with_generic_terms() {
     let rec = root().join("tests/reference/recordings/generic_day.mcap");
     let cfg = ModelConfig::from_file(&rec.with_extension("config.toml")).unwrap();
     check(&rec, &cfg);
+}
+
+/// Every effect parameter of `cfg` a tangent can follow: the named
+/// effects' (but the bands, which have none) and the smooth parameter of
+/// every generic term on the pulse mass, the transfer or the consumption.
+fn followable(cfg: &ModelConfig) -> Vec<EffectParam> {
+    let mut out = Vec::new();
+    for effect in Named::ALL {
+        let n = cfg.effects.get(effect).map_or(0, <[f64]>::len);
+        out.extend((0..n).map(|param| EffectParam::Named { effect, param }));
+    }
+    for (term, t) in cfg.effects.generic.iter().enumerate() {
+        let on_mass = matches!(
+            t.acts_on,
+            ActsOn::PulseMass | ActsOn::Transfer | ActsOn::Consumption
+        );
+        if on_mass && matches!(t.effect, TermEffect::Factor { .. }) {
+            out.push(EffectParam::Generic { term });
+        }
+    }
+    out
+}
+
+/// `cfg` with effect parameter `p` moved by `d`; the parameter's value.
+fn moved(cfg: &ModelConfig, p: EffectParam, d: f64) -> (ModelConfig, f64) {
+    let mut c = cfg.clone();
+    let value = match p {
+        EffectParam::Named { effect, param } => {
+            let mut v = cfg.effects.get(effect).unwrap().to_vec();
+            let value = v[param];
+            v[param] += d;
+            c.effects.set(effect, &v);
+            value
+        }
+        EffectParam::Generic { term } => {
+            let TermEffect::Factor { driver, form } = cfg.effects.generic[term].effect else {
+                unreachable!("only factors are followed")
+            };
+            let (value, form) = match form {
+                Form::Exp { beta } => (beta, Form::Exp { beta: beta + d }),
+                Form::Power { n } => (n, Form::Power { n: n + d }),
+                Form::Linear { gamma } => (gamma, Form::Linear { gamma: gamma + d }),
+                Form::Step { x0, f } => (f, Form::Step { x0, f: f + d }),
+            };
+            c.effects.generic[term].effect = TermEffect::Factor { driver, form };
+            value
+        }
+    };
+    (c, value)
+}
+
+/// Compares the effect slots' columns of `cfg` on `rec` with central
+/// differences in each parameter; returns how many were compared.
+fn check_effects(rec: &Path, cfg: &ModelConfig) -> usize {
+    let data = Dataset::read(rec).unwrap();
+    let params = followable(cfg);
+    assert!(!params.is_empty(), "{}: nothing to follow", rec.display());
+    for pair in params.chunks(EFFECT_SLOTS) {
+        let s = data.simulate_with_tangents(cfg, &[], pair).unwrap();
+        let plain = data.simulate(cfg).unwrap();
+        assert!(
+            s.simulated
+                .iter()
+                .zip(&plain)
+                .all(|(a, b)| a.to_bits() == b.to_bits()),
+            "{}: the replay with effect tangents changed a value",
+            rec.display()
+        );
+        for (&p, column) in pair.iter().zip(&s.columns) {
+            let value = moved(cfg, p, 0.0).1;
+            let h = 1e-5 * value.abs().max(0.1);
+            let (hi, lo) = (
+                data.simulate(&moved(cfg, p, h).0).unwrap(),
+                data.simulate(&moved(cfg, p, -h).0).unwrap(),
+            );
+            let fd: Vec<f64> = hi
+                .iter()
+                .zip(&lo)
+                .map(|(a, b)| (a - b) / (2.0 * h))
+                .collect();
+            let norm = fd.iter().map(|x| x * x).sum::<f64>().sqrt();
+            let miss = fd
+                .iter()
+                .zip(column)
+                .map(|(a, b)| (a - b).powi(2))
+                .sum::<f64>()
+                .sqrt();
+            let relative = if norm > 0.0 { miss / norm } else { miss };
+            eprintln!(
+                "{} {p:?} = {value}: |J| {norm:.3e}, |J - central| / |J| = {relative:.2e}",
+                rec.file_name().unwrap().to_string_lossy(),
+            );
+            assert!(norm > 0.0, "{}: {p:?} shows nothing", rec.display());
+            assert!(
+                relative <= 1e-6,
+                "{}: {p:?} tangent vs central differences {relative:e}",
+                rec.display()
+            );
+        }
+    }
+    params.len()
+}
+
+#[test]
+fn effect_tangents_equal_central_differences_for_every_named_effect() {
+    let mut named = std::collections::BTreeSet::new();
+    for name in ["curve_day_all_effects", "curve_day_bands_rain"] {
+        let rec = root().join("recordings").join(format!("{name}.mcap"));
+        let cfg = truth_of(&rec);
+        for p in followable(&cfg) {
+            if let EffectParam::Named { effect, param } = p {
+                named.insert((effect.name(), param));
+            }
+        }
+        check_effects(&rec, &cfg);
+    }
+    // Every named effect's parameter that acts on the mass, seen at least once.
+    let expected = [
+        ("rail_ageing", 0),
+        ("rain_washoff", 0),
+        ("temperature_consumption", 0),
+        ("speed_transfer", 0),
+        ("wheel_edge_reservoir", 0),
+        ("wheel_edge_reservoir", 1),
+    ];
+    for e in expected {
+        assert!(named.contains(&e), "{e:?} was not checked: {named:?}");
+    }
+}
+
+#[test]
+fn effect_tangents_equal_central_differences_for_generic_terms() {
+    let rec = root().join("tests/reference/recordings/generic_day.mcap");
+    let cfg = ModelConfig::from_file(&rec.with_extension("config.toml")).unwrap();
+    // Pulse mass (a time step, a linear term), transfer (wheel, weather
+    // step), consumption (weather exp, wheel power).
+    assert_eq!(check_effects(&rec, &cfg), 6);
 }

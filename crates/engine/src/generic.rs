@@ -38,6 +38,43 @@ struct Compiled {
     quantity: Option<Quantity>,
 }
 
+impl Compiled {
+    /// The term's driver value where it acts (`rail`, `applicator`) among
+    /// the terms `which` selects, `at` a time with its weather and, at a
+    /// contact, the wheel's drivers; `None` where it does not act (a wheel
+    /// term without a wheel: g = 1).
+    #[inline]
+    fn driver_value(
+        &self,
+        which: Which,
+        applicator: Option<usize>,
+        rail: usize,
+        at: When<'_>,
+    ) -> Option<f64> {
+        if self.rail.is_some_and(|r| r != rail)
+            || self.applicator.is_some_and(|a| Some(a) != applicator)
+        {
+            return None;
+        }
+        let When {
+            time_s,
+            weather,
+            wheel,
+        } = at;
+        Some(match (self.driver, which) {
+            (d, Which::Wheel) if !d.is_wheel() => return None,
+            (d, Which::Event) if d.is_wheel() => return None,
+            (Driver::Time, _) => time_s,
+            (Driver::AirTemperatureC, _) => weather.air_temperature_c,
+            (Driver::RelativeHumidity, _) => weather.relative_humidity,
+            (Driver::PrecipitationMmH, _) => weather.precipitation_mm_h,
+            (Driver::SpeedMps, _) => wheel?.speed_mps,
+            (Driver::WheelLoadKn, _) => wheel?.wheel_load_kn,
+            (Driver::Creepage, _) => wheel?.creepage,
+        })
+    }
+}
+
 /// A generic term whose factor is not a finite number at a driver value.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct UndefinedFactor {
@@ -168,41 +205,42 @@ impl GenericSet {
         rail: usize,
         at: When<'_>,
     ) -> f64 {
-        let When {
-            time_s,
-            weather,
-            wheel,
-        } = at;
         let mut g = 1.0;
         for t in &self.by_acts_on[acts_on.index()] {
-            if t.rail.is_some_and(|r| r != rail)
-                || t.applicator.is_some_and(|a| Some(a) != applicator)
-            {
-                continue;
+            if let Some(x) = t.driver_value(which, applicator, rail, at) {
+                g *= t.form.g(x, t.x_ref);
             }
-            let x = match (t.driver, which) {
-                (d, Which::Wheel) if !d.is_wheel() => continue,
-                (d, Which::Event) if d.is_wheel() => continue,
-                (Driver::Time, _) => time_s,
-                (Driver::AirTemperatureC, _) => weather.air_temperature_c,
-                (Driver::RelativeHumidity, _) => weather.relative_humidity,
-                (Driver::PrecipitationMmH, _) => weather.precipitation_mm_h,
-                (Driver::SpeedMps, _) => match wheel {
-                    Some(w) => w.speed_mps,
-                    None => continue,
-                },
-                (Driver::WheelLoadKn, _) => match wheel {
-                    Some(w) => w.wheel_load_kn,
-                    None => continue,
-                },
-                (Driver::Creepage, _) => match wheel {
-                    Some(w) => w.creepage,
-                    None => continue,
-                },
-            };
-            g *= t.form.g(x, t.x_ref);
         }
         g
+    }
+
+    /// [`GenericSet::factor`] and its derivative in the smooth parameter of
+    /// `[[effects.generic]]` table `term` (`Form::dg_dq`; 0 when that term
+    /// is not among the factors), by the product rule: exact where a
+    /// factor is 0.
+    pub(crate) fn factor_and_derivative(
+        &self,
+        acts_on: ActsOn,
+        which: Which,
+        applicator: Option<usize>,
+        rail: usize,
+        at: When<'_>,
+        term: usize,
+    ) -> (f64, f64) {
+        let (mut g, mut dg) = (1.0, 0.0);
+        for t in &self.by_acts_on[acts_on.index()] {
+            if let Some(x) = t.driver_value(which, applicator, rail, at) {
+                let gt = t.form.g(x, t.x_ref);
+                let own = if t.index == term {
+                    t.form.dg_dq(x, t.x_ref)
+                } else {
+                    0.0
+                };
+                dg = dg * gt + g * own;
+                g *= gt;
+            }
+        }
+        (g, dg)
     }
 
     /// muD and muC of eq. (4) with the friction terms for `rail` at this

@@ -160,6 +160,11 @@ pub struct EngineOptions {
     /// wheels at once); the masses are the same. A replay from a saved
     /// state starts with zero tangents: the saved masses are taken as given.
     pub tangents: bool,
+    /// With `tangents`: the effect parameters the tangents' effect slots
+    /// follow (`tortwin_model::tangent::EffectParam`), slot by slot; a
+    /// slot that follows none stays zero. A parameter of an effect or term
+    /// that the configuration does not switch on has a zero slot.
+    pub effect_tangents: [Option<tortwin_model::tangent::EffectParam>; tangent::EFFECT_SLOTS],
     /// Let values that are not finite numbers through to the sink instead
     /// of stopping with [`EngineError::NotFinite`]: for a study's own
     /// replays, where a candidate whose arithmetic overflows is a worst

@@ -19,7 +19,9 @@ use tortwin_model::exp::exp4_inline;
 use tortwin_model::exp::exp4_is_vectorised;
 use tortwin_model::generic::ActsOn;
 use tortwin_model::product::{self, ContactConditions, ProductParams};
-use tortwin_model::tangent::{self, ConditionTangents, Tangent, SLOTS};
+use tortwin_model::tangent::{
+    self, effect_slot, ConditionTangents, EffectParam, Tangent, EFFECT_SLOTS, SLOTS,
+};
 use tortwin_recording::Section;
 
 /// What a wheel saw at every point of its track (kept for the last wheel of
@@ -90,6 +92,13 @@ struct Roller {
     /// The tangent of `fp_fc` in its slots `kp`, `kc` (zero without
     /// tangents).
     fp_fc_tan: [f64; 2],
+    /// With tangents, the effect parameters followed and the derivatives
+    /// of `transfer_factor` and `consumption_generic` in them.
+    effect_params: [Option<EffectParam>; EFFECT_SLOTS],
+    transfer_factor_d: [f64; EFFECT_SLOTS],
+    consumption_generic_d: [f64; EFFECT_SLOTS],
+    /// The air temperature of `temperature_factor` (when that is constant).
+    temperature_c: f64,
 }
 
 impl Roller {
@@ -137,10 +146,11 @@ impl Roller {
 
     /// [`Roller::contact`] with the tangents carried
     /// ([`tortwin_model::tangent`]): the same masses, and the rail's
-    /// tangent at `i` (`rail_tan`) and the wheel's updated by each step.
+    /// tangent at `i` (`rail_tan`) and the wheel's updated by each step, in
+    /// their first `W` slots ([`RollContext::tangent_width`]).
     #[allow(clippy::too_many_arguments)]
     #[inline(always)]
-    fn contact_tangent(
+    fn contact_tangent<const W: usize>(
         &self,
         st: &mut WheelRoll,
         track: &mut TrackState,
@@ -158,19 +168,20 @@ impl Roller {
                 .time_effects
                 .exp_args(touch.dt_s, touch.rain_mm)
                 .map(f64::exp);
-            self.age_tangent(st, &mut touch, &mut dr, exps);
+            self.age_tangent::<W>(st, &mut touch, &mut dr, exps);
         }
         self.touched(track, &touch, i);
         let conditions = self.conditions(st, &touch, revolution, i);
         let exps = product::roll_exp_args(&self.params, st.wheel_kg, touch.rail_kg).map(f64::exp);
         let tan = (rail_tan, dr);
-        self.finish_tangent(st, track, tan, observed, &touch, &conditions, exps, i)
+        let given = (&conditions, revolution);
+        self.finish_tangent::<W>(st, track, tan, observed, &touch, given, exps, i)
     }
 
     /// [`Roller::age`] with the rail mass's tangent `dr`: the time effects
     /// multiply the mass, and its tangent alike.
     #[inline(always)]
-    fn age_tangent(
+    fn age_tangent<const W: usize>(
         &self,
         st: &mut WheelRoll,
         touch: &mut Touch<'_>,
@@ -179,37 +190,53 @@ impl Roller {
     ) {
         let rain_mm = touch.rain_mm;
         self.age(st, touch, exps);
-        for x in dr {
+        for x in dr.iter_mut().take(W) {
             *x = self.time_effects.apply_given(*x, rain_mm, exps);
         }
+        if W <= tangent::STATE_SLOTS {
+            return;
+        }
+        time_effect_sources(
+            &self.effect_params,
+            &self.time_effects,
+            touch.rail_kg,
+            (touch.dt_s, rain_mm),
+            dr,
+        );
     }
 
     /// [`Roller::finish`] with the tangents (`dr`: the rail mass's after
     /// step 1, written back to `rail_tan[i]`), the exponentials given.
     #[allow(clippy::too_many_arguments)]
     #[inline(always)]
-    fn finish_tangent(
+    fn finish_tangent<const W: usize>(
         &self,
         st: &mut WheelRoll,
         track: &mut TrackState,
         (rail_tan, mut dr): (&mut [Tangent], Tangent),
         observed: &mut Observed,
         touch: &Touch<'_>,
-        conditions: &ContactConditions,
+        (conditions, revolution): (&ContactConditions, &[f64]),
         exps: [f64; 2],
         i: usize,
     ) -> f64 {
+        let (transfer_effect, consumption_effect) = match W > tangent::STATE_SLOTS {
+            true => self.effect_tangents(st, touch, revolution, i),
+            false => Default::default(),
+        };
         let tangents = ConditionTangents {
             fp_fc: self.fp_fc_tan,
             transfer_revolution: match (conditions.transfer_revolution, st.applicator_point) {
                 (Some(r), Some(ia)) => tangent::revolution_tangent(&self.params, r, i.abs_diff(ia)),
                 _ => 0.0,
             },
+            transfer_effect,
+            consumption_effect,
         };
         let mut rail_kg = touch.rail_kg;
         let m_kg = st.wheel_kg + rail_kg;
         st.seen_tan = tangent::add(&st.wheel_tan, &dr);
-        let losses = tangent::roll_given(
+        let losses = tangent::roll_given::<W>(
             &self.params,
             &mut st.wheel_kg,
             &mut rail_kg,
@@ -221,11 +248,28 @@ impl Roller {
         st.consumed_kg += losses.consumed_kg;
         st.capped_kg += losses.capped_kg;
         if let Some((alpha, r)) = self.reservoir {
-            (st.wheel_kg, st.edge_kg) =
-                effects::wheel_edge_reservoir(st.wheel_kg, st.edge_kg, alpha, r);
-            for k in 0..SLOTS {
+            let (w, e) = (st.wheel_kg, st.edge_kg);
+            (st.wheel_kg, st.edge_kg) = effects::wheel_edge_reservoir(w, e, alpha, r);
+            for k in 0..W {
                 (st.wheel_tan[k], st.edge_tan[k]) =
                     effects::wheel_edge_reservoir(st.wheel_tan[k], st.edge_tan[k], alpha, r);
+            }
+            // Its own parameters: wheel' = w (1 - alpha + r alpha) + r e,
+            // edge' = (e + alpha w) (1 - r).
+            for (k, p) in self.effect_params.iter().enumerate() {
+                let (dw, de) = match *p {
+                    Some(EffectParam::Named {
+                        effect: Named::WheelEdgeReservoir,
+                        param: 0,
+                    }) => (w * (r - 1.0), w * (1.0 - r)),
+                    Some(EffectParam::Named {
+                        effect: Named::WheelEdgeReservoir,
+                        param: 1,
+                    }) => (e + alpha * w, -(e + alpha * w)),
+                    _ => continue,
+                };
+                st.wheel_tan[effect_slot(k)] += dw;
+                st.edge_tan[effect_slot(k)] += de;
             }
         }
         track.rail_mass_kg[i] = rail_kg;
@@ -382,6 +426,78 @@ struct Touch<'w> {
 }
 
 impl Roller {
+    /// The derivatives of a contact's transfer factor (with the revolution
+    /// decay, as `ContactConditions::transfer_revolution`) and consumption
+    /// factor in the effect parameters followed
+    /// ([`ConditionTangents::transfer_effect`], `consumption_effect`).
+    #[inline(never)]
+    fn effect_tangents(
+        &self,
+        st: &WheelRoll,
+        touch: &Touch<'_>,
+        revolution: &[f64],
+        i: usize,
+    ) -> ([f64; EFFECT_SLOTS], [f64; EFFECT_SLOTS]) {
+        let mut transfer = [0.0; EFFECT_SLOTS];
+        let mut consumption = [0.0; EFFECT_SLOTS];
+        let (t, weather) = (touch.t, touch.weather);
+        let at = When {
+            time_s: t,
+            weather: &weather.current,
+            wheel: None,
+        };
+        for (k, p) in self.effect_params.iter().enumerate() {
+            // The time effects and the reservoir act elsewhere.
+            let p = match *p {
+                None
+                | Some(EffectParam::Named {
+                    effect: Named::RailAgeing | Named::RainWashoff | Named::WheelEdgeReservoir,
+                    ..
+                }) => continue,
+                Some(p) => p,
+            };
+            // The time- and weather-driven factors and their derivatives.
+            let event = |acts_on, varies: bool| match (p, varies) {
+                (_, false) => (1.0, 0.0),
+                (EffectParam::Generic { term }, true) => self.generic.factor_and_derivative(
+                    acts_on,
+                    Which::Event,
+                    None,
+                    self.rail,
+                    at,
+                    term,
+                ),
+                (_, true) => (self.event_factor(acts_on, t, weather), 0.0),
+            };
+            if let Some(ia) = st.applicator_point {
+                let (g, dg) = event(ActsOn::Transfer, self.transfer_varies);
+                let d = self.transfer_factor_d[k] * g + self.transfer_factor * dg;
+                transfer[k] = revolution[i.abs_diff(ia)] * d;
+            }
+            let on_temperature = p
+                == EffectParam::Named {
+                    effect: Named::TemperatureConsumption,
+                    param: 0,
+                };
+            // exp(beta (T - 20)) and its derivative in beta.
+            let (temp, d_temp) = match (self.temperature_factor, self.temperature_beta) {
+                (Some(f), _) => (f, (self.temperature_c - 20.0) * f),
+                (None, Some(beta)) => {
+                    let c = weather.current.air_temperature_c;
+                    let f = effects::temperature_factor(c, beta);
+                    (f, (c - 20.0) * f)
+                }
+                (None, None) => (1.0, 0.0),
+            };
+            let d_temp = if on_temperature { d_temp } else { 0.0 };
+            let (g, dg) = event(ActsOn::Consumption, self.consumption_varies);
+            let cg = self.consumption_generic;
+            consumption[k] =
+                d_temp * cg * g + temp * self.consumption_generic_d[k] * g + temp * cg * dg;
+        }
+        (transfer, consumption)
+    }
+
     /// The generic terms on `acts_on` driven by time or weather, at a
     /// contact at `t_s`.
     #[inline(never)]
@@ -436,6 +552,42 @@ unsafe fn div4_avx(a: [f64; LANES], b: [f64; LANES]) -> [f64; LANES] {
         _mm256_storeu_pd(q.as_mut_ptr(), v);
     }
     q
+}
+
+/// The time effects' own parameters among those followed: `aged` is the
+/// mass after them, `tan` its tangent (the multiplications done), `(dt_s,
+/// rain_mm)` what they acted over. `m exp(-dt / tau)`: `∂/∂tau = aged dt /
+/// tau²`; `m exp(-k R)`: `∂/∂k = -aged R`.
+#[inline]
+fn time_effect_sources(
+    params: &[Option<EffectParam>; EFFECT_SLOTS],
+    effects: &TimeEffects,
+    aged: f64,
+    (dt_s, rain_mm): (f64, f64),
+    tan: &mut Tangent,
+) {
+    for (k, p) in params.iter().enumerate() {
+        let source = match (*p, effects.ageing_tau_s, effects.rain_k_per_mm) {
+            (
+                Some(EffectParam::Named {
+                    effect: Named::RailAgeing,
+                    param: 0,
+                }),
+                Some(tau),
+                _,
+            ) => aged * dt_s / (tau * tau),
+            (
+                Some(EffectParam::Named {
+                    effect: Named::RainWashoff,
+                    param: 0,
+                }),
+                _,
+                Some(_),
+            ) if rain_mm != 0.0 => -aged * rain_mm,
+            _ => continue,
+        };
+        tan[effect_slot(k)] += source;
+    }
 }
 
 /// A wheel's time at a point: `t_passage + (|d - d_entry| + offset) / v`
@@ -632,6 +784,12 @@ pub(crate) struct RollContext<'a> {
     keep_seen: bool,
     /// Carry the masses' tangents ([`crate::EngineOptions::tangents`]).
     tangents: bool,
+    /// The effect parameters the tangents' effect slots follow.
+    effect_params: [Option<EffectParam>; EFFECT_SLOTS],
+    /// How many of a tangent's slots the contacts step: 0 without
+    /// tangents, the constants' alone when no effect slot is followed,
+    /// else all. The slots past it stay zero.
+    tangent_width: usize,
     origin_ns: i64,
 }
 
@@ -682,6 +840,12 @@ impl Engine {
                 observe_every_wheel: self.opts.snapshot_every_wheel,
                 keep_seen: self.opts.every_wheel_contacts && !self.opts.snapshot_every_wheel,
                 tangents: self.opts.tangents,
+                effect_params: self.opts.effect_tangents,
+                tangent_width: match (self.opts.tangents, self.opts.effect_tangents) {
+                    (false, _) => 0,
+                    (true, e) if e.iter().all(Option::is_none) => tangent::STATE_SLOTS,
+                    (true, _) => SLOTS,
+                },
                 origin_ns: self.origin_ns,
             },
             &mut self.tracks,
@@ -986,11 +1150,13 @@ impl RollContext<'_> {
                 let is: [usize; LANES] =
                     std::array::from_fn(|j| if up { s - j } else { points - 1 - (s - j) });
                 if !is.iter().any(|&i| special[i]) {
-                    // Compiled twice: without tangents nothing of them is left.
-                    let seen = if self.tangents {
-                        self.contacts4::<true>(&mut lanes, state, work, is, v)
-                    } else {
-                        self.contacts4::<false>(&mut lanes, state, work, is, v)
+                    // Compiled three times: without tangents nothing of them
+                    // is left; without effect slots only the constants'.
+                    let seen = match self.tangent_width {
+                        0 => self.contacts4::<0>(&mut lanes, state, work, is, v),
+                        tangent::STATE_SLOTS => self
+                            .contacts4::<{ tangent::STATE_SLOTS }>(&mut lanes, state, work, is, v),
+                        _ => self.contacts4::<SLOTS>(&mut lanes, state, work, is, v),
                     };
                     if self.keep_seen {
                         for (lane, (&i, &m)) in lanes.iter().zip(is.iter().zip(&seen)) {
@@ -1033,17 +1199,21 @@ impl RollContext<'_> {
         work: &mut TrackWork,
         i: usize,
     ) -> f64 {
-        if self.tangents {
-            return lane.roller.contact_tangent(
-                &mut lane.st,
-                state,
-                &mut work.rail_tan,
-                &mut work.observed,
-                self.d_m,
-                self.revolution,
-                self.timeline,
-                i,
-            );
+        let (rail_tan, observed) = (&mut work.rail_tan, &mut work.observed);
+        let (d_m, revolution, timeline) = (self.d_m, self.revolution, self.timeline);
+        let st = &mut lane.st;
+        match self.tangent_width {
+            0 => {}
+            tangent::STATE_SLOTS => {
+                return lane.roller.contact_tangent::<{ tangent::STATE_SLOTS }>(
+                    st, state, rail_tan, observed, d_m, revolution, timeline, i,
+                )
+            }
+            _ => {
+                return lane.roller.contact_tangent::<SLOTS>(
+                    st, state, rail_tan, observed, d_m, revolution, timeline, i,
+                )
+            }
         }
         lane.roller.contact(
             &mut lane.st,
@@ -1120,7 +1290,7 @@ impl RollContext<'_> {
     /// lane, with each phase's exponentials taken for the four lanes at
     /// once ([`exp4`]; bit for bit `f64::exp` with glibc on an FMA CPU).
     #[inline(always)]
-    fn contacts4<const TANGENTS: bool>(
+    fn contacts4<const W: usize>(
         &self,
         lanes: &mut [Lane; LANES],
         state: &mut TrackState,
@@ -1132,7 +1302,7 @@ impl RollContext<'_> {
         let mut touches = self.touches4(lanes, state, is, v.div);
         // With tangents: the rail masses' tangents, aged with them.
         let mut dr: [Tangent; LANES] = [[0.0; SLOTS]; LANES];
-        if TANGENTS {
+        if W > 0 {
             for (d, &i) in dr.iter_mut().zip(&is) {
                 *d = work.rail_tan[i];
             }
@@ -1151,9 +1321,9 @@ impl RollContext<'_> {
             for (j, (lane, touch)) in lanes.iter_mut().zip(&mut touches).enumerate() {
                 if touch.aged {
                     let exps = [ageing[j], washoff[j]];
-                    if TANGENTS {
+                    if W > 0 {
                         lane.roller
-                            .age_tangent(&mut lane.st, touch, &mut dr[j], exps);
+                            .age_tangent::<W>(&mut lane.st, touch, &mut dr[j], exps);
                     } else {
                         lane.roller.age(&mut lane.st, touch, exps);
                     }
@@ -1176,14 +1346,14 @@ impl RollContext<'_> {
         let mut seen = [0.0; LANES];
         for (j, lane) in lanes.iter_mut().enumerate() {
             let exps = [transfer[j], consumption[j]];
-            seen[j] = if TANGENTS {
-                lane.roller.finish_tangent(
+            seen[j] = if W > 0 {
+                lane.roller.finish_tangent::<W>(
                     &mut lane.st,
                     state,
                     (&mut work.rail_tan, dr[j]),
                     &mut work.observed,
                     &touches[j],
-                    &conditions[j],
+                    (&conditions[j], self.revolution),
                     exps,
                     is[j],
                 )
@@ -1304,6 +1474,42 @@ impl RollContext<'_> {
         };
         let transfer_generic = wheel_generic(ActsOn::Transfer);
         let consumption_generic = wheel_generic(ActsOn::Consumption);
+        let speed_n = self.effects.param(Named::SpeedTransfer, 0);
+        let speed_factor = speed_n.map_or(1.0, |n| effects::speed_transfer_factor(speed_mps, n));
+        // With tangents: the wheel factors' derivatives in the effect
+        // parameters followed (a term switched off has none).
+        let mut transfer_factor_d = [0.0; EFFECT_SLOTS];
+        let mut consumption_generic_d = [0.0; EFFECT_SLOTS];
+        for (k, p) in self.effect_params.iter().enumerate() {
+            match (*p, self.tangents) {
+                (
+                    Some(EffectParam::Named {
+                        effect: Named::SpeedTransfer,
+                        param: 0,
+                    }),
+                    true,
+                ) if speed_n.is_some() => {
+                    // ∂(v / 20)^(-n) / ∂n = -ln(v / 20) (v / 20)^(-n).
+                    transfer_factor_d[k] =
+                        -(speed_mps / 20.0).ln() * speed_factor * transfer_generic;
+                }
+                (Some(EffectParam::Generic { term }), true) => {
+                    let at = When {
+                        time_s: 0.0,
+                        weather: &tortwin_recording::Weather::default(),
+                        wheel: Some(&wheel.drivers),
+                    };
+                    let derivative = |acts_on| {
+                        generic
+                            .factor_and_derivative(acts_on, Which::Wheel, None, r, at, term)
+                            .1
+                    };
+                    transfer_factor_d[k] = speed_factor * derivative(ActsOn::Transfer);
+                    consumption_generic_d[k] = derivative(ActsOn::Consumption);
+                }
+                _ => {}
+            }
+        }
         let roller = Roller {
             params: *self.product,
             time_effects: self.time_effects,
@@ -1312,11 +1518,7 @@ impl RollContext<'_> {
             speed_mps,
             d_entry_m: if up { 0.0 } else { self.section.length_m },
             fp_fc: wheel.fp_fc,
-            transfer_factor: self
-                .effects
-                .param(Named::SpeedTransfer, 0)
-                .map_or(1.0, |n| effects::speed_transfer_factor(speed_mps, n))
-                * transfer_generic,
+            transfer_factor: speed_factor * transfer_generic,
             consumption_generic,
             transfer_varies: generic.varies(ActsOn::Transfer, r),
             consumption_varies: generic.varies(ActsOn::Consumption, r),
@@ -1348,6 +1550,14 @@ impl RollContext<'_> {
             } else {
                 [0.0; 2]
             },
+            effect_params: if self.tangents {
+                self.effect_params
+            } else {
+                [None; EFFECT_SLOTS]
+            },
+            transfer_factor_d,
+            consumption_generic_d,
+            temperature_c: self.timeline.last().current.air_temperature_c,
         };
         Lane {
             axle: a,
@@ -1375,19 +1585,18 @@ impl RollContext<'_> {
         mass_kg: f64,
         weather: &WeatherState,
     ) -> PulseTotals {
+        let share = mass_kg;
         let mut mass_kg = mass_kg;
+        let rail = self.track_info[track].rail;
+        let at = When {
+            time_s,
+            weather: &weather.current,
+            wheel: None,
+        };
         if self.generic.any(ActsOn::PulseMass) {
-            let g = self.generic.factor(
-                ActsOn::PulseMass,
-                Which::All,
-                Some(applicator),
-                self.track_info[track].rail,
-                When {
-                    time_s,
-                    weather: &weather.current,
-                    wheel: None,
-                },
-            );
+            let g = self
+                .generic
+                .factor(ActsOn::PulseMass, Which::All, Some(applicator), rail, at);
             mass_kg *= g;
         }
         let effects = self.time_effects;
@@ -1403,13 +1612,30 @@ impl RollContext<'_> {
             m = aged;
             // The same multiplications on the tangent.
             if let Some(t) = &mut tan {
-                for x in t {
+                for x in t.iter_mut() {
                     *x = effects.apply(*x, dt_s, rain_mm);
+                }
+                time_effect_sources(&self.effect_params, &effects, aged, (dt_s, rain_mm), t);
+            }
+        }
+        // The pulse's mass does not depend on the constants; a generic
+        // pulse-mass term's parameter moves it.
+        m += mass_kg;
+        if let Some(t) = &mut tan {
+            for (k, p) in self.effect_params.iter().enumerate() {
+                if let Some(EffectParam::Generic { term }) = *p {
+                    let (_, dg) = self.generic.factor_and_derivative(
+                        ActsOn::PulseMass,
+                        Which::All,
+                        Some(applicator),
+                        rail,
+                        at,
+                        term,
+                    );
+                    t[effect_slot(k)] += share * dg;
                 }
             }
         }
-        // The pulse's mass does not depend on the constants.
-        m += mass_kg;
         let capped_kg = match &mut tan {
             Some(t) => tangent::cap(self.product, &mut m, t),
             None => product::cap(self.product, &mut m),
@@ -1449,6 +1675,8 @@ impl RollContext<'_> {
             for x in &mut tan {
                 *x = self.time_effects.apply(*x, time_s - last, rain);
             }
+            let since = (time_s - last, rain);
+            time_effect_sources(&self.effect_params, &self.time_effects, m, since, &mut tan);
         }
         let reading = |value| Reading {
             value,

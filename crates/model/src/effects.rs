@@ -192,6 +192,18 @@ impl Param {
     }
 
     /// The inverse of [`Param::at`], clamped into [0, 1] (0 when undefined).
+    /// `d at(u) / du`, the search transform's slope (inside the box; at
+    /// its ends the slope of the side within it).
+    pub fn dp_du(&self, u: f64) -> f64 {
+        let u = u.clamp(0.0, 1.0);
+        let (lo, hi) = self.search;
+        match self.transform {
+            Transform::Log => self.at(u) * (hi.ln() - lo.ln()),
+            Transform::LogLike { base } => (hi - lo) * base.ln() * base.powf(u) / (base - 1.0),
+            Transform::Linear => hi - lo,
+        }
+    }
+
     pub fn unit_of(&self, p: f64) -> f64 {
         let (lo, hi) = self.search;
         let u = match self.transform {

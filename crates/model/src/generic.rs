@@ -263,6 +263,32 @@ impl Form {
             }
         }
     }
+
+    /// `∂g/∂q` at `x`, `q` the form's smooth parameter: `beta`, `n`,
+    /// `gamma`, or a step's `f` (its threshold `x0` moves g by a jump: it
+    /// has no derivative, and a fit takes differences for it). Where the
+    /// linear form is clamped at 0 the derivative of that branch: 0.
+    #[inline]
+    pub fn dg_dq(self, x: f64, x_ref: f64) -> f64 {
+        match self {
+            Form::Exp { beta } => (x - x_ref) * (beta * (x - x_ref)).exp(),
+            Form::Power { n } => (x / x_ref).ln() * (x / x_ref).powf(n),
+            Form::Linear { gamma } => {
+                if 1.0 + gamma * (x - x_ref) > 0.0 {
+                    x - x_ref
+                } else {
+                    0.0
+                }
+            }
+            Form::Step { x0, .. } => {
+                if x >= x0 {
+                    1.0
+                } else {
+                    0.0
+                }
+            }
+        }
+    }
 }
 
 #[cfg(test)]
@@ -286,6 +312,34 @@ mod tests {
             (s.g(0.79, 0.5), s.g(0.8, 0.5), s.g(0.9, 0.5)),
             (1.0, 1.5, 1.5)
         );
+    }
+
+    #[test]
+    fn the_parameter_derivative_is_the_central_difference() {
+        let forms = [
+            (Form::Exp { beta: 0.8 }, 0.75, 0.5),
+            (Form::Power { n: -0.3 }, 0.02, 0.01),
+            (Form::Linear { gamma: -0.02 }, 30.0, 20.0),
+            (Form::Step { x0: 0.8, f: 0.4 }, 0.9, 0.5),
+            (Form::Step { x0: 0.8, f: 0.4 }, 0.7, 0.5),
+        ];
+        let h = 1e-6;
+        for (form, x, x_ref) in forms {
+            let moved = |d: f64| match form {
+                Form::Exp { beta } => Form::Exp { beta: beta + d },
+                Form::Power { n } => Form::Power { n: n + d },
+                Form::Linear { gamma } => Form::Linear { gamma: gamma + d },
+                Form::Step { x0, f } => Form::Step { x0, f: f + d },
+            };
+            let fd = (moved(h).g(x, x_ref) - moved(-h).g(x, x_ref)) / (2.0 * h);
+            let d = form.dg_dq(x, x_ref);
+            assert!(
+                (fd - d).abs() <= 1e-8 * d.abs().max(1.0),
+                "{form:?}: {d} vs {fd}"
+            );
+        }
+        // Clamped at 0: the branch's derivative.
+        assert_eq!(Form::Linear { gamma: -0.02 }.dg_dq(80.0, 20.0), 0.0);
     }
 
     #[test]

@@ -25,17 +25,36 @@
 //! The time effects, the wheel edge reservoir, the bands and the generic
 //! terms on transfer, consumption and the pulse mass are linear in the
 //! masses or do not depend on the constants: their tangents follow from
-//! the same multiplications. Their own parameters are not differentiated
-//! here (a fit takes differences for them).
+//! the same multiplications.
+//!
+//! **The effects' own parameters** that act on the mass have
+//! [`EFFECT_SLOTS`] slots more, after the constants': each follows one
+//! [`EffectParam`] that a replay names, as `∂ mass / ∂ q` in the
+//! parameter's own unit (not its logarithm: `n`, `beta` and a step's `f`
+//! cross 0). A parameter enters a contact through the transfer factor
+//! (`speed_transfer`, a generic transfer term), the consumption factor
+//! (`temperature_consumption`, a generic consumption term), the pulse mass
+//! (a generic pulse-mass term), the time effects (`rail_ageing`,
+//! `rain_washoff`) or the wheel edge reservoir; the engine gives the
+//! factors' derivatives ([`ConditionTangents`]) and here they enter the
+//! contact as `cN` and `k0` do. A step's threshold `x0` moves the masses by
+//! a jump and has no slot.
 
+use crate::effects::Named;
 use crate::product::{self, ContactConditions, ContactLosses, ProductKey, ProductParams};
 
-/// How many constants a tangent follows.
-pub const SLOTS: usize = 10;
+/// How many constants a tangent follows: its first slots.
+pub const STATE_SLOTS: usize = 10;
+
+/// How many effect parameters a tangent follows: its last slots.
+pub const EFFECT_SLOTS: usize = 2;
+
+/// Slots in a [`Tangent`].
+pub const SLOTS: usize = STATE_SLOTS + EFFECT_SLOTS;
 
 /// The constants a [`Tangent`] follows, in the order of its slots: every
 /// constant whose role is `State`.
-pub const STATE_KEYS: [ProductKey; SLOTS] = [
+pub const STATE_KEYS: [ProductKey; STATE_SLOTS] = [
     ProductKey::Kc,
     ProductKey::Kt,
     ProductKey::Cn,
@@ -59,8 +78,31 @@ const KP: usize = 7;
 const CM: usize = 8;
 const M_MAX: usize = 9;
 
-/// `∂ mass / ∂ ln p` for the constants of [`STATE_KEYS`], in kg.
+/// `∂ mass / ∂ ln p` for the constants of [`STATE_KEYS`], in kg, then
+/// `∂ mass / ∂ q` for the effect parameters a replay follows
+/// ([`EffectParam`]; zero for a slot that follows none).
 pub type Tangent = [f64; SLOTS];
+
+/// An effect parameter that acts on the mass, followed in a tangent's
+/// effect slot ([`effect_slot`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum EffectParam {
+    /// Parameter `param` of a named effect (effects.md's table order):
+    /// `rail_ageing`'s `tau_s`, `rain_washoff`'s `k_per_mm`,
+    /// `temperature_consumption`'s `beta_per_k`, `speed_transfer`'s `n`,
+    /// `wheel_edge_reservoir`'s `alpha` (0) and `r` (1).
+    Named { effect: Named, param: usize },
+    /// The smooth parameter ([`crate::generic::Form::dg_dq`]) of the
+    /// configuration's `[[effects.generic]]` table `term` (0-based), a
+    /// term on the pulse mass, the transfer or the consumption.
+    Generic { term: usize },
+}
+
+/// The slot of effect parameter `k` (`k < EFFECT_SLOTS`).
+#[inline]
+pub const fn effect_slot(k: usize) -> usize {
+    STATE_SLOTS + k
+}
 
 /// The slot of `key` in a [`Tangent`]; `None` for a read-out constant.
 pub fn slot(key: ProductKey) -> Option<usize> {
@@ -77,6 +119,11 @@ pub struct ConditionTangents {
     /// Of the transfer's `exp(-(N - 1) / cN)` times the effect factor: its
     /// slot `cN` ([`revolution_tangent`]).
     pub transfer_revolution: f64,
+    /// Of the same transfer factor, in the effect parameters followed.
+    pub transfer_effect: [f64; EFFECT_SLOTS],
+    /// Of the consumption factor (eq. 1's `F`), in the effect parameters
+    /// followed.
+    pub consumption_effect: [f64; EFFECT_SLOTS],
 }
 
 /// The tangent of eq. (2) times eq. (3) for a wheel of mean pressure
@@ -116,7 +163,8 @@ pub fn add(a: &Tangent, b: &Tangent) -> Tangent {
 
 /// [`product::roll`] (steps 3 to 5 of one contact) with the tangents of
 /// the two masses carried: the same masses bit for bit, and `wheel_tan`,
-/// `rail_tan` updated to the masses' tangents after the contact.
+/// `rail_tan` updated to the masses' tangents after the contact (every
+/// slot).
 #[inline]
 pub fn roll(
     params: &ProductParams,
@@ -128,7 +176,7 @@ pub fn roll(
     rail_tan: &mut Tangent,
 ) -> ContactLosses {
     let exps = product::roll_exp_args(params, *wheel_kg, *rail_kg).map(f64::exp);
-    roll_given(
+    roll_given::<SLOTS>(
         params,
         wheel_kg,
         rail_kg,
@@ -142,8 +190,10 @@ pub fn roll(
 /// [`roll`] with its exponentials given: `exps` is `exp` of
 /// [`product::roll_exp_args`] for the same masses (as
 /// [`product::roll_given`]), so that four contacts can take theirs at once.
+/// Only the first `W` slots are stepped (the rest are left as they are: a
+/// replay that follows no effect parameter steps the constants' alone).
 #[inline(always)]
-pub fn roll_given(
+pub fn roll_given<const W: usize>(
     params: &ProductParams,
     wheel_kg: &mut f64,
     rail_kg: &mut f64,
@@ -159,9 +209,9 @@ pub fn roll_given(
     if m > 0.0 {
         let per_m = 1.0 / m;
         if let Some(revolution) = conditions.transfer_revolution {
-            transfer(
+            transfer::<W>(
                 params,
-                (revolution, tangents.transfer_revolution),
+                (revolution, tangents),
                 exps[0],
                 (wheel_kg, wheel_tan),
                 (rail_kg, rail_tan),
@@ -190,6 +240,11 @@ pub fn roll_given(
             own[KM2] -= on_saturation * e_per_scale * m;
             own[K0] += params.k0_kg * factor;
             own[KM1] += on_saturation * saturation;
+            // raw = (k0 + km1 fp fc S) F.
+            let per_factor = params.k0_kg + params.km1_kg * conditions.fp_fc * saturation;
+            for (k, d) in tangents.consumption_effect.iter().enumerate() {
+                own[effect_slot(k)] += per_factor * d;
+            }
             on_saturation * e_per_scale
         } else {
             1.0
@@ -206,7 +261,7 @@ pub fn roll_given(
         // ∂f = (∂m - ∂c - f ∂m) / m; both surfaces are scaled by f.
         let keep = over_m(1.0 - f - slope);
         let before = *wheel_kg + *rail_kg;
-        for k in 0..SLOTS {
+        for k in 0..W {
             let df = keep * dm[k] - over_m(own[k]);
             wheel_tan[k] = wheel_tan[k] * f + *wheel_kg * df;
             rail_tan[k] = rail_tan[k] * f + *rail_kg * df;
@@ -222,9 +277,9 @@ pub fn roll_given(
 /// Eq. (5) and (6) with tangents: the donor (more product) gives `t (m1 -
 /// m2)`, `t = min(kt (1 - e^(-m1/cm)) R, 0.5)`.
 #[inline]
-fn transfer(
+fn transfer<const W: usize>(
     params: &ProductParams,
-    (revolution, d_revolution): (f64, f64),
+    (revolution, tangents): (f64, &ConditionTangents),
     e: f64,
     wheel: (&mut f64, &mut Tangent),
     rail: (&mut f64, &mut Tangent),
@@ -248,11 +303,15 @@ fn transfer(
     let per_m1 = params.kt * revolution * e * (1.0 / params.cm_kg);
     let per_revolution = params.kt * (1.0 - e);
     let mut own = [0.0; SLOTS];
-    own[CN] = per_revolution * d_revolution;
+    own[CN] = per_revolution * tangents.transfer_revolution;
+    for (k, d) in tangents.transfer_effect.iter().enumerate() {
+        own[effect_slot(k)] = per_revolution * d;
+    }
     own[CM] = -per_m1 * m1;
     own[KT] = raw;
     let on_donor = per_m1 * gap + t;
-    for ((d, r), o) in donor.1.iter_mut().zip(receiver.1.iter_mut()).zip(own) {
+    let steps = donor.1.iter_mut().zip(receiver.1.iter_mut()).zip(own);
+    for ((d, r), o) in steps.take(W) {
         let d_moved = on_donor * *d - t * *r + gap * o;
         *d -= d_moved;
         *r += d_moved;
@@ -280,7 +339,10 @@ mod tests {
         ModelConfig::default().product
     }
 
-    /// One contact from clean tangents at `params` (masses only).
+    /// One contact from clean tangents at `params` (masses only), the
+    /// transfer factor times `1 + q[0]`, the consumption factor times
+    /// `exp(q[1])`: the two effect slots' parameters.
+    #[allow(clippy::too_many_arguments)]
     fn contact(
         params: &ProductParams,
         w: f64,
@@ -288,8 +350,11 @@ mod tests {
         pm_pa: f64,
         creep: f64,
         n: Option<usize>,
+        q: [f64; 2],
     ) -> (f64, f64) {
-        let conditions = conditions(params, pm_pa, creep, n);
+        let mut conditions = conditions(params, pm_pa, creep, n);
+        conditions.transfer_revolution = conditions.transfer_revolution.map(|r| r * (1.0 + q[0]));
+        conditions.consumption_factor *= q[1].exp();
         let (mut w, mut r) = (w, r);
         product::roll(params, &mut w, &mut r, &conditions);
         (w, r)
@@ -321,8 +386,8 @@ mod tests {
             n in prop::option::of(0usize..40),
             // Tangents the masses arrive with (from earlier contacts), as
             // shares of the masses.
-            aw in prop::array::uniform10(-1.0f64..1.0),
-            ar in prop::array::uniform10(-1.0f64..1.0),
+            aw in prop::array::uniform12(-1.0f64..1.0),
+            ar in prop::array::uniform12(-1.0f64..1.0),
         ) {
             let p = table2();
             let (dw0, dr0): (Tangent, Tangent) = (aw.map(|a| a * w), ar.map(|a| a * r));
@@ -332,6 +397,9 @@ mod tests {
                 transfer_revolution: n.map_or(0.0, |n| {
                     revolution_tangent(&p, cond.transfer_revolution.unwrap(), n)
                 }),
+                // ∂R/∂q0 = R, ∂F/∂q1 = F (= 1) at q = 0.
+                transfer_effect: [cond.transfer_revolution.unwrap_or(0.0), 0.0],
+                consumption_effect: [0.0, cond.consumption_factor],
             };
             let (mut w1, mut r1, mut dw, mut dr) = (w, r, dw0, dr0);
             let losses = roll(&p, &mut w1, &mut r1, &cond, &tangents, &mut dw, &mut dr);
@@ -342,12 +410,17 @@ mod tests {
             // Central differences in ln p for each constant, the incoming
             // masses moved along their tangents.
             let h = 1e-6;
-            for (k, key) in STATE_KEYS.into_iter().enumerate() {
+            for k in 0..SLOTS {
                 let at = |s: f64| {
                     let mut q = p;
-                    key.set(&mut q, key.get(&p) * s.exp());
-                    contact(&q, w + s * dw0[k], r + s * dr0[k], pm, creep, n)
+                    let mut e = [0.0; 2];
+                    match STATE_KEYS.get(k) {
+                        Some(key) => key.set(&mut q, key.get(&p) * s.exp()),
+                        None => e[k - STATE_SLOTS] = s,
+                    }
+                    contact(&q, w + s * dw0[k], r + s * dr0[k], pm, creep, n, e)
                 };
+                let key = STATE_KEYS.get(k);
                 let (hi, lo) = (at(h), at(-h));
                 let fd = ((hi.0 - lo.0) / (2.0 * h), (hi.1 - lo.1) / (2.0 * h));
                 // Only where no branch changes between the two sides.

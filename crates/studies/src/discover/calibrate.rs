@@ -78,6 +78,7 @@ use tortwin_model::config::ModelConfig;
 use tortwin_model::error::UsageError;
 use tortwin_model::product::{ProductKey, ProductParams};
 use tortwin_model::role::Role;
+use tortwin_model::tangent::{self, EffectParam};
 
 /// A constant is determined when the standard error of `ln p` is at most
 /// this: its 95 % interval spans about ±20 %.
@@ -277,6 +278,27 @@ impl<'e, 'a> Problem<'e, 'a> {
         matches!(self.knobs[j], Knob::Constant(_))
     }
 
+    /// The effect knobs whose columns a replay with tangents gives (the
+    /// first [`tangent::EFFECT_SLOTS`] that act on the mass smoothly), with
+    /// the parameter each slot follows.
+    fn followed(&self) -> Vec<(usize, EffectParam)> {
+        self.knobs
+            .iter()
+            .enumerate()
+            .filter_map(|(j, knob)| match knob {
+                Knob::Effect(c, i) => c.tangent_param(*i, &self.base.effects).map(|p| (j, p)),
+                Knob::Constant(_) => None,
+            })
+            .take(tangent::EFFECT_SLOTS)
+            .collect()
+    }
+
+    /// Whether knob `j`'s column is exact: a constant's (tangents or
+    /// read-outs) or a followed effect parameter's.
+    fn is_exact(&self, j: usize) -> bool {
+        self.is_constant(j) || self.followed().iter().any(|&(k, _)| k == j)
+    }
+
     /// The knobs' coordinates in `cfg`.
     fn theta_of(&self, cfg: &ModelConfig) -> Vec<f64> {
         self.knobs
@@ -397,13 +419,22 @@ impl<'e, 'a> Problem<'e, 'a> {
             })
             .collect();
         let keys: Vec<ProductKey> = state.iter().map(|&(_, key)| key).collect();
-        let (all, columns) = self.ev.sensitivities(&cfg, &keys)?;
+        let followed = self.followed();
+        let params: Vec<EffectParam> = followed.iter().map(|&(_, p)| p).collect();
+        let (all, columns) = self.ev.sensitivities(&cfg, &keys, &params)?;
         self.remember(key.clone(), &self.active(&all));
+        // An effect's coordinate is u: the tangent's ∂/∂q times dq/du.
+        let scale = |j: usize| match &self.knobs[j] {
+            Knob::Effect(c, i) => c.dparam_du(*i, theta[j]),
+            Knob::Constant(_) => 1.0,
+        };
         let columns: StateColumns = Arc::new(
             state
                 .iter()
+                .map(|&(j, _)| j)
+                .chain(followed.iter().map(|&(j, _)| j))
                 .zip(columns)
-                .map(|(&(j, _), column)| (j, self.active(&column)))
+                .map(|(j, column)| (j, self.active(&column) * scale(j)))
                 .collect(),
         );
         let mut kept = lock();
@@ -415,14 +446,17 @@ impl<'e, 'a> Problem<'e, 'a> {
     }
 
     /// The simulated values' derivatives in the knobs `cols`: the state
-    /// constants' from one replay with tangents (exact), the others by
-    /// forward differences (inwards at a bound; a read-out constant's from
-    /// the read-outs that replay kept, an effect parameter's one replay
+    /// constants' and the followed effect parameters' ([`Problem::followed`])
+    /// from one replay with tangents (exact), the others by forward
+    /// differences (inwards at a bound; a read-out constant's from the
+    /// read-outs that replay kept, any other effect parameter's one replay
     /// each, in parallel).
     fn jacobian(&self, theta: &[f64], at: &DVector<f64>, cols: &[usize]) -> Result<DMatrix<f64>> {
-        let wants_state = cols
-            .iter()
-            .any(|&j| matches!(self.knobs[j], Knob::Constant(key) if key.role() == Role::State));
+        let followed = self.followed();
+        let wants_state = cols.iter().any(|&j| {
+            matches!(self.knobs[j], Knob::Constant(key) if key.role() == Role::State)
+                || followed.iter().any(|&(k, _)| k == j)
+        });
         let state = match wants_state {
             true => self.state_columns(theta)?,
             false => None,
@@ -472,9 +506,11 @@ impl<'e, 'a> Problem<'e, 'a> {
 
     /// [`Problem::fit`], the first Jacobian given (over `free`): computed at
     /// `theta` (`true`), or carried from nearby (`false`: computed again
-    /// before the fit may stop on it). A fit of constants alone takes exact
-    /// Jacobians ([`Problem::fit_exact`]); with an effect's parameters it
-    /// carries one by Broyden's updates.
+    /// before the fit may stop on it). A fit whose knobs all have exact
+    /// columns (constants, followed effect parameters) takes exact
+    /// Jacobians ([`Problem::fit_exact`]); with any other effect parameter
+    /// (a step's threshold, a third one) it carries one by Broyden's
+    /// updates.
     fn fit_from(
         &self,
         theta: &[f64],
@@ -482,7 +518,7 @@ impl<'e, 'a> Problem<'e, 'a> {
         truncate: Option<f64>,
         mut first_j: Option<(DMatrix<f64>, bool)>,
     ) -> Result<(Vec<f64>, DVector<f64>)> {
-        if !free.is_empty() && free.iter().all(|&f| self.is_constant(f)) {
+        if !free.is_empty() && free.iter().all(|&f| self.is_exact(f)) {
             return self.fit_exact(theta, free, truncate, None);
         }
         let flat_sse = LM_FLAT * self.noise2;

@@ -188,13 +188,13 @@ impl Dataset {
     /// The simulated value of every row with `cfg`: one replay of the
     /// in-memory recording through the engine.
     pub fn simulate(&self, cfg: &ModelConfig) -> Result<Vec<f64>> {
-        Ok(self.replay(cfg, false, false, 0)?.0)
+        Ok(self.replay(cfg, false, None, 0)?.0)
     }
 
     /// [`Dataset::simulate`], and what every row's value was read from
     /// (for [`Dataset::read_out`] at other read-out parameters).
     pub fn simulate_with_readouts(&self, cfg: &ModelConfig) -> Result<(Vec<f64>, Vec<Readout>)> {
-        let (simulated, readouts, _) = self.replay(cfg, true, false, 0)?;
+        let (simulated, readouts, _) = self.replay(cfg, true, None, 0)?;
         Ok((simulated, complete(readouts)))
     }
 
@@ -203,13 +203,21 @@ impl Dataset {
     /// respect to `ln p` of each constant of `keys` (state constants,
     /// [`tortwin_model::role::Role::State`]): `∂ value / ∂ mass` at the
     /// mass read ([`ReadoutModel::slope`]) times the mass's tangent. One
-    /// column per key.
+    /// column per key, then one per effect parameter of `effects` (at most
+    /// [`tangent::EFFECT_SLOTS`]; the derivative in the parameter itself,
+    /// [`tangent::EffectParam`]).
     pub fn simulate_with_tangents(
         &self,
         cfg: &ModelConfig,
         keys: &[ProductKey],
+        effects: &[tangent::EffectParam],
     ) -> Result<Sensitivities> {
-        let (simulated, readouts, _) = self.replay(cfg, true, true, 0)?;
+        assert!(
+            effects.len() <= tangent::EFFECT_SLOTS,
+            "too many effect slots"
+        );
+        let followed = std::array::from_fn(|k| effects.get(k).copied());
+        let (simulated, readouts, _) = self.replay(cfg, true, Some(followed), 0)?;
         let readouts = complete(readouts);
         let model = ReadoutModel::new(&self.section, cfg, self.origin_ns);
         let slopes: Vec<f64> = self
@@ -218,10 +226,12 @@ impl Dataset {
             .zip(&readouts)
             .map(|(row, r)| model.slope(r, row.site, row.rail, row.quantity))
             .collect();
-        let columns = keys
+        let slots = keys
             .iter()
-            .map(|&key| {
-                let slot = tangent::slot(key);
+            .map(|&key| tangent::slot(key))
+            .chain((0..effects.len()).map(|k| Some(tangent::effect_slot(k))));
+        let columns = slots
+            .map(|slot| {
                 readouts
                     .iter()
                     .zip(&slopes)
@@ -261,7 +271,7 @@ impl Dataset {
         cfg: &ModelConfig,
         checkpoints: usize,
     ) -> Result<(Vec<f64>, Vec<Readout>, Checkpoints)> {
-        let (simulated, readouts, cps) = self.replay(cfg, true, false, checkpoints)?;
+        let (simulated, readouts, cps) = self.replay(cfg, true, None, checkpoints)?;
         Ok((simulated, complete(readouts), cps))
     }
 
@@ -326,14 +336,15 @@ impl Dataset {
         &self,
         cfg: &ModelConfig,
         readouts: bool,
-        tangents: bool,
+        tangents: Option<[Option<tangent::EffectParam>; tangent::EFFECT_SLOTS]>,
         checkpoints: usize,
     ) -> Result<(Vec<f64>, Vec<Option<Readout>>, Checkpoints)> {
         let mut engine = Engine::new(
             self.section.clone(),
             cfg.clone(),
             EngineOptions {
-                tangents,
+                tangents: tangents.is_some(),
+                effect_tangents: tangents.unwrap_or_default(),
                 // A candidate whose arithmetic overflows ranks last (its
                 // SSE is NaN), as before the engine checked its outputs.
                 non_finite_allowed: true,

@@ -50,6 +50,8 @@ use crate::{Error, Result};
 use tortwin_engine::Readout;
 use tortwin_model::config::{Effects, ModelConfig};
 use tortwin_model::effects::Named;
+use tortwin_model::role::Role;
+use tortwin_model::tangent::EffectParam;
 
 /// The effects discover knows: the named ones of effects.md (their table,
 /// `tortwin_model::effects::EFFECTS`, gives parameters, ranges and
@@ -109,6 +111,38 @@ impl Candidate {
                 let (lo, hi) = g.bounds();
                 lo + (hi - lo) * u
             }
+        }
+    }
+
+    /// `d param(i, u) / du`.
+    pub(super) fn dparam_du(&self, i: usize, u: f64) -> f64 {
+        match self {
+            Candidate::Named(n) => n.spec().params.get(i).map_or(f64::NAN, |p| p.dp_du(u)),
+            Candidate::Generic(g) => {
+                let (lo, hi) = g.bounds();
+                hi - lo
+            }
+        }
+    }
+
+    /// The effect parameter a tangent can follow for parameter `i` in
+    /// `effects` (where the effect is on): one that acts on the mass and is
+    /// smooth (`tortwin_model::tangent::EffectParam`). `None` for a
+    /// read-out term (its parameter is read, not replayed) and for the
+    /// bands.
+    pub(super) fn tangent_param(&self, i: usize, effects: &Effects) -> Option<EffectParam> {
+        match self {
+            Candidate::Named(Named::BogieBands) => None,
+            Candidate::Named(n) => Some(EffectParam::Named {
+                effect: *n,
+                param: i,
+            }),
+            Candidate::Generic(g) if g.acts_on.role() == Role::State => effects
+                .generic
+                .iter()
+                .position(|t| g.is(t))
+                .map(|term| EffectParam::Generic { term }),
+            Candidate::Generic(_) => None,
         }
     }
 
@@ -593,17 +627,19 @@ impl<'a> Evaluator<'a> {
     }
 
     /// Every row's simulated value with `cfg` and its derivatives in `ln p`
-    /// of the state constants `keys` (one column per key), from one replay
-    /// with tangents ([`Dataset::simulate_with_tangents`]), counted at its
+    /// of the state constants `keys` (one column per key), then in the
+    /// effect parameters `effects` (one column each), from one replay with
+    /// tangents ([`Dataset::simulate_with_tangents`]), counted at its
     /// measured time; its read-outs are kept.
     pub(super) fn sensitivities(
         &self,
         cfg: &ModelConfig,
         keys: &[tortwin_model::product::ProductKey],
+        effects: &[tortwin_model::tangent::EffectParam],
     ) -> Result<(Vec<f64>, Vec<Vec<f64>>)> {
         crate::progress::check(self.progress)?;
         let start = std::time::Instant::now();
-        let s = self.data.simulate_with_tangents(cfg, keys)?;
+        let s = self.data.simulate_with_tangents(cfg, keys, effects)?;
         self.cost
             .add(Spent::Tangents(start.elapsed().as_nanos() as u64));
         self.keep(cfg.state_part(), s.readouts);

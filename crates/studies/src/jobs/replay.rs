@@ -219,8 +219,7 @@ pub fn replay_from(
     let opts = EngineOptions {
         snapshot_every_wheel: args.every_wheel,
         every_wheel_contacts: args.per_train,
-        tangents: false,
-        non_finite_allowed: false,
+        ..EngineOptions::default()
     };
     let section = reader.section().clone();
     let source = args.config.as_ref().map_or_else(
