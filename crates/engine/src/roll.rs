@@ -175,7 +175,7 @@ impl Roller {
         let exps = product::roll_exp_args(&self.params, st.wheel_kg, touch.rail_kg).map(f64::exp);
         let tan = (rail_tan, dr);
         let given = (&conditions, revolution);
-        self.finish_tangent::<W>(st, track, tan, observed, &touch, given, exps, i)
+        self.finish_tangent::<W, true>(st, track, tan, observed, &touch, given, exps, i)
     }
 
     /// [`Roller::age`] with the rail mass's tangent `dr`: the time effects
@@ -207,9 +207,12 @@ impl Roller {
 
     /// [`Roller::finish`] with the tangents (`dr`: the rail mass's after
     /// step 1, written back to `rail_tan[i]`), the exponentials given.
+    /// `SEEN`: keep the step-2 mass's tangent (`WheelRoll::seen_tan`, what
+    /// a site's measurement of this contact reads; the wavefront's contacts
+    /// are never at a site).
     #[allow(clippy::too_many_arguments)]
     #[inline(always)]
-    fn finish_tangent<const W: usize>(
+    fn finish_tangent<const W: usize, const SEEN: bool>(
         &self,
         st: &mut WheelRoll,
         track: &mut TrackState,
@@ -235,7 +238,9 @@ impl Roller {
         };
         let mut rail_kg = touch.rail_kg;
         let m_kg = st.wheel_kg + rail_kg;
-        st.seen_tan = tangent::add(&st.wheel_tan, &dr);
+        if SEEN {
+            st.seen_tan = tangent::add(&st.wheel_tan, &dr);
+        }
         let losses = tangent::roll_given::<W>(
             &self.params,
             &mut st.wheel_kg,
@@ -1347,7 +1352,7 @@ impl RollContext<'_> {
         for (j, lane) in lanes.iter_mut().enumerate() {
             let exps = [transfer[j], consumption[j]];
             seen[j] = if W > 0 {
-                lane.roller.finish_tangent::<W>(
+                lane.roller.finish_tangent::<W, false>(
                     &mut lane.st,
                     state,
                     (&mut work.rail_tan, dr[j]),

@@ -276,7 +276,7 @@ pub fn roll_given<const W: usize>(
 
 /// Eq. (5) and (6) with tangents: the donor (more product) gives `t (m1 -
 /// m2)`, `t = min(kt (1 - e^(-m1/cm)) R, 0.5)`.
-#[inline]
+#[inline(always)]
 fn transfer<const W: usize>(
     params: &ProductParams,
     (revolution, tangents): (f64, &ConditionTangents),
