@@ -27,6 +27,26 @@ fn root() -> PathBuf {
 /// The relative step of the central differences in `ln p`.
 const H: f64 = 1e-5;
 
+/// A tangent column against the central differences of the replays at
+/// `+h` (`hi`) and `-h` (`lo`): the differences' norm, the norm of the
+/// column's miss, and the miss relative to the norm (absolute where the
+/// differences are 0).
+fn against_central(hi: &[f64], lo: &[f64], h: f64, column: &[f64]) -> (f64, f64, f64) {
+    let fd: Vec<f64> = hi
+        .iter()
+        .zip(lo)
+        .map(|(a, b)| (a - b) / (2.0 * h))
+        .collect();
+    let norm = fd.iter().map(|x| x * x).sum::<f64>().sqrt();
+    let miss = fd
+        .iter()
+        .zip(column)
+        .map(|(a, b)| (a - b).powi(2))
+        .sum::<f64>()
+        .sqrt();
+    (norm, miss, if norm > 0.0 { miss / norm } else { miss })
+}
+
 /// Compares the tangent columns of `cfg` on `rec` with central differences;
 /// returns the worst column's relative error.
 fn check(rec: &Path, cfg: &ModelConfig) -> f64 {
@@ -49,20 +69,7 @@ fn check(rec: &Path, cfg: &ModelConfig) -> f64 {
             key.set(&mut c.product, key.get(&cfg.product) * s.exp());
             data.simulate(&c).unwrap()
         };
-        let (hi, lo) = (at(H), at(-H));
-        let fd: Vec<f64> = hi
-            .iter()
-            .zip(&lo)
-            .map(|(a, b)| (a - b) / (2.0 * H))
-            .collect();
-        let norm = fd.iter().map(|x| x * x).sum::<f64>().sqrt();
-        let miss = fd
-            .iter()
-            .zip(column)
-            .map(|(a, b)| (a - b).powi(2))
-            .sum::<f64>()
-            .sqrt();
-        let relative = if norm > 0.0 { miss / norm } else { miss };
+        let (norm, miss, relative) = against_central(&at(H), &at(-H), H, column);
         eprintln!(
             "{} {:>8}: |J| {norm:.3e}, |J - central| / |J| = {relative:.2e}",
             rec.file_name().unwrap().to_string_lossy(),
@@ -176,19 +183,7 @@ fn check_effects(rec: &Path, cfg: &ModelConfig) -> usize {
                 data.simulate(&moved(cfg, p, h).0).unwrap(),
                 data.simulate(&moved(cfg, p, -h).0).unwrap(),
             );
-            let fd: Vec<f64> = hi
-                .iter()
-                .zip(&lo)
-                .map(|(a, b)| (a - b) / (2.0 * h))
-                .collect();
-            let norm = fd.iter().map(|x| x * x).sum::<f64>().sqrt();
-            let miss = fd
-                .iter()
-                .zip(column)
-                .map(|(a, b)| (a - b).powi(2))
-                .sum::<f64>()
-                .sqrt();
-            let relative = if norm > 0.0 { miss / norm } else { miss };
+            let (norm, _, relative) = against_central(&hi, &lo, h, column);
             eprintln!(
                 "{} {p:?} = {value}: |J| {norm:.3e}, |J - central| / |J| = {relative:.2e}",
                 rec.file_name().unwrap().to_string_lossy(),

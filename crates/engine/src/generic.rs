@@ -192,10 +192,26 @@ impl GenericSet {
             .any(|t| t.rail.is_none_or(|r| r == rail) && !t.driver.is_wheel())
     }
 
-    /// The product of the terms on `acts_on` that `which` selects and that
-    /// apply to `rail` (and `applicator`, for pulses), `at` a time with its
-    /// weather and, at a contact, the wheel's drivers. A wheel term has no
-    /// value without a wheel: it does not act (g = 1).
+    /// The terms on `acts_on` that `which` selects and that apply to `rail`
+    /// (and `applicator`, for pulses), each with its driver's value `at` a
+    /// time with its weather and, at a contact, the wheel's drivers. A
+    /// wheel term has no value without a wheel: it does not act.
+    #[inline]
+    fn acting<'s>(
+        &'s self,
+        acts_on: ActsOn,
+        which: Which,
+        applicator: Option<usize>,
+        rail: usize,
+        at: When<'s>,
+    ) -> impl Iterator<Item = (&'s Compiled, f64)> + 's {
+        self.by_acts_on[acts_on.index()]
+            .iter()
+            .filter_map(move |t| Some((t, t.driver_value(which, applicator, rail, at)?)))
+    }
+
+    /// The product of the [`GenericSet::acting`] terms' factors (1 when
+    /// none acts).
     #[inline]
     pub(crate) fn factor(
         &self,
@@ -205,13 +221,8 @@ impl GenericSet {
         rail: usize,
         at: When<'_>,
     ) -> f64 {
-        let mut g = 1.0;
-        for t in &self.by_acts_on[acts_on.index()] {
-            if let Some(x) = t.driver_value(which, applicator, rail, at) {
-                g *= t.form.g(x, t.x_ref);
-            }
-        }
-        g
+        self.acting(acts_on, which, applicator, rail, at)
+            .fold(1.0, |g, (t, x)| g * t.form.g(x, t.x_ref))
     }
 
     /// [`GenericSet::factor`] and its derivative in the smooth parameter of
@@ -227,20 +238,16 @@ impl GenericSet {
         at: When<'_>,
         term: usize,
     ) -> (f64, f64) {
-        let (mut g, mut dg) = (1.0, 0.0);
-        for t in &self.by_acts_on[acts_on.index()] {
-            if let Some(x) = t.driver_value(which, applicator, rail, at) {
+        self.acting(acts_on, which, applicator, rail, at)
+            .fold((1.0, 0.0), |(g, dg), (t, x)| {
                 let gt = t.form.g(x, t.x_ref);
                 let own = if t.index == term {
                     t.form.dg_dq(x, t.x_ref)
                 } else {
                     0.0
                 };
-                dg = dg * gt + g * own;
-                g *= gt;
-            }
-        }
-        (g, dg)
+                (g * gt, dg * gt + g * own)
+            })
     }
 
     /// muD and muC of eq. (4) with the friction terms for `rail` at this
