@@ -787,13 +787,11 @@ pub(crate) struct RollContext<'a> {
     observe_every_wheel: bool,
     /// Keep every wheel's step-2 masses in [`TrackWork::wheel_seen`].
     keep_seen: bool,
-    /// Carry the masses' tangents ([`crate::EngineOptions::tangents`]).
-    tangents: bool,
     /// The effect parameters the tangents' effect slots follow.
     effect_params: [Option<EffectParam>; EFFECT_SLOTS],
-    /// How many of a tangent's slots the contacts step: 0 without
-    /// tangents, the constants' alone when no effect slot is followed,
-    /// else all. The slots past it stay zero.
+    /// How many of a tangent's slots the contacts step: 0 without tangents
+    /// ([`crate::EngineOptions::tangents`]), the constants' alone when no
+    /// effect slot is followed, else all. The slots past it stay zero.
     tangent_width: usize,
     origin_ns: i64,
 }
@@ -844,7 +842,6 @@ impl Engine {
                 last_axle: &self.last_axle,
                 observe_every_wheel: self.opts.snapshot_every_wheel,
                 keep_seen: self.opts.every_wheel_contacts && !self.opts.snapshot_every_wheel,
-                tangents: self.opts.tangents,
                 effect_params: self.opts.effect_tangents,
                 tangent_width: match (self.opts.tangents, self.opts.effect_tangents) {
                     (false, _) => 0,
@@ -1486,7 +1483,7 @@ impl RollContext<'_> {
         let mut transfer_factor_d = [0.0; EFFECT_SLOTS];
         let mut consumption_generic_d = [0.0; EFFECT_SLOTS];
         for (k, p) in self.effect_params.iter().enumerate() {
-            match (*p, self.tangents) {
+            match (*p, self.tangent_width > 0) {
                 (
                     Some(EffectParam::Named {
                         effect: Named::SpeedTransfer,
@@ -1545,7 +1542,7 @@ impl RollContext<'_> {
                 .get(Named::WheelEdgeReservoir)
                 .map(|p| (p[0], p[1])),
             observe: self.observe_every_wheel || self.last_axle[track] == a,
-            fp_fc_tan: if self.tangents {
+            fp_fc_tan: if self.tangent_width > 0 {
                 tangent::fp_fc_tangent(
                     self.product,
                     wheel.hertz.pm_pa,
@@ -1555,7 +1552,7 @@ impl RollContext<'_> {
             } else {
                 [0.0; 2]
             },
-            effect_params: if self.tangents {
+            effect_params: if self.tangent_width > 0 {
                 self.effect_params
             } else {
                 [None; EFFECT_SLOTS]
