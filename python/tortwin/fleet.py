@@ -56,11 +56,17 @@ import signal
 import sys
 import tempfile
 import time
-import tomllib
 import uuid
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Iterable
+
+# The standard library reads TOML from Python 3.11; on 3.10 (which the
+# package supports) tomli is the same parser under another name.
+if sys.version_info >= (3, 11):
+    import tomllib
+else:
+    import tomli as tomllib
 
 import pyarrow as pa
 import pyarrow.compute as pc
