@@ -23,8 +23,8 @@ friction measured at three sites), plots mu at the sites and along the section, 
 `discover` on a recording where the model lacks an effect, and shows the rerun recording."""
     ),
     new_code_cell(
-        """from pathlib import Path
-import tomllib
+        """import sys
+from pathlib import Path
 
 import matplotlib.pyplot as plt
 import tortwin
@@ -107,7 +107,12 @@ ax.set_ylabel("measured - simulated")
 ax.legend(markerscale=5)
 fig.tight_layout()
 
-# The model found, replayed from its TOML as a dict.
+# The model found, replayed from its TOML as a dict (tomllib is Python
+# 3.11's; on 3.10 the package brings tomli, the same parser).
+if sys.version_info >= (3, 11):
+    import tomllib
+else:
+    import tomli as tomllib
 model = tomllib.loads(found.model_toml)
 tortwin.replay(ROOT / "recordings" / "tangent_day_ageing.mcap", config=model, field=False).summary["rmse"]"""
     ),

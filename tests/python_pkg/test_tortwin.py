@@ -9,7 +9,6 @@ import signal
 import subprocess
 import sys
 import time
-import tomllib
 from pathlib import Path
 
 import pyarrow as pa
@@ -17,6 +16,12 @@ import pyarrow.compute as pc
 import pytest
 
 import tortwin
+
+# The package supports Python 3.10, where tomllib is tomli.
+if sys.version_info >= (3, 11):
+    import tomllib
+else:
+    import tomli as tomllib
 from conftest import RECORDINGS, REFERENCE, rewrite, run_cli, twin_measurements
 
 REFERENCE_CASES = [
