@@ -170,6 +170,11 @@ pub struct EngineOptions {
     /// replays, where a candidate whose arithmetic overflows is a worst
     /// cost to be ranked last, not an output.
     pub non_finite_allowed: bool,
+    /// Step with the portable kernel (`f64::exp` lane by lane, plain
+    /// division) even on a CPU with AVX2 and FMA, where the vector kernel
+    /// is the default. The two give the same bits (crates/engine/tests/
+    /// kernel.rs checks it); this is for checking that, and for timing it.
+    pub portable_kernel: bool,
 }
 
 /// The calculation grid: `d_i = i * C`, `C = pi * nominal wheel diameter`,

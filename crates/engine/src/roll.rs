@@ -793,6 +793,8 @@ pub(crate) struct RollContext<'a> {
     /// ([`crate::EngineOptions::tangents`]), the constants' alone when no
     /// effect slot is followed, else all. The slots past it stay zero.
     tangent_width: usize,
+    /// Never the vector kernel ([`crate::EngineOptions::portable_kernel`]).
+    portable: bool,
     origin_ns: i64,
 }
 
@@ -848,6 +850,7 @@ impl Engine {
                     (true, e) if e.iter().all(Option::is_none) => tangent::STATE_SLOTS,
                     (true, _) => SLOTS,
                 },
+                portable: self.opts.portable_kernel,
                 origin_ns: self.origin_ns,
             },
             &mut self.tracks,
@@ -1093,7 +1096,7 @@ impl RollContext<'_> {
     /// else is shared between the wheels of a track.
     fn roll_group(&self, group: &Group<'_>, state: &mut TrackState, work: &mut TrackWork) {
         #[cfg(target_arch = "x86_64")]
-        if exp4_is_vectorised() {
+        if !self.portable && exp4_is_vectorised() {
             // SAFETY: the CPU has AVX2 and FMA.
             unsafe { self.roll_group_fma(group, state, work) };
             return;

@@ -1,0 +1,126 @@
+//! The stepping kernel's two builds give the same bits: the vector one
+//! (four wheels' exponentials and quotients in one AVX2/FMA register, the
+//! default where the CPU has them) and the portable one
+//! (`EngineOptions::portable_kernel`: `f64::exp` and `/` lane by lane).
+//! Every measurement's simulated value, every read-out mass and its
+//! tangent, and the state at the end are compared bit for bit on the
+//! bundled recordings: the paper's model, every named effect, bands and
+//! rain, generic terms, with and without tangents.
+
+use std::path::PathBuf;
+
+use tortwin_engine::sink::{MeasurementOutput, Sink, SinkResult};
+use tortwin_engine::{Engine, EngineOptions};
+use tortwin_model::config::ModelConfig;
+use tortwin_recording::recording::Recording;
+
+/// The repository's root.
+fn root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..")
+}
+
+/// The truth configuration a bundled recording was written with (its
+/// `REC.key.json`, `truth_config_toml`).
+fn truth_of(recording: &std::path::Path) -> ModelConfig {
+    let key = recording.with_extension("key.json");
+    let key: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&key).unwrap()).unwrap();
+    ModelConfig::from_overlay_str(key["truth_config_toml"].as_str().unwrap(), "truth").unwrap()
+}
+
+/// Every measurement as text that differs wherever a bit does (`{:?}` of
+/// an f64 is its shortest round-trip form).
+#[derive(Default)]
+struct Collect(Vec<String>);
+
+impl Sink for Collect {
+    fn measurement(&mut self, m: &MeasurementOutput<'_>) -> SinkResult {
+        let readout = m.readout.map(|r| (r.mass_kg, r.mass_tangent));
+        self.0.push(format!(
+            "{} {:?} {:?}",
+            m.index_in_file, m.simulated, readout
+        ));
+        Ok(())
+    }
+
+    fn wants_readouts(&self) -> bool {
+        true
+    }
+}
+
+/// The measurements and the final state (as JSON) of one replay.
+fn replay(
+    rec: &Recording,
+    cfg: &ModelConfig,
+    tangents: bool,
+    portable: bool,
+) -> (Vec<String>, String) {
+    let mut engine = Engine::new(
+        rec.section.clone(),
+        cfg.clone(),
+        EngineOptions {
+            tangents,
+            portable_kernel: portable,
+            ..EngineOptions::default()
+        },
+        rec.origin_ns,
+    );
+    let mut sink = Collect::default();
+    for event in &rec.events {
+        engine.push(event.clone(), &mut sink).unwrap();
+    }
+    engine
+        .finish(&mut sink, rec.unknown_topic_messages)
+        .unwrap();
+    let state = serde_json::to_string(&engine.state()).unwrap();
+    (sink.0, state)
+}
+
+#[test]
+fn the_vector_kernel_gives_the_portable_kernels_bits() {
+    if !tortwin_model::exp::exp4_is_vectorised() {
+        eprintln!("this CPU has no AVX2 and FMA: both replays run the portable kernel");
+    }
+    let cases: Vec<(PathBuf, ModelConfig)> =
+        ["demo_day", "curve_day_all_effects", "curve_day_bands_rain"]
+            .iter()
+            .map(|name| {
+                let path = root().join("recordings").join(format!("{name}.mcap"));
+                let cfg = truth_of(&path);
+                (path, cfg)
+            })
+            .chain(std::iter::once({
+                let dir = root().join("tests/reference/recordings");
+                let text = std::fs::read_to_string(dir.join("generic_day.config.toml")).unwrap();
+                let cfg = ModelConfig::from_overlay_str(&text, "generic_day.config.toml").unwrap();
+                (dir.join("generic_day.mcap"), cfg)
+            }))
+            .collect();
+    for (path, cfg) in &cases {
+        let rec = Recording::read(path).unwrap();
+        for tangents in [false, true] {
+            let (vector, vector_state) = replay(&rec, cfg, tangents, false);
+            let (portable, portable_state) = replay(&rec, cfg, tangents, true);
+            assert!(
+                vector.len() > 100,
+                "{}: {} measurements",
+                path.display(),
+                vector.len()
+            );
+            assert_eq!(vector.len(), portable.len(), "{}", path.display());
+            if let Some(k) = (0..vector.len()).find(|&k| vector[k] != portable[k]) {
+                panic!(
+                    "{} (tangents {tangents}): measurement {k} differs:\nvector   {}\nportable {}",
+                    path.display(),
+                    vector[k],
+                    portable[k]
+                );
+            }
+            assert!(
+                vector_state == portable_state,
+                "{}: the final states differ",
+                path.display()
+            );
+        }
+    }
+}
