@@ -24,7 +24,8 @@ Figures (docs/spec/interfaces.md "Site constants"; issue: calibration):
     python3 scripts/calibration-campaign.py --sites 30 --seed 1 [--mode discover|calibrate]
 
 Prints one line per site and a summary; writes campaign.json in --work.
-The draws are seeded: the same --seed draws the same sites.
+The draws are seeded: the same --seed draws the same sites; --only 14 runs
+site 14 of that campaign alone (sites are numbered from 0).
 """
 
 import argparse
@@ -99,6 +100,11 @@ def site(args, rng, number):
     names = rng.sample(MOVABLE, moved_count)
     moved = {n: DEFAULTS[n] * rng.uniform(0.65, 1.35) for n in names}
     hidden = rng.choice(EFFECTS) if rng.random() < 0.3 else None
+    later_trains = rng.choice([30, 50])
+    # Every draw of a site comes before this: --only runs some sites of a
+    # seed's campaign and draws the others as the whole campaign would.
+    if args.only and number not in args.only:
+        return None
     d = os.path.join(args.work, f"site{number:02d}")
     os.makedirs(d, exist_ok=True)
     truth_toml = os.path.join(d, "truth.toml")
@@ -109,7 +115,7 @@ def site(args, rng, number):
     common = [args.tortwin, "synth", "--days", "3", "--preset", preset, "--noise-sigma", str(SIGMA),
               "--rain-events-per-day", "1", "--truth-config", truth_toml] + hidden_args + ["-q"]
     for out, seed_k, start, trains in [(rec, seed, "2024-04-08T00:00:00Z", 40),
-                                       (later, seed + 7919, "2024-04-29T00:00:00Z", rng.choice([30, 50]))]:
+                                       (later, seed + 7919, "2024-04-29T00:00:00Z", later_trains)]:
         o = run(common + ["--seed", str(seed_k), "--start", start, "--trains-per-day", str(trains),
                           "--out", out])
         if o.returncode != 0:
@@ -200,12 +206,16 @@ def main():
     ap.add_argument("--work", default="out/calibration-campaign")
     ap.add_argument("--tortwin", default="target/release/tortwin")
     ap.add_argument("--mode", choices=["discover", "calibrate"], default="discover")
+    ap.add_argument("--only", type=int, nargs="*", default=[],
+                    help="run only these sites (0-based) of the seed's campaign")
     args = ap.parse_args()
     rng = random.Random(args.seed)
     os.makedirs(args.work, exist_ok=True)
     results = []
     for number in range(args.sites):
         r = site(args, rng, number)
+        if r is None:
+            continue
         results.append(r)
         if "error" in r:
             print(f"site {number:2d} ERROR {r['error']}", flush=True)
