@@ -277,3 +277,34 @@ fn calibrate_starts_from_the_configuration() {
     let truth = ModelConfig::from_overlay_str(truth_text, "truth").unwrap();
     determined_hold_the_truth(&report, &truth);
 }
+
+/// A site whose consumption is about a third above the laboratory's (kc
+/// 0.75 for 0.57) and grows with the air temperature as well
+/// (`temperature_consumption`, beta 0.04 per K). Fitted with the
+/// laboratory's kc held, the named effect had to make up for kc (beta
+/// 0.094) and lost to a power of relative humidity on the consumption,
+/// which discover then reported beside the calibrated constants (the
+/// calibration campaign of 2026-11-28, `--seed 20261132`, site 14: this
+/// recording). The two are now weighed beside the site's constants: the
+/// named effect is reported, its beta near the truth, kc above the
+/// laboratory's, and the model closes to the noise.
+#[test]
+fn a_temperature_driven_consumption_at_a_site_with_a_high_kc_is_named() {
+    let dir = tempfile::tempdir().unwrap();
+    let truth_text = "[product]\nkc = 0.7516\n";
+    let hidden = ["temperature_consumption:beta_per_k=0.04"];
+    let rec = synth(dir.path(), "tangent", 3190, truth_text, &hidden);
+    let report = common::discover_report(&rec, &dir.path().join("report"));
+    let found = report["effects_found"].as_array().unwrap();
+    assert_eq!(found.len(), 1, "effects found: {found:?}");
+    assert_eq!(found[0]["name"], "temperature_consumption", "{found:?}");
+    let beta = found[0]["params"]["beta_per_k"].as_f64().unwrap();
+    assert!((beta / 0.04 - 1.0).abs() < 0.25, "beta {beta}");
+    let kc = constant(&report, "product.kc");
+    assert!(kc["value"].as_f64().unwrap() > 1.15 * 0.57, "{kc}");
+    assert!(
+        report["rmse_after"].as_f64().unwrap() < 1.05 * SIGMA,
+        "{}",
+        report["rmse_after"]
+    );
+}

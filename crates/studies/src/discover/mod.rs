@@ -805,6 +805,56 @@ pub fn discover(
             }
         }
         results.sort_by(|a, b| a.0.delta_bic.total_cmp(&b.0.delta_bic));
+        // With the site's constants in the model, the best generic term on
+        // a quantity a named effect scales and that named effect are both
+        // fitted with the constants free: held where they made up for what
+        // was missing, the constants favour the term (a temperature-driven
+        // consumption at a site whose km_kg is 23 % high: with the
+        // constants of step 1 held, temperature_consumption's beta went to
+        // 0.009 for 0.04, and a step of the consumption on air temperature
+        // was reported).
+        if constants_in && !constant_keys.is_empty() {
+            let best = results.iter().position(|r| {
+                r.0.passes_bic
+                    && r.0.passes_share
+                    && !r
+                        .1
+                        .slots
+                        .first()
+                        .is_some_and(|c| constant_in_disguise(c, &ev))
+            });
+            let rival = best.and_then(|k| {
+                let named = results[k].1.slots.first().and_then(named_on_quantity)?;
+                let j = results
+                    .iter()
+                    .position(|x| x.1.slots.first() == Some(&named))?;
+                Some((k, j))
+            });
+            if let Some((k, j)) = rival {
+                progress.stage(&format!(
+                    "step {step}: {} and {} with the site's constants free",
+                    results[k].0.label, results[j].0.label
+                ));
+                let _stage = ev.cost.enter(fit::Stage::Refits);
+                let tried = [&results[k], &results[j]];
+                let pairs =
+                    each_beside_constants(&ev, &tried, &constant_keys, &start.product, noise_now)?;
+                for (c, space, u, pair_sse) in pairs {
+                    let Some(i) = [k, j]
+                        .into_iter()
+                        .find(|&i| results[i].1.slots.first() == Some(&c))
+                    else {
+                        continue;
+                    };
+                    if pair_sse < results[i].0.sse {
+                        update(&mut results[i].0, &space, &u, pair_sse);
+                        results[i].1 = space;
+                        results[i].2 = u;
+                    }
+                }
+                results.sort_by(|a, b| a.0.delta_bic.total_cmp(&b.0.delta_bic));
+            }
+        }
         // A named effect that describes the data (nearly) as well as the
         // best generic term is the better statement: it goes first.
         prefer_named(&mut results, n, options);
@@ -994,6 +1044,53 @@ pub fn discover(
             chosen = Some(k);
             break;
         }
+        // A generic term chosen over the site's constants may stand in for
+        // both them and a named effect on the same quantity that the
+        // laboratory's constants kept from fitting (consumption growing
+        // with the temperature at a site whose kc is 32 % high: with kc
+        // held, temperature_consumption's beta went to 0.094 to make up
+        // for kc and lost to a power of humidity by 11700 BIC units; with
+        // kc and km1_kg free it describes the data better than the
+        // humidity term does with them). The two are fitted beside the
+        // constants; when the named effect is the better there and the
+        // pair beats the term alone by the BIC threshold, the constants
+        // and the named effect are taken together.
+        let mut pair_first: Option<(Candidate, ModelConfig, f64)> = None;
+        if let (false, Some(k), Some((constants_alone, _, keys))) =
+            (take_constants, chosen, constants.as_ref())
+        {
+            let rival = results[k].1.slots.first().and_then(named_on_quantity);
+            let j = rival.and_then(|r| results.iter().position(|x| x.1.slots.first() == Some(&r)));
+            if let Some(j) = j {
+                progress.stage(&format!(
+                    "step {step}: {} and {} beside the site's constants",
+                    results[k].0.label, results[j].0.label
+                ));
+                let _stage = ev.cost.enter(fit::Stage::Refits);
+                let tried = [&results[k], &results[j]];
+                let best = best_beside_constants(&ev, &tried, keys, &start.product, noise_now)?;
+                if let Some((c, own, u, pair_sse)) = best.filter(|b| !b.0.is_generic()) {
+                    let k_pair = keys.len() + c.dims();
+                    let pair_bic = n as f64 * (pair_sse / sse).ln() + k_pair as f64 * ln_n;
+                    if pair_bic <= results[k].0.delta_bic + options.bic_threshold
+                        && passes_beside_constants(
+                            &ev,
+                            &c,
+                            &own,
+                            &u,
+                            pair_sse,
+                            constants_alone.sse,
+                            noise_now,
+                            options,
+                        )?
+                    {
+                        pair_first = Some((c, own.config(&u), pair_sse));
+                        take_constants = true;
+                        chosen = None;
+                    }
+                }
+            }
+        }
         let now = ev.evaluate(&current)?;
         let mut record = Step {
             step,
@@ -1045,15 +1142,19 @@ pub fn discover(
             progress.stage(&format!(
                 "step {step}: the best effects beside the site's constants"
             ));
-            if let Some((effect, model, pair_sse)) = effect_beside_constants(
-                &ev,
-                &results,
-                &constant_keys,
-                &start.product,
-                sse,
-                noise_now,
-                options,
-            )? {
+            let pair = match pair_first.take() {
+                Some(pair) => Some(pair),
+                None => effect_beside_constants(
+                    &ev,
+                    &results,
+                    &constant_keys,
+                    &start.product,
+                    sse,
+                    noise_now,
+                    options,
+                )?,
+            };
+            if let Some((effect, model, pair_sse)) = pair {
                 progress.stage(&format!(
                     "step {step}: {} taken with the site's constants",
                     effect.label()
@@ -1777,11 +1878,10 @@ fn fewest_constants(
 
 /// The best of a step's passing effects (every named one, the best
 /// [`GENERIC_BESIDE_CONSTANTS`] generic directions) fitted beside the
-/// site's constants `keys` (the constants refitted on the effect's model,
-/// then the effect on theirs), if it explains enough of what the constants
-/// alone leave (`sse_constants`): BIC, share of the excess and
-/// cross-validation by day and by site, as any effect. The effect, the
-/// model with both and its SSE.
+/// site's constants `keys` ([`best_beside_constants`]), if it explains
+/// enough of what the constants alone leave (`sse_constants`:
+/// [`passes_beside_constants`]). The effect, the model with both and its
+/// SSE.
 fn effect_beside_constants(
     ev: &Evaluator<'_>,
     results: &[(CandidateResult, Space, Vec<f64>)],
@@ -1792,8 +1892,6 @@ fn effect_beside_constants(
     options: &Options,
 ) -> Result<Option<(Candidate, ModelConfig, f64)>> {
     let _stage = ev.cost.enter(fit::Stage::Refits);
-    let n = ev.active.iter().filter(|&&a| a).count();
-    let ln_n = (n as f64).ln();
     let mut directions: Vec<&space::GenericSlot> = Vec::new();
     let tried: Vec<&(CandidateResult, Space, Vec<f64>)> = results
         .iter()
@@ -1814,7 +1912,44 @@ fn effect_beside_constants(
             None => false,
         })
         .collect();
-    let pairs: Vec<(Candidate, Space, Vec<f64>, f64)> = tried
+    let Some((c, own, u, pair_sse)) = best_beside_constants(ev, &tried, keys, reference, noise)?
+    else {
+        return Ok(None);
+    };
+    if !passes_beside_constants(ev, &c, &own, &u, pair_sse, sse_constants, noise, options)? {
+        return Ok(None);
+    }
+    Ok(Some((c, own.config(&u), pair_sse)))
+}
+
+/// An effect fitted beside the site's constants: the effect, its space over
+/// a base that holds the constants, its coordinates and the SSE.
+type Beside = (Candidate, Space, Vec<f64>, f64);
+
+/// The best of `tried` by SSE, each fitted beside the site's constants
+/// `keys` ([`each_beside_constants`]).
+fn best_beside_constants(
+    ev: &Evaluator<'_>,
+    tried: &[&(CandidateResult, Space, Vec<f64>)],
+    keys: &[tortwin_model::product::ProductKey],
+    reference: &tortwin_model::product::ProductParams,
+    noise: Option<f64>,
+) -> Result<Option<Beside>> {
+    let pairs = each_beside_constants(ev, tried, keys, reference, noise)?;
+    Ok(pairs.into_iter().min_by(|a, b| a.3.total_cmp(&b.3)))
+}
+
+/// Each of `tried` fitted beside the site's constants `keys` (the constants
+/// refitted on the effect's model, then the effect on theirs, then both
+/// together), in the order given; one without a slot is left out.
+fn each_beside_constants(
+    ev: &Evaluator<'_>,
+    tried: &[&(CandidateResult, Space, Vec<f64>)],
+    keys: &[tortwin_model::product::ProductKey],
+    reference: &tortwin_model::product::ProductParams,
+    noise: Option<f64>,
+) -> Result<Vec<Beside>> {
+    let pairs: Vec<Beside> = tried
         .par_iter()
         .map(|(_, space, u)| {
             let Some(c) = space.slots.first().cloned() else {
@@ -1855,26 +1990,57 @@ fn effect_beside_constants(
         .into_iter()
         .flatten()
         .collect();
-    let Some((c, own, u, pair_sse)) = pairs.into_iter().min_by(|a, b| a.3.total_cmp(&b.3)) else {
-        return Ok(None);
-    };
-    let k = c.dims() + usize::from(is_step(&c));
-    let delta_bic = n as f64 * (pair_sse / sse_constants).ln() + k as f64 * ln_n;
+    Ok(pairs)
+}
+
+/// Whether an effect fitted beside the site's constants (`pair_sse`)
+/// explains enough of what the constants alone leave (`sse_constants`):
+/// BIC, share of the excess and cross-validation by day and by site, as
+/// any effect.
+#[allow(clippy::too_many_arguments)]
+fn passes_beside_constants(
+    ev: &Evaluator<'_>,
+    c: &Candidate,
+    own: &Space,
+    u: &[f64],
+    pair_sse: f64,
+    sse_constants: f64,
+    noise: Option<f64>,
+    options: &Options,
+) -> Result<bool> {
+    let n = ev.active.iter().filter(|&&a| a).count();
+    let k = c.dims() + usize::from(is_step(c));
+    let delta_bic = n as f64 * (pair_sse / sse_constants).ln() + k as f64 * (n as f64).ln();
     let (_, big) = judge_share(sse_constants, pair_sse, n, noise, options);
     if delta_bic >= options.bic_threshold || !big {
-        return Ok(None);
+        return Ok(false);
     }
     // Held-out blocks predicted better than by the constants alone.
     for blocking in [Blocking::Day, Blocking::Site] {
         if blocking == Blocking::Site && ev.sites.len() < 2 {
             continue;
         }
-        let cv = fit::cross_validate(ev, &own, &u, blocking)?;
+        let cv = fit::cross_validate(ev, own, u, blocking)?;
         if cv.held_out_sse >= sse_constants {
-            return Ok(None);
+            return Ok(false);
         }
     }
-    Ok(Some((c, own.config(&u), pair_sse)))
+    Ok(true)
+}
+
+/// The named effect that is a factor on the quantity a generic term acts
+/// on everywhere, whatever drives the term (effects.md:
+/// `temperature_consumption` on the consumption, `speed_transfer` on the
+/// transfer): the rival the term may stand in for.
+fn named_on_quantity(c: &Candidate) -> Option<Candidate> {
+    match c {
+        Candidate::Generic(g) if g.scope().keys() == 0 => match g.acts_on {
+            ActsOn::Consumption => Some(Candidate::Named(Named::TemperatureConsumption)),
+            ActsOn::Transfer => Some(Candidate::Named(Named::SpeedTransfer)),
+            _ => None,
+        },
+        _ => None,
+    }
 }
 
 /// Takes out of `current` (and `accepted`) every effect found that the
