@@ -766,15 +766,7 @@ pub fn discover(
             let passing: Vec<usize> = results
                 .iter()
                 .enumerate()
-                .filter(|(_, r)| {
-                    r.0.passes_bic
-                        && r.0.passes_share
-                        && !r
-                            .1
-                            .slots
-                            .first()
-                            .is_some_and(|c| constant_in_disguise(c, &ev))
-                })
+                .filter(|(_, r)| contends(r, &ev))
                 .map(|(k, _)| k)
                 .collect();
             if let Some(&first) = passing.first() {
@@ -814,22 +806,8 @@ pub fn discover(
         // 0.009 for 0.04, and a step of the consumption on air temperature
         // was reported).
         if constants_in && !constant_keys.is_empty() {
-            let best = results.iter().position(|r| {
-                r.0.passes_bic
-                    && r.0.passes_share
-                    && !r
-                        .1
-                        .slots
-                        .first()
-                        .is_some_and(|c| constant_in_disguise(c, &ev))
-            });
-            let rival = best.and_then(|k| {
-                let named = results[k].1.slots.first().and_then(named_on_quantity)?;
-                let j = results
-                    .iter()
-                    .position(|x| x.1.slots.first() == Some(&named))?;
-                Some((k, j))
-            });
+            let best = results.iter().position(|r| contends(r, &ev));
+            let rival = best.and_then(|k| Some((k, rival_of(&results, k)?)));
             if let Some((k, j)) = rival {
                 progress.stage(&format!(
                     "step {step}: {} and {} with the site's constants free",
@@ -1059,9 +1037,7 @@ pub fn discover(
         if let (false, Some(k), Some((constants_alone, _, keys))) =
             (take_constants, chosen, constants.as_ref())
         {
-            let rival = results[k].1.slots.first().and_then(named_on_quantity);
-            let j = rival.and_then(|r| results.iter().position(|x| x.1.slots.first() == Some(&r)));
-            if let Some(j) = j {
+            if let Some(j) = rival_of(&results, k) {
                 progress.stage(&format!(
                     "step {step}: {} and {} beside the site's constants",
                     results[k].0.label, results[j].0.label
@@ -2026,6 +2002,28 @@ fn passes_beside_constants(
         }
     }
     Ok(true)
+}
+
+/// Whether a step's result contends for the step: it passes the BIC and
+/// the share, and is no change in time before the first measurement it
+/// could affect (a site constant in disguise).
+fn contends(r: &(CandidateResult, Space, Vec<f64>), ev: &Evaluator<'_>) -> bool {
+    r.0.passes_bic
+        && r.0.passes_share
+        && !r
+            .1
+            .slots
+            .first()
+            .is_some_and(|c| constant_in_disguise(c, ev))
+}
+
+/// Where among `results` the named rival of result `k` is
+/// ([`named_on_quantity`]), if it was fitted at this step.
+fn rival_of(results: &[(CandidateResult, Space, Vec<f64>)], k: usize) -> Option<usize> {
+    let named = results[k].1.slots.first().and_then(named_on_quantity)?;
+    results
+        .iter()
+        .position(|x| x.1.slots.first() == Some(&named))
 }
 
 /// The named effect that is a factor on the quantity a generic term acts
