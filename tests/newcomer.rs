@@ -192,3 +192,54 @@ fn the_readme_is_read_as_a_newcomer_reads_it() {
         ["cargo run -- a", "bash .ci/run", "tortwin b --c d"]
     );
 }
+
+/// The features of every dependency as `cargo tree -e features` resolves
+/// them for `args`: package -> its features.
+fn features(
+    args: &[&str],
+) -> std::collections::BTreeMap<String, std::collections::BTreeSet<String>> {
+    let o = Command::new(env!("CARGO"))
+        .arg("tree")
+        .args(args)
+        .args(["-f", "{p}|{f}", "--prefix", "none"])
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .output()
+        .unwrap();
+    common::check(&o, "cargo tree");
+    let mut map = std::collections::BTreeMap::<String, std::collections::BTreeSet<String>>::new();
+    for line in String::from_utf8_lossy(&o.stdout).lines() {
+        let line = line.replace(" (*)", "");
+        let Some((package, f)) = line.split_once('|') else {
+            continue;
+        };
+        map.entry(package.to_string())
+            .or_default()
+            .extend(f.split(',').filter(|x| !x.is_empty()).map(str::to_string));
+    }
+    map
+}
+
+/// Each package a README command builds on its own (`cargo run --release`,
+/// `cargo run -p tortwin-fuzz`, maturin's build of python/) resolves every
+/// dependency it shares with the workspace's test build with the test
+/// build's features (Cargo.toml, "feature alignment"): a clone's first
+/// build after the tests then compiles only the tortwin crates, and maturin
+/// reuses them. With serde's `alloc` missing, each of them compiled serde
+/// and every crate above it, rerun's tree included, a second time.
+#[test]
+fn the_packages_the_readme_builds_share_the_test_builds_features() {
+    let workspace = features(&["--workspace"]);
+    for package in ["tortwin", "tortwin-fuzz", "tortwin-py"] {
+        let own = features(&["-p", package, "-e", "no-dev"]);
+        let differ: Vec<&String> = own
+            .iter()
+            .filter(|(p, f)| workspace.get(*p).is_some_and(|w| w != *f))
+            .map(|(p, _)| p)
+            .collect();
+        assert!(own.len() > 100, "{package}: {} packages", own.len());
+        assert!(
+            differ.is_empty(),
+            "{package} builds these with other features than the tests: {differ:?}"
+        );
+    }
+}
