@@ -170,6 +170,12 @@ impl Candidate {
         }
     }
 
+    /// Whether the effect is a step whose threshold the data chose (one
+    /// more parameter for the BIC).
+    pub(super) fn is_step(&self) -> bool {
+        matches!(self, Candidate::Generic(g) if g.form == Some(tortwin_model::generic::FormKind::Step))
+    }
+
     /// Switches the effect off in `effects`.
     pub(super) fn unset(&self, effects: &mut Effects) {
         match self {
@@ -584,6 +590,23 @@ impl<'a> Evaluator<'a> {
         self.active.iter().filter(|a| **a).count()
     }
 
+    /// Whether row `k` counts outside the block `excluded`.
+    fn counts(&self, k: usize, excluded: Option<(Blocking, usize)>) -> bool {
+        self.active[k]
+            && match excluded {
+                None => true,
+                Some((Blocking::Day, j)) => self.day_slot[k] != j,
+                Some((Blocking::Site, j)) => self.site_slot[k] != j,
+            }
+    }
+
+    /// The rows that count outside the block `excluded`.
+    pub(super) fn n_counted(&self, excluded: Option<(Blocking, usize)>) -> usize {
+        (0..self.active.len())
+            .filter(|&k| self.counts(k, excluded))
+            .count()
+    }
+
     /// The simulated value of every row with `cfg`: read from a kept
     /// replay of its state part when there is one, else one engine run
     /// (counted) whose read-outs are kept.
@@ -875,12 +898,7 @@ impl Objective<'_, '_> {
 
     /// Whether row `k` counts in this objective's SSE.
     fn counts(&self, k: usize) -> bool {
-        self.ev.active[k]
-            && match self.excluded {
-                None => true,
-                Some((Blocking::Day, j)) => self.ev.day_slot[k] != j,
-                Some((Blocking::Site, j)) => self.ev.site_slot[k] != j,
-            }
+        self.ev.counts(k, self.excluded)
     }
 
     /// The SSE at `u` projected onto the box: outside it the objective is
@@ -1310,6 +1328,11 @@ pub struct CrossValidation {
     /// Per block: the parameters fitted without it (per slot), and its SSE.
     pub folds: Vec<Fold>,
     pub runs: usize,
+    /// The one block the effect's evidence lies in, when every other
+    /// block's fold is supported and its own is not (the rain of one day):
+    /// this blocking cannot test such an effect, for no block predicts
+    /// another.
+    pub evidence_in: Option<String>,
 }
 
 #[derive(Debug, Clone, Serialize)]
@@ -1317,15 +1340,27 @@ pub struct Fold {
     pub held_out: String,
     pub params: Vec<Vec<f64>>,
     pub held_out_sse: f64,
+    /// Whether the other blocks alone support the effect (its BIC on them,
+    /// against the model without it, below 0). A fold they do not support
+    /// predicts its block without the effect: `held_out_sse` is the
+    /// model's without it.
+    pub supported: bool,
 }
 
 /// For each block: refit on the other blocks, warm-started from the
 /// full-data optimum `u_star` (a bracket around it for one parameter,
 /// Levenberg–Marquardt from it for several, both stopping once the SSE is
-/// flat),
-/// and take the held-out block's SSE at the refitted parameters. The folds
-/// run in parallel; every run of one fold serves the others through the
-/// cache.
+/// flat), and take the held-out block's SSE at the refitted parameters.
+/// The folds run in parallel; every run of one fold serves the others
+/// through the cache.
+///
+/// A warm start keeps the full-data optimum where the other blocks say
+/// nothing about the parameters (an effect of the rain on the one day it
+/// rained, a term on precipitation that is 1 wherever it is 0): the held-out
+/// block would be predicted by parameters fitted on it. So a fold counts
+/// its refit only where the other blocks support it by themselves, BIC
+/// below 0 against the model without the effects of `space` (its base with
+/// every slot off); elsewhere it predicts its block with that model.
 pub(super) fn cross_validate(
     ev: &Evaluator<'_>,
     space: &Space,
@@ -1334,25 +1369,54 @@ pub(super) fn cross_validate(
 ) -> Result<CrossValidation> {
     let _stage = ev.cost.enter(Stage::CrossValidation);
     let labels = ev.blocks(blocking);
+    let mut without = space.base.clone();
+    for c in &space.slots {
+        c.unset(&mut without.effects);
+    }
+    let (without, ran) = ev.evaluate_counted(&without)?;
+    // A step in time has its threshold's placement besides its size.
+    let k = space.dims() + space.slots.iter().filter(|c| c.is_step()).count();
     let folds: Vec<(Fold, usize)> = (0..labels.len())
         .into_par_iter()
         .map(|b| {
-            let f = fit_limited(ev, space, Start::Warm(u_star.to_vec()), Some((blocking, b)))?;
+            let excluded = Some((blocking, b));
+            let f = fit_limited(ev, space, Start::Warm(u_star.to_vec()), excluded)?;
+            let n_in = ev.n_counted(excluded);
+            let supported = n_in > 0 && {
+                let (fitted, base) = (f.eval.sse_without(excluded), without.sse_without(excluded));
+                n_in as f64 * (fitted / base).ln() + k as f64 * (n_in as f64).ln() < 0.0
+            };
+            let held_out_sse = if supported {
+                f.eval.by(blocking)[b]
+            } else {
+                without.by(blocking)[b]
+            };
             Ok((
                 Fold {
                     held_out: labels[b].clone(),
                     params: space.params(&f.u),
-                    held_out_sse: f.eval.by(blocking)[b],
+                    held_out_sse,
+                    supported,
                 },
                 f.runs,
             ))
         })
         .collect::<Result<_>>()?;
+    let unsupported: Vec<&Fold> = folds
+        .iter()
+        .map(|(f, _)| f)
+        .filter(|f| !f.supported)
+        .collect();
+    let evidence_in = match unsupported[..] {
+        [one] if folds.len() >= 2 => Some(one.held_out.clone()),
+        _ => None,
+    };
     Ok(CrossValidation {
         blocking,
         held_out_sse: folds.iter().map(|(f, _)| f.held_out_sse).sum(),
-        runs: folds.iter().map(|(_, r)| r).sum(),
+        runs: folds.iter().map(|(_, r)| r).sum::<usize>() + usize::from(ran),
         folds: folds.into_iter().map(|(f, _)| f).collect(),
+        evidence_in,
     })
 }
 

@@ -679,7 +679,7 @@ pub fn discover(
                 if !c.is_generic() {
                     warm.insert(c.clone(), f.u.clone());
                 }
-                let k = c.dims() + usize::from(is_step(&c));
+                let k = c.dims() + usize::from(c.is_step());
                 let params = space.params(&f.u).pop().unwrap_or_default();
                 let mut r = judge.result(c.name(), c.label(), f.eval.sse, k);
                 r.params = c.named(&params);
@@ -993,19 +993,23 @@ pub fn discover(
                 result.label
             ));
             let cv = fit::cross_validate(&ev, space, u, Blocking::Day)?;
-            let passes = cv.held_out_sse < cv_current;
+            // A sensor's offset belongs to its site: other sites cannot
+            // predict it, and need not.
+            let site_bound = space.slots.first().is_some_and(|c| {
+                matches!(c, Candidate::Generic(g) if g.acts_on == ActsOn::Measurement && g.site.is_some())
+            });
+            let by_site = ev.sites.len() >= 2 && !site_bound;
+            // An effect seen on one day alone (the rain of that day) is
+            // not tested by the days, for none predicts another: the
+            // sites test it.
+            let passes = cv.held_out_sse < cv_current || (by_site && cv.evidence_in.is_some());
             result.engine_runs += cv.runs;
             result.cv = Some(cv);
             result.passes_cv = Some(passes);
             if !passes {
                 continue;
             }
-            // A sensor's offset belongs to its site: other sites cannot
-            // predict it, and need not.
-            let site_bound = space.slots.first().is_some_and(|c| {
-                matches!(c, Candidate::Generic(g) if g.acts_on == ActsOn::Measurement && g.site.is_some())
-            });
-            if ev.sites.len() >= 2 && !site_bound {
+            if by_site {
                 progress.stage(&format!(
                     "step {step}: cross-validating {} by site",
                     result.label
@@ -1344,7 +1348,7 @@ pub fn discover(
                 .into_iter()
                 .map(|(i, w, cfg)| {
                     let c = &accepted[i];
-                    let k = c.dims() + usize::from(is_step(c));
+                    let k = c.dims() + usize::from(c.is_step());
                     let bic = n as f64 * (w / sse).ln() + (keys.len() as f64 - k as f64) * ln_n;
                     (i, bic, w, cfg)
                 })
@@ -1734,7 +1738,7 @@ fn is_time_step(space: &Space) -> bool {
 }
 
 fn is_step_slot(space: &Space) -> bool {
-    space.slots.first().is_some_and(is_step)
+    space.slots.first().is_some_and(Candidate::is_step)
 }
 
 /// A candidate fitted together with the effects already in the model (a
@@ -1985,19 +1989,22 @@ fn passes_beside_constants(
     options: &Options,
 ) -> Result<bool> {
     let n = ev.active.iter().filter(|&&a| a).count();
-    let k = c.dims() + usize::from(is_step(c));
+    let k = c.dims() + usize::from(c.is_step());
     let delta_bic = n as f64 * (pair_sse / sse_constants).ln() + k as f64 * (n as f64).ln();
     let (_, big) = judge_share(sse_constants, pair_sse, n, noise, options);
     if delta_bic >= options.bic_threshold || !big {
         return Ok(false);
     }
-    // Held-out blocks predicted better than by the constants alone.
+    // Held-out blocks predicted better than by the constants alone (an
+    // effect seen on one day alone by the sites only, as at a step).
+    let by_site = ev.sites.len() >= 2;
     for blocking in [Blocking::Day, Blocking::Site] {
-        if blocking == Blocking::Site && ev.sites.len() < 2 {
+        if blocking == Blocking::Site && !by_site {
             continue;
         }
         let cv = fit::cross_validate(ev, own, u, blocking)?;
-        if cv.held_out_sse >= sse_constants {
+        let untested = blocking == Blocking::Day && by_site && cv.evidence_in.is_some();
+        if cv.held_out_sse >= sse_constants && !untested {
             return Ok(false);
         }
     }
@@ -2111,7 +2118,7 @@ fn least_needed(
         .into_iter()
         .map(|(i, w, cfg)| {
             let c = &accepted[i];
-            let k = c.dims() + usize::from(is_step(c));
+            let k = c.dims() + usize::from(c.is_step());
             let keep_bic = n as f64 * (sse / w).ln() + k as f64 * ln_n;
             let (_, big) = judge_share(w, sse, n, noise, options);
             (keep_bic, big, (i, w, cfg))
@@ -2391,12 +2398,6 @@ fn fit_each(
             fit
         })
         .collect()
-}
-
-/// Whether a candidate is a step whose threshold the data chose (one more
-/// parameter for the BIC).
-fn is_step(c: &Candidate) -> bool {
-    matches!(c, Candidate::Generic(g) if g.form == Some(FormKind::Step))
 }
 
 /// Moves the best passing named effect in front of the generic terms when

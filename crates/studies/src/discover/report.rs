@@ -611,9 +611,12 @@ fn markdown(data: &Dataset, d: &Discovery, residual_file: Option<&str>, distance
                     .collect::<Vec<_>>()
                     .join(", ")
             };
-            let held = |cv: &Option<CrossValidation>| {
-                cv.as_ref()
-                    .map_or_else(|| "-".to_string(), |cv| format!("{:.4}", cv.held_out_sse))
+            let held = |cv: &Option<CrossValidation>| match cv {
+                None => "-".to_string(),
+                Some(cv) => match &cv.evidence_in {
+                    Some(b) => format!("{:.4} (seen on {b} alone)", cv.held_out_sse),
+                    None => format!("{:.4}", cv.held_out_sse),
+                },
             };
             let cv = format!("{} / {}", held(&c.cv), held(&c.cv_site));
             let verdict = match (c.passes_bic, c.passes_cv, c.passes_cv_site) {
