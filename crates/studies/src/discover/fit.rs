@@ -1325,13 +1325,14 @@ pub struct CrossValidation {
     /// Σ over blocks of the held-out block's SSE with the parameters fitted
     /// on the other blocks.
     pub held_out_sse: f64,
-    /// Per block: the parameters fitted without it (per slot), and its SSE.
+    /// Per block: the parameters fitted without it (per slot; none where
+    /// nothing is left to fit), and its SSE.
     pub folds: Vec<Fold>,
     pub runs: usize,
     /// The one block the effect's evidence lies in, when every other
-    /// block's fold is supported and its own is not (the rain of one day):
-    /// this blocking cannot test such an effect, for no block predicts
-    /// another.
+    /// block's fold is supported and its own is not (the rain of one day,
+    /// the one day of a recording): this blocking cannot test such an
+    /// effect, for no other block predicts it.
     pub evidence_in: Option<String>,
 }
 
@@ -1380,9 +1381,20 @@ pub(super) fn cross_validate(
         .into_par_iter()
         .map(|b| {
             let excluded = Some((blocking, b));
-            let f = fit_limited(ev, space, Start::Warm(u_star.to_vec()), excluded)?;
             let n_in = ev.n_counted(excluded);
-            let supported = n_in > 0 && {
+            // Nothing outside the block (a recording of one day): nothing
+            // to fit, and nothing supports the effect.
+            if n_in == 0 {
+                let fold = Fold {
+                    held_out: labels[b].clone(),
+                    params: Vec::new(),
+                    held_out_sse: without.by(blocking)[b],
+                    supported: false,
+                };
+                return Ok((fold, 0));
+            }
+            let f = fit_limited(ev, space, Start::Warm(u_star.to_vec()), excluded)?;
+            let supported = {
                 let (fitted, base) = (f.eval.sse_without(excluded), without.sse_without(excluded));
                 n_in as f64 * (fitted / base).ln() + k as f64 * (n_in as f64).ln() < 0.0
             };
@@ -1407,8 +1419,9 @@ pub(super) fn cross_validate(
         .map(|(f, _)| f)
         .filter(|f| !f.supported)
         .collect();
+    // One block alone (a recording of one day) is such a block too.
     let evidence_in = match unsupported[..] {
-        [one] if folds.len() >= 2 => Some(one.held_out.clone()),
+        [one] => Some(one.held_out.clone()),
         _ => None,
     };
     Ok(CrossValidation {
