@@ -79,8 +79,8 @@ pub fn check(o: &Output, what: &str) {
     );
 }
 
-/// `tortwin discover RECORDING --report DIR` (its summary echoed to
-/// stderr); returns report.json.
+/// `tortwin discover RECORDING --report DIR` (its summary and its cost
+/// echoed to stderr); returns report.json.
 pub fn discover_report(recording: &std::path::Path, report: &std::path::Path) -> serde_json::Value {
     let o = tortwin()
         .arg("discover")
@@ -95,6 +95,12 @@ pub fn discover_report(recording: &std::path::Path, report: &std::path::Path) ->
     let provenance = python("check_provenance.py", &[json.as_path(), recording]);
     check(&provenance, "check_provenance.py report.json");
     let text = std::fs::read_to_string(&json).unwrap();
+    // What the case cost, beside its findings (a failing or slow case
+    // shows where its time went).
+    let md = std::fs::read_to_string(report.join("report.md")).unwrap_or_default();
+    for line in md.lines().filter(|l| l.starts_with("| engine runs |")) {
+        eprintln!("{line}");
+    }
     serde_json::from_str(&text).unwrap()
 }
 
