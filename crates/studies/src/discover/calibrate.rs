@@ -1195,7 +1195,49 @@ fn clusters(problem: &Problem<'_, '_>) -> Vec<usize> {
 /// (effects switched on in `base`); every other constant is held at its
 /// value in `reference`. `noise`: the measurements' standard deviation
 /// (the RMSE of `base` when unknown).
+///
+/// A calibration is a function of these arguments and the evaluator's
+/// rows: one asked for again with the same arguments (the final
+/// calibration of a discover whose last step's calibration started from
+/// the model it ends with) is the earlier one, with no engine runs of its
+/// own.
 pub(super) fn calibrate(
+    ev: &Evaluator<'_>,
+    base: &ModelConfig,
+    reference: &ProductParams,
+    effects: &[Candidate],
+    noise: Option<f64>,
+) -> Result<Calibration> {
+    let t0 = Instant::now();
+    let key = CalibrationKey {
+        base: base.clone(),
+        reference: *reference,
+        effects: effects.to_vec(),
+        noise: noise.map(f64::to_bits),
+    };
+    if let Some(earlier) = ev.calibrated(&key) {
+        return Ok(Calibration {
+            engine_runs: 0,
+            elapsed_s: t0.elapsed().as_secs_f64(),
+            ..earlier
+        });
+    }
+    let calibration = calibrate_anew(ev, base, reference, effects, noise)?;
+    ev.keep_calibration(key, &calibration);
+    Ok(calibration)
+}
+
+/// What a [`calibrate`] call is a function of (besides the evaluator).
+#[derive(Debug, Clone, PartialEq)]
+pub(super) struct CalibrationKey {
+    base: ModelConfig,
+    reference: ProductParams,
+    effects: Vec<Candidate>,
+    /// The noise's bits.
+    noise: Option<u64>,
+}
+
+fn calibrate_anew(
     ev: &Evaluator<'_>,
     base: &ModelConfig,
     reference: &ProductParams,

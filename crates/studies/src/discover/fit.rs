@@ -43,6 +43,7 @@ use std::sync::{Arc, Mutex};
 use rayon::prelude::*;
 use serde::Serialize;
 
+use super::calibrate::{Calibration, CalibrationKey};
 use super::data::Dataset;
 use super::space::GenericSlot;
 use crate::progress::Progress;
@@ -315,6 +316,9 @@ pub(super) struct Evaluator<'a> {
     bases: Mutex<std::collections::VecDeque<(Kept, Arc<super::data::Checkpoints>)>>,
     /// How many replays' read-outs are kept (a bounded amount of memory).
     keep_readouts: usize,
+    /// The last calibrations, by what they were asked
+    /// ([`super::calibrate::calibrate`]).
+    calibrations: Mutex<std::collections::VecDeque<(CalibrationKey, Calibration)>>,
     /// What the evaluations cost: replays and read-outs, with their time.
     pub(super) cost: CostMeter,
     /// Asked before every engine run whether to stop.
@@ -326,6 +330,8 @@ const READOUTS_KEPT_BYTES: usize = 256 << 20;
 /// Checkpoints along a base's replay, and how many bases are kept.
 const CHECKPOINTS: usize = 16;
 const BASES_KEPT: usize = 4;
+/// Calibrations kept by their arguments (a few configurations each).
+const CALIBRATIONS_KEPT: usize = 8;
 
 /// A replay kept by the [`Evaluator`].
 #[derive(Clone)]
@@ -563,6 +569,7 @@ impl<'a> Evaluator<'a> {
             keep_readouts: (READOUTS_KEPT_BYTES
                 / (data.rows.len().max(1) * std::mem::size_of::<Readout>()))
             .clamp(2, 64),
+            calibrations: Default::default(),
             cost: CostMeter::default(),
             progress,
         }
@@ -701,6 +708,24 @@ impl<'a> Evaluator<'a> {
             Arc::new(checkpoints),
         ));
         Ok(())
+    }
+
+    /// The calibration asked for with `key` earlier, if it is kept.
+    pub(super) fn calibrated(&self, key: &CalibrationKey) -> Option<Calibration> {
+        lock_ignoring_poison(&self.calibrations)
+            .iter()
+            .find(|(k, _)| k == key)
+            .map(|(_, c)| c.clone())
+    }
+
+    /// Keeps a calibration for [`Evaluator::calibrated`] (the oldest of
+    /// [`CALIBRATIONS_KEPT`] goes first).
+    pub(super) fn keep_calibration(&self, key: CalibrationKey, calibration: &Calibration) {
+        let mut kept = lock_ignoring_poison(&self.calibrations);
+        if kept.len() >= CALIBRATIONS_KEPT {
+            kept.pop_front();
+        }
+        kept.push_back((key, calibration.clone()));
     }
 
     fn kept(&self) -> std::sync::MutexGuard<'_, std::collections::VecDeque<Kept>> {
