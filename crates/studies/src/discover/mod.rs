@@ -248,6 +248,11 @@ pub struct Step {
     /// Best BIC drop first.
     pub candidates: Vec<CandidateResult>,
     pub accepted: Option<String>,
+    /// Close contenders of another kind told apart with the site's
+    /// constants calibrated beside each (their BIC against the current
+    /// model, the constants moved counted), where the recording moved no
+    /// constant yet.
+    pub calibrated_beside: Vec<(String, f64)>,
     /// An effect taken out again after the step: the model no longer needs it.
     pub removed: Option<String>,
     /// The model after the step (after the joint refit).
@@ -807,19 +812,20 @@ pub fn discover(
         // was reported).
         if constants_in && !constant_keys.is_empty() {
             let best = results.iter().position(|r| contends(r, &ev));
-            let rival = best.and_then(|k| Some((k, rival_of(&results, k)?)));
-            if let Some((k, j)) = rival {
+            let rivals = best.map(|k| rivals_beside_constants(&results, k, true, &ev, options));
+            if let Some(at) = rivals.filter(|at| at.len() > 1) {
                 progress.stage(&format!(
-                    "step {step}: {} and {} with the site's constants free",
-                    results[k].0.label, results[j].0.label
+                    "step {step}: {} with the site's constants free",
+                    labels_of(&results, &at)
                 ));
                 let _stage = ev.cost.enter(fit::Stage::Refits);
-                let tried = [&results[k], &results[j]];
+                let tried: Vec<_> = at.iter().map(|&i| &results[i]).collect();
                 let pairs =
                     each_beside_constants(&ev, &tried, &constant_keys, &start.product, noise_now)?;
                 for (c, space, u, pair_sse) in pairs {
-                    let Some(i) = [k, j]
-                        .into_iter()
+                    let Some(i) = at
+                        .iter()
+                        .copied()
                         .find(|&i| results[i].1.slots.first() == Some(&c))
                     else {
                         continue;
@@ -988,68 +994,40 @@ pub fn discover(
                 take_constants = true;
                 break;
             }
-            progress.stage(&format!(
-                "step {step}: cross-validating {} by day",
-                result.label
-            ));
-            let cv = fit::cross_validate(&ev, space, u, Blocking::Day)?;
-            // A sensor's offset belongs to its site: other sites cannot
-            // predict it, and need not.
-            let site_bound = space.slots.first().is_some_and(|c| {
-                matches!(c, Candidate::Generic(g) if g.acts_on == ActsOn::Measurement && g.site.is_some())
-            });
-            let by_site = ev.sites.len() >= 2 && !site_bound;
-            // An effect seen on one day alone (the rain of that day) is
-            // not tested by the days, for none predicts another: the
-            // sites test it.
-            let passes = cv.held_out_sse < cv_current || (by_site && cv.evidence_in.is_some());
-            result.engine_runs += cv.runs;
-            result.cv = Some(cv);
-            result.passes_cv = Some(passes);
-            if !passes {
+            if !cross_validated(&ev, result, space, u, cv_current, progress, step)? {
                 continue;
-            }
-            if by_site {
-                progress.stage(&format!(
-                    "step {step}: cross-validating {} by site",
-                    result.label
-                ));
-                let cv = fit::cross_validate(&ev, space, u, Blocking::Site)?;
-                let passes = cv.held_out_sse < cv_current;
-                result.engine_runs += cv.runs;
-                result.cv_site = Some(cv);
-                result.passes_cv_site = Some(passes);
-                if !passes {
-                    continue;
-                }
             }
             chosen = Some(k);
             break;
         }
-        // A generic term chosen over the site's constants may stand in for
-        // both them and a named effect on the same quantity that the
-        // laboratory's constants kept from fitting (consumption growing
-        // with the temperature at a site whose kc is 32 % high: with kc
-        // held, temperature_consumption's beta went to 0.094 to make up
-        // for kc and lost to a power of humidity by 11700 BIC units; with
-        // kc and km1_kg free it describes the data better than the
-        // humidity term does with them). The two are fitted beside the
-        // constants; when the named effect is the better there and the
-        // pair beats the term alone by the BIC threshold, the constants
-        // and the named effect are taken together.
+        // An effect chosen over the site's constants may stand in for both
+        // them and another effect that the laboratory's constants kept
+        // from fitting: a named effect on the same quantity (consumption
+        // growing with the temperature at a site whose kc is 32 % high:
+        // with kc held, temperature_consumption's beta went to 0.094 to
+        // make up for kc and lost to a power of humidity by 11700 BIC
+        // units; with kc and km1_kg free it describes the data better than
+        // the humidity term does with them), or a contender of another
+        // kind the BIC cannot tell from it (a transfer step 2.6 units ahead
+        // of the clogged nozzle at a site whose kt is 27 % high).
+        // They are fitted beside the constants; when another is the better
+        // there and the pair beats the choice alone by the BIC threshold,
+        // the constants and that effect are taken together.
         let mut pair_first: Option<(Candidate, ModelConfig, f64)> = None;
         if let (false, Some(k), Some((constants_alone, _, keys))) =
             (take_constants, chosen, constants.as_ref())
         {
-            if let Some(j) = rival_of(&results, k) {
+            let at = rivals_beside_constants(&results, k, true, &ev, options);
+            if at.len() > 1 {
                 progress.stage(&format!(
-                    "step {step}: {} and {} beside the site's constants",
-                    results[k].0.label, results[j].0.label
+                    "step {step}: {} beside the site's constants",
+                    labels_of(&results, &at)
                 ));
                 let _stage = ev.cost.enter(fit::Stage::Refits);
-                let tried = [&results[k], &results[j]];
+                let tried: Vec<_> = at.iter().map(|&i| &results[i]).collect();
                 let best = best_beside_constants(&ev, &tried, keys, &start.product, noise_now)?;
-                if let Some((c, own, u, pair_sse)) = best.filter(|b| !b.0.is_generic()) {
+                let choice = results[k].1.slots.first();
+                if let Some((c, own, u, pair_sse)) = best.filter(|b| Some(&b.0) != choice) {
                     let k_pair = keys.len() + c.dims();
                     let pair_bic = n as f64 * (pair_sse / sse).ln() + k_pair as f64 * ln_n;
                     if pair_bic <= results[k].0.delta_bic + options.bic_threshold
@@ -1071,6 +1049,46 @@ pub fn discover(
                 }
             }
         }
+        // Where the recording moves no constant yet (a strong effect hides
+        // them), close contenders of another kind are told apart with the
+        // site's constants calibrated beside each: held at the laboratory's
+        // values, the constants favour whichever effect makes up for them
+        // (a transfer step came 2.6 BIC units ahead of a clogged nozzle at
+        // a site whose kt is 27 % and km_kg 25 % high; calibrated with
+        // each, the nozzle is about 250 units ahead). The best calibrated
+        // (BIC, the constants each moved counted) is taken instead when it
+        // passes the cross-validation as the choice did.
+        let mut calibrated_beside = Vec::new();
+        if let (false, false, Some(k), None, Some(_)) = (
+            take_constants,
+            constants_in,
+            chosen,
+            constants.as_ref(),
+            calibration_start.as_ref(),
+        ) {
+            let at = rivals_beside_constants(&results, k, false, &ev, options);
+            if at.len() > 1 {
+                progress.stage(&format!(
+                    "step {step}: the site's constants calibrated beside {}",
+                    labels_of(&results, &at)
+                ));
+                let scored = calibrated_bic(&ev, &results, &at, &start.product, sse, noise_now)?;
+                let best = scored
+                    .iter()
+                    .min_by(|a, b| a.1.total_cmp(&b.1))
+                    .map(|b| b.0);
+                calibrated_beside = scored
+                    .iter()
+                    .map(|&(i, bic)| (results[i].0.label.clone(), bic))
+                    .collect();
+                if let Some(i) = best.filter(|&i| i != k) {
+                    let (result, space, u) = &mut results[i];
+                    if cross_validated(&ev, result, space, u, cv_current, progress, step)? {
+                        chosen = Some(i);
+                    }
+                }
+            }
+        }
         let now = ev.evaluate(&current)?;
         let mut record = Step {
             step,
@@ -1083,6 +1101,7 @@ pub fn discover(
             screening,
             candidates: results.iter().map(|r| r.0.clone()).collect(),
             accepted: None,
+            calibrated_beside,
             removed: None,
             rmse_after: rmse(sse, n),
             effects_after: effects_of(&current),
@@ -2031,6 +2050,143 @@ fn rival_of(results: &[(CandidateResult, Space, Vec<f64>)], k: usize) -> Option<
     results
         .iter()
         .position(|x| x.1.slots.first() == Some(&named))
+}
+
+/// Whether a step's result predicts held-out blocks better than the current
+/// model (`cv_current`, its SSE): by day, then by site where the recording
+/// has two sites or more; the cross-validations are kept in `result`.
+fn cross_validated(
+    ev: &Evaluator<'_>,
+    result: &mut CandidateResult,
+    space: &Space,
+    u: &[f64],
+    cv_current: f64,
+    progress: &dyn Progress,
+    step: usize,
+) -> Result<bool> {
+    progress.stage(&format!(
+        "step {step}: cross-validating {} by day",
+        result.label
+    ));
+    let cv = fit::cross_validate(ev, space, u, Blocking::Day)?;
+    // A sensor's offset belongs to its site: other sites cannot predict
+    // it, and need not.
+    let site_bound = space.slots.first().is_some_and(|c| {
+        matches!(c, Candidate::Generic(g) if g.acts_on == ActsOn::Measurement && g.site.is_some())
+    });
+    let by_site = ev.sites.len() >= 2 && !site_bound;
+    // An effect seen on one day alone (the rain of that day) is not tested
+    // by the days, for none predicts another: the sites test it.
+    let passes = cv.held_out_sse < cv_current || (by_site && cv.evidence_in.is_some());
+    result.engine_runs += cv.runs;
+    result.cv = Some(cv);
+    result.passes_cv = Some(passes);
+    if !passes || !by_site {
+        return Ok(passes);
+    }
+    progress.stage(&format!(
+        "step {step}: cross-validating {} by site",
+        result.label
+    ));
+    let cv = fit::cross_validate(ev, space, u, Blocking::Site)?;
+    let passes = cv.held_out_sse < cv_current;
+    result.engine_runs += cv.runs;
+    result.cv_site = Some(cv);
+    result.passes_cv_site = Some(passes);
+    Ok(passes)
+}
+
+/// How well each of `results` at `at` describes the data with the site's
+/// constants calibrated beside it ([`calibrate::calibrate`], the effect
+/// free): its BIC against the current model's SSE `sse`, counting the
+/// effect's parameters and the constants its calibration moved (none
+/// where the calibration does not lower the SSE).
+fn calibrated_bic(
+    ev: &Evaluator<'_>,
+    results: &[(CandidateResult, Space, Vec<f64>)],
+    at: &[usize],
+    reference: &tortwin_model::product::ProductParams,
+    sse: f64,
+    noise: Option<f64>,
+) -> Result<Vec<(usize, f64)>> {
+    let _stage = ev.cost.enter(fit::Stage::Refits);
+    let n = ev.active.iter().filter(|&&a| a).count() as f64;
+    at.par_iter()
+        .filter_map(|&i| {
+            let (result, space, u) = &results[i];
+            let effect = space.slots.first()?.clone();
+            let own = effect.dims() + usize::from(effect.is_step());
+            Some((i, result.sse, own, space.config(u), effect))
+        })
+        .map(|(i, fit_sse, own, cfg, effect)| {
+            let cal = calibrate::calibrate(ev, &cfg, reference, &[effect], noise)?;
+            let cal_sse = ev.evaluate(&cal.model)?.sse;
+            let (fit_sse, k) = match cal_sse < fit_sse {
+                true => (cal_sse, own + cal.fitted.len()),
+                false => (fit_sse, own),
+            };
+            Ok((i, n * (fit_sse / sse).ln() + k as f64 * n.ln()))
+        })
+        .collect()
+}
+
+/// Result `k` (the step's best) and its rivals, fitted beside the site's
+/// constants before one is taken: its named rival on the same quantity
+/// ([`rival_of`], with `named_rival`) and the contenders of another kind
+/// whose BIC drop is within the BIC threshold of its own (the BIC cannot
+/// tell them apart while the constants are held where the laboratory put
+/// them); at most [`MAX_CONTENDERS`] in all, the best first.
+fn rivals_beside_constants(
+    results: &[(CandidateResult, Space, Vec<f64>)],
+    k: usize,
+    named_rival: bool,
+    ev: &Evaluator<'_>,
+    options: &Options,
+) -> Vec<usize> {
+    let mut at = vec![k];
+    if named_rival {
+        at.extend(rival_of(results, k));
+    }
+    let Some(own) = results[k].1.slots.first() else {
+        return at;
+    };
+    for (i, r) in results.iter().enumerate() {
+        if at.len() >= MAX_CONTENDERS {
+            break;
+        }
+        let close = (r.0.delta_bic - results[k].0.delta_bic).abs() <= options.bic_threshold.abs();
+        let other_kind = r.1.slots.first().is_some_and(|c| {
+            !same_kind(c, own)
+                && !matches!(c, Candidate::Generic(g) if g.acts_on == ActsOn::Measurement)
+        });
+        let failed_cv = r.0.passes_cv == Some(false) || r.0.passes_cv_site == Some(false);
+        if close && other_kind && !failed_cv && !at.contains(&i) && contends(r, ev) {
+            at.push(i);
+        }
+    }
+    at
+}
+
+/// Whether two candidates are of one kind: generic terms on the same
+/// quantity (whatever drives them), a named effect and a term everywhere
+/// on the quantity it scales ([`named_on_quantity`]: the named one is
+/// preferred between them by its own rule, [`prefer_named`]), or the
+/// same named effect.
+fn same_kind(a: &Candidate, b: &Candidate) -> bool {
+    match (a, b) {
+        (Candidate::Generic(g), Candidate::Generic(h)) => g.acts_on == h.acts_on,
+        (Candidate::Generic(_), _) => named_on_quantity(a).as_ref() == Some(b),
+        (_, Candidate::Generic(_)) => named_on_quantity(b).as_ref() == Some(a),
+        _ => a == b,
+    }
+}
+
+/// The labels of `results` at `at`, joined.
+fn labels_of(results: &[(CandidateResult, Space, Vec<f64>)], at: &[usize]) -> String {
+    at.iter()
+        .map(|&i| results[i].0.label.as_str())
+        .collect::<Vec<_>>()
+        .join(", ")
 }
 
 /// The named effect that is a factor on the quantity a generic term acts

@@ -639,6 +639,18 @@ fn markdown(data: &Dataset, d: &Discovery, residual_file: Option<&str>, distance
                 c.name, params, c.rmse, c.delta_bic, share, cv, verdict, c.engine_runs
             );
         }
+        if !s.calibrated_beside.is_empty() {
+            let _ = writeln!(
+                md,
+                "\nThe closest contenders of different kinds, with the site's constants \
+                 calibrated beside each (ΔBIC, the constants moved counted): {}.",
+                s.calibrated_beside
+                    .iter()
+                    .map(|(label, bic)| format!("`{label}` {bic:.1}"))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            );
+        }
         match &s.accepted {
             Some(name) => {
                 let _ = writeln!(
