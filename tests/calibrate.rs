@@ -390,15 +390,7 @@ fn a_clogged_nozzle_at_a_site_with_a_high_kt_is_named_not_a_transfer_step() {
     let found = report["effects_found"].as_array().unwrap();
     assert_eq!(found.len(), 1, "effects found: {found:?}");
     let nozzle = &found[0];
-    assert_eq!(
-        (&nozzle["acts_on"], &nozzle["driver"], &nozzle["scope"]),
-        (
-            &serde_json::json!("pulse_mass"),
-            &serde_json::json!("time"),
-            &serde_json::json!({"applicator": "A1"})
-        ),
-        "{nozzle}"
-    );
+    common::assert_nozzle_step(nozzle, "A1");
     let f = nozzle["params"]["f"].as_f64().unwrap();
     assert!((f - 0.5).abs() <= 0.25 * 0.5, "f = {f}");
     // The step that told them apart: the transfer step was the first

@@ -542,15 +542,7 @@ fn a_catalogue_effect_behind_a_clogged_nozzle_is_found() {
         .iter()
         .find(|e| e["name"] == "generic")
         .unwrap_or_else(|| panic!("no generic term: {found:?}"));
-    assert_eq!(
-        (&nozzle["acts_on"], &nozzle["driver"], &nozzle["scope"]),
-        (
-            &serde_json::json!("pulse_mass"),
-            &serde_json::json!("time"),
-            &serde_json::json!({"applicator": "A1"})
-        ),
-        "{nozzle}"
-    );
+    common::assert_nozzle_step(nozzle, "A1");
     let f = nozzle["params"]["f"].as_f64().unwrap();
     assert!((f - 0.6).abs() <= 0.25 * 0.4, "f = {f}");
     let ageing = found

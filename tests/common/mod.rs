@@ -254,3 +254,17 @@ pub fn truth_of(recording: &std::path::Path) -> tortwin_model::config::ModelConf
     )
     .unwrap()
 }
+
+/// A found effect (report.json `effects_found`) is a step in time of the
+/// pulse mass of `applicator` alone: a clogged nozzle.
+pub fn assert_nozzle_step(effect: &serde_json::Value, applicator: &str) {
+    assert_eq!(
+        (&effect["acts_on"], &effect["driver"], &effect["scope"]),
+        (
+            &serde_json::json!("pulse_mass"),
+            &serde_json::json!("time"),
+            &serde_json::json!({ "applicator": applicator })
+        ),
+        "{effect}"
+    );
+}
