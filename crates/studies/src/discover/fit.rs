@@ -1074,10 +1074,21 @@ fn fit_with(
         };
         let mut done = false;
         if let Some((u0, lo, hi)) = bracket {
-            let u = line_search(&obj, u0, lo, hi)?;
-            // On an inner edge of the bracket: the optimum has moved away.
             let edge = 3.0 * LINE_TOL + 1e-3;
-            done = !((u - lo < edge && lo > 0.0) || (hi - u < edge && hi < 1.0));
+            let inner_edge = |u: f64, lo: f64, hi: f64| {
+                (u - lo < edge && lo > 0.0) || (hi - u < edge && hi < 1.0)
+            };
+            let u = line_search(&obj, u0, lo, hi)?;
+            done = !inner_edge(u, lo, hi);
+            // On an inner edge of the bracket: the optimum has moved away.
+            // Once more from there, in a bracket twice as wide (three or
+            // four evaluations); the grid where it moved further still.
+            if !done {
+                let wide = 2.0 * limits.warm_half_width;
+                let (lo, hi) = ((u - wide).max(0.0), (u + wide).min(1.0));
+                let u = line_search(&obj, u, lo, hi)?;
+                done = !inner_edge(u, lo, hi);
+            }
         }
         if !done {
             // The grid includes both ends: several effects are off (or
