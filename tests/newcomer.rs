@@ -3,14 +3,18 @@
 //! exactly as written there, its outputs checked, then every other example
 //! command of the README's `sh` blocks.
 //!
-//! The clone builds with its own target folder (`target/newcomer`, kept
-//! between runs). The first time, that folder starts with the third-party
-//! crates this build has already compiled (hard links, [`seed_with_dependencies`]),
-//! as a newcomer's machine has them after the first command's first build:
-//! the clone compiles every tortwin crate from its own sources, but rerun
-//! and the other dependencies are not compiled a second time within CI's
-//! time (a cold build of them is what CI's own build from a clean clone
-//! does). Commands written with `tortwin` run the clone's own build
+//! The clone builds with its own target folder (`target/newcomer`, made
+//! anew each run). That folder starts with the third-party crates this
+//! build has already compiled (hard links, [`seed_with_dependencies`]), as a
+//! newcomer's machine has them after the first command's first build: the
+//! clone compiles every tortwin crate from its own sources, but rerun and
+//! the other dependencies are not compiled a second time within CI's time
+//! (a cold build of them is what CI's own build from a clean clone does).
+//! The test fails if the clone's builds compile any of them again but
+//! pyo3's crates, which only the extension module uses: that is a feature
+//! set that differs from the test build's (Cargo.toml, "feature
+//! alignment"), and it costs every newcomer and CI minutes. Commands
+//! written with `tortwin` run the clone's own build
 //! on the PATH, as `cargo install --path .` in the clone would put it. Two
 //! kinds of line are not run: `bash .ci/run` (the test command, which runs
 //! this test) and the viewer (`pip install rerun-sdk ... && rerun FILE`, a
@@ -101,9 +105,11 @@ fn the_readme_commands_work_in_a_fresh_clone() {
         .nth(2)
         .unwrap()
         .join("newcomer");
-    if !target.exists() {
-        seed_with_dependencies(&target);
+    if target.exists() {
+        std::fs::remove_dir_all(&target).unwrap();
     }
+    let seeded = std::time::SystemTime::now();
+    seed_with_dependencies(&target);
     let bin = target.join("release");
     let path_var = format!(
         "{}:{}",
@@ -133,6 +139,14 @@ fn the_readme_commands_work_in_a_fresh_clone() {
         ran += 1;
     }
     assert!(ran >= 8, "only {ran} README commands ran: {commands:?}");
+    let compiled_again = third_party_compiled_since(&target, seeded);
+    assert!(
+        compiled_again.is_empty(),
+        "the clone's builds compiled these third-party crates again, with \
+         other features than the workspace's test build (Cargo.toml, \"feature \
+         alignment\"; the seed is that build's, as `cargo test --release \
+         --workspace` leaves it): {compiled_again:?}"
+    );
     // What the README says the commands make.
     for output in [
         "out/imported.mcap",
@@ -183,6 +197,33 @@ find "$1/deps" -maxdepth 1 -type f -name 'lib*' ! -name 'libtortwin*' \
     std::fs::rename(&seeding, target).unwrap();
 }
 
+/// The third-party units (cargo's fingerprint folders, `name-hash`) that a
+/// build in `target` wrote after `seeded`, but pyo3's crates, which only the
+/// extension module uses and the test build does not compile. The seed's
+/// own fingerprints keep their times (`cp -a`).
+fn third_party_compiled_since(target: &Path, seeded: std::time::SystemTime) -> Vec<String> {
+    let only_the_extension = ["pyo3", "target-lexicon"];
+    let mut units = Vec::new();
+    for unit in std::fs::read_dir(target.join("release/.fingerprint")).unwrap() {
+        let unit = unit.unwrap();
+        let name = unit.file_name().to_string_lossy().into_owned();
+        if name.starts_with("tortwin") || only_the_extension.iter().any(|p| name.starts_with(p)) {
+            continue;
+        }
+        let written = std::fs::read_dir(unit.path()).unwrap().any(|f| {
+            f.unwrap()
+                .metadata()
+                .and_then(|m| m.modified())
+                .is_ok_and(|t| t >= seeded)
+        });
+        if written {
+            units.push(name);
+        }
+    }
+    units.sort();
+    units
+}
+
 #[test]
 fn the_readme_is_read_as_a_newcomer_reads_it() {
     let readme = "x\n```sh\ncargo run -- a   # comment\nbash .ci/run\n```\n```toml\nk = 1\n```\n\
@@ -191,55 +232,4 @@ fn the_readme_is_read_as_a_newcomer_reads_it() {
         readme_commands(readme),
         ["cargo run -- a", "bash .ci/run", "tortwin b --c d"]
     );
-}
-
-/// The features of every dependency as `cargo tree -e features` resolves
-/// them for `args`: package -> its features.
-fn features(
-    args: &[&str],
-) -> std::collections::BTreeMap<String, std::collections::BTreeSet<String>> {
-    let o = Command::new(env!("CARGO"))
-        .arg("tree")
-        .args(args)
-        .args(["-f", "{p}|{f}", "--prefix", "none"])
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
-        .output()
-        .unwrap();
-    common::check(&o, "cargo tree");
-    let mut map = std::collections::BTreeMap::<String, std::collections::BTreeSet<String>>::new();
-    for line in String::from_utf8_lossy(&o.stdout).lines() {
-        let line = line.replace(" (*)", "");
-        let Some((package, f)) = line.split_once('|') else {
-            continue;
-        };
-        map.entry(package.to_string())
-            .or_default()
-            .extend(f.split(',').filter(|x| !x.is_empty()).map(str::to_string));
-    }
-    map
-}
-
-/// Each package a README command builds on its own (`cargo run --release`,
-/// `cargo run -p tortwin-fuzz`, maturin's build of python/) resolves every
-/// dependency it shares with the workspace's test build with the test
-/// build's features (Cargo.toml, "feature alignment"): a clone's first
-/// build after the tests then compiles only the tortwin crates, and maturin
-/// reuses them. With serde's `alloc` missing, each of them compiled serde
-/// and every crate above it, rerun's tree included, a second time.
-#[test]
-fn the_packages_the_readme_builds_share_the_test_builds_features() {
-    let workspace = features(&["--workspace"]);
-    for package in ["tortwin", "tortwin-fuzz", "tortwin-py"] {
-        let own = features(&["-p", package, "-e", "no-dev"]);
-        let differ: Vec<&String> = own
-            .iter()
-            .filter(|(p, f)| workspace.get(*p).is_some_and(|w| w != *f))
-            .map(|(p, _)| p)
-            .collect();
-        assert!(own.len() > 100, "{package}: {} packages", own.len());
-        assert!(
-            differ.is_empty(),
-            "{package} builds these with other features than the tests: {differ:?}"
-        );
-    }
 }
