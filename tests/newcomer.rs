@@ -54,9 +54,22 @@ fn readme_commands(readme: &str) -> Vec<String> {
     commands
 }
 
+/// Runs `command` in `dir` with a newcomer's environment: this test's own
+/// less the variables cargo sets for a test (`CARGO_MANIFEST_DIR`,
+/// `CARGO_PKG_NAME`, ...). A newcomer's shell has none of them, and build
+/// scripts that ask to run again when one changes (ring's, under rustls and
+/// rerun's gRPC client) ran again in the clone and every crate above them
+/// was compiled a second time.
 fn run(command: &str, dir: &Path, path_var: &str, target: &Path) {
     eprintln!("$ {command}");
-    let o = Command::new("bash")
+    let mut bash = Command::new("bash");
+    for (name, _) in std::env::vars_os() {
+        let name = name.to_string_lossy();
+        if (name.starts_with("CARGO_") && name != "CARGO_HOME") || name == "CARGO" {
+            bash.env_remove(&*name);
+        }
+    }
+    let o = bash
         .arg("-c")
         .arg(command)
         .current_dir(dir)
