@@ -11,5 +11,6 @@ pub mod geometry;
 pub mod mcap_out;
 pub mod provenance;
 pub mod rerun_out;
+pub mod rerun_sdk;
 pub mod scale;
 pub mod tables;

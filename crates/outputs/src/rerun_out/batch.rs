@@ -4,9 +4,10 @@
 //! ([`super::SERIES_CHUNK_ROWS`] values), and the block of the mu history
 //! being filled.
 
-use rerun::components::ClassId;
-use rerun::datatypes::ChannelDatatype;
-use rerun::{EntityPath, RecordingStream, RecordingStreamError, TimeColumn};
+use crate::rerun_sdk;
+use crate::rerun_sdk::components::ClassId;
+use crate::rerun_sdk::datatypes::ChannelDatatype;
+use crate::rerun_sdk::{EntityPath, RecordingStream, RecordingStreamError, TimeColumn};
 
 use super::entities::TrackEntities;
 use super::{TIMELINE_TIME, TIMELINE_WHEEL_PASS};
@@ -101,7 +102,7 @@ pub(super) fn send_rows(
         rec.send_columns(
             path.clone(),
             indexes(),
-            rerun::Points2D::update_fields()
+            rerun_sdk::Points2D::update_fields()
                 .with_class_ids(ids.into_iter().map(ClassId::from))
                 .columns(lengths.clone())?,
         )?;
@@ -110,7 +111,7 @@ pub(super) fn send_rows(
         rec.send_columns(
             path.clone(),
             indexes(),
-            rerun::LineStrips2D::update_fields()
+            rerun_sdk::LineStrips2D::update_fields()
                 .with_strips(strips)
                 .columns_of_unit_batches()?,
         )?;
@@ -140,9 +141,9 @@ pub(super) fn log_block(
             TimeColumn::new_timestamp_nanos_since_epoch(TIMELINE_TIME, [time_ns]),
             TimeColumn::new_sequence(TIMELINE_WHEEL_PASS, [wheel_pass]),
         ],
-        rerun::SegmentationImage::new(
+        rerun_sdk::SegmentationImage::new(
             track.block.clone(),
-            rerun::components::ImageFormat::segmentation(
+            rerun_sdk::components::ImageFormat::segmentation(
                 [grid_len as u32, rows as u32],
                 ChannelDatatype::U8,
             ),
@@ -169,7 +170,7 @@ pub(super) fn send_series(
     rec.send_columns(
         path,
         [time],
-        rerun::Scalars::new(series.values)
+        rerun_sdk::Scalars::new(series.values)
             .columns(std::iter::repeat_n(series.width.max(1), rows))?,
     )?;
     Ok(())

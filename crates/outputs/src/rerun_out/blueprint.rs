@@ -2,21 +2,22 @@
 //! into a blueprint store: the 0.36 Rust builder cannot set the view
 //! properties it needs.
 
+use crate::rerun_sdk;
 use std::collections::{BTreeMap, BTreeSet};
 
-use rerun::blueprint::components::{
+use crate::rerun_sdk::blueprint::components::{
     AutoLayout, AutoViews, ColumnShare, ContainerKind, Corner2D, Fps, IncludedContent, PanelState,
     PlayState, PlaybackSpeed, QueryExpression, RootContainer, RowShare, TimelineName, ViewClass,
 };
-use rerun::components::Name;
-use rerun::datatypes::{TimeRange, VisibleTimeRange};
-use rerun::external::re_log_types::{LogMsg, RecordingId};
-use rerun::external::re_sdk_types::blueprint::archetypes::{
+use crate::rerun_sdk::components::Name;
+use crate::rerun_sdk::datatypes::{TimeRange, VisibleTimeRange};
+use crate::rerun_sdk::external::re_log_types::{LogMsg, RecordingId};
+use crate::rerun_sdk::external::re_sdk_types::blueprint::archetypes::{
     ContainerBlueprint, PanelBlueprint, PlotLegend, TimeAxis, TimePanelBlueprint, ViewBlueprint,
     ViewContents, ViewportBlueprint, VisibleTimeRanges, VisualBounds2D,
 };
-use rerun::external::re_sdk_types::external::uuid::Uuid;
-use rerun::{
+use crate::rerun_sdk::external::re_sdk_types::external::uuid::Uuid;
+use crate::rerun_sdk::{
     ApplicationId, Archetype, AsComponents, EntityPath, RecordingStream, RecordingStreamBuilder,
     RecordingStreamError,
 };
@@ -225,10 +226,10 @@ pub(super) fn blueprint(run: &Run<'_>) -> Result<Vec<LogMsg>, RecordingStreamErr
 
 /// A 2D view's visible range.
 fn bounds([x, y]: Bounds) -> VisualBounds2D {
-    VisualBounds2D::new(rerun::blueprint::components::VisualBounds2D(
-        rerun::datatypes::Range2D {
-            x_range: rerun::datatypes::Range1D(x),
-            y_range: rerun::datatypes::Range1D(y),
+    VisualBounds2D::new(rerun_sdk::blueprint::components::VisualBounds2D(
+        rerun_sdk::datatypes::Range2D {
+            x_range: rerun_sdk::datatypes::Range1D(x),
+            y_range: rerun_sdk::datatypes::Range1D(y),
         },
     ))
 }
@@ -237,7 +238,7 @@ fn bounds([x, y]: Bounds) -> VisualBounds2D {
 /// writes to it (on the `blueprint` timeline the viewer expects).
 pub fn blueprint_store(
     application_id: &ApplicationId,
-) -> Result<(RecordingStream, rerun::sink::MemorySinkStorage), RecordingStreamError> {
+) -> Result<(RecordingStream, rerun_sdk::sink::MemorySinkStorage), RecordingStreamError> {
     let (rec, storage) = RecordingStreamBuilder::new(application_id.clone())
         .recording_id(RecordingId::random())
         .blueprint()
@@ -254,7 +255,7 @@ pub fn send_blueprint(rec: &RecordingStream, blueprint: Vec<LogMsg>) -> bool {
     };
     rec.send_blueprint(
         blueprint,
-        rerun::external::re_log_types::BlueprintActivationCommand {
+        rerun_sdk::external::re_log_types::BlueprintActivationCommand {
             blueprint_id,
             make_active: true,
             make_default: true,

@@ -2,9 +2,10 @@
 //! product), the profiles along d as lines, and the mu history image: what
 //! is logged once for them, and how a snapshot becomes a row of each.
 
-use rerun::components::{Color, Radius};
-use rerun::datatypes::Rgba32;
-use rerun::{RecordingStream, RecordingStreamError};
+use crate::rerun_sdk;
+use crate::rerun_sdk::components::{Color, Radius};
+use crate::rerun_sdk::datatypes::Rgba32;
+use crate::rerun_sdk::{RecordingStream, RecordingStreamError};
 use tortwin_engine::sink::SectionInfo;
 
 use crate::geometry::Plan;
@@ -119,8 +120,8 @@ fn labelled(
     labels: Vec<String>,
     color: Color,
     radius: Radius,
-) -> rerun::Points2D {
-    rerun::Points2D::new(positions)
+) -> rerun_sdk::Points2D {
+    rerun_sdk::Points2D::new(positions)
         .with_labels(labels)
         .with_show_labels(true)
         .with_colors([color])
@@ -142,8 +143,8 @@ fn distance_ticks(length_m: f64, y: f64) -> (Vec<[f32; 2]>, Vec<String>) {
 }
 
 /// The annotation context of the mu scale: class, label, colour.
-fn mu_context() -> rerun::AnnotationContext {
-    rerun::AnnotationContext::new(
+fn mu_context() -> rerun_sdk::AnnotationContext {
+    rerun_sdk::AnnotationContext::new(
         (1..=MU_CLASSES)
             .map(|c| (c, mu_class_label(c), rgba(mu_class_color(c))))
             .collect::<Vec<_>>()
@@ -153,8 +154,8 @@ fn mu_context() -> rerun::AnnotationContext {
     )
 }
 
-fn mass_context() -> rerun::AnnotationContext {
-    rerun::AnnotationContext::new(
+fn mass_context() -> rerun_sdk::AnnotationContext {
+    rerun_sdk::AnnotationContext::new(
         (1..=MASS_CLASSES)
             .map(|c| (c, mass_class_label(c), rgba(mass_class_color(c))))
             .collect::<Vec<_>>()
@@ -195,7 +196,7 @@ pub(super) fn log_static(
         for layer in ["mu", "product"] {
             rec.log_static(
                 entity(&["curve", layer, "rails", name]),
-                &rerun::LineStrips2D::new([strip.clone()])
+                &rerun_sdk::LineStrips2D::new([strip.clone()])
                     .with_colors([Color::from_rgb(150, 150, 150)])
                     .with_radii([Radius::new_scene_units((gauge / 40.0) as f32)]),
             )?;
@@ -213,7 +214,7 @@ pub(super) fn log_static(
         for layer in [&state.entities.curve_mu, &state.entities.curve_product] {
             rec.log_static(
                 layer.clone(),
-                &rerun::Points2D::new(points.clone()).with_radii([radius]),
+                &rerun_sdk::Points2D::new(points.clone()).with_radii([radius]),
             )?;
         }
         let color = state.entities.color;
@@ -226,7 +227,7 @@ pub(super) fn log_static(
         ] {
             rec.log_static(
                 path.clone(),
-                &rerun::LineStrips2D::update_fields()
+                &rerun_sdk::LineStrips2D::update_fields()
                     .with_colors([color])
                     .with_radii([Radius::new_ui_points(width)]),
             )?;
@@ -274,7 +275,7 @@ pub(super) fn log_static(
             state
                 .entities
                 .history
-                .join(&rerun::EntityPath::from_single_string("distance")),
+                .join(&rerun_sdk::EntityPath::from_single_string("distance")),
             &labelled(
                 positions.clone(),
                 labels.clone(),
@@ -339,7 +340,7 @@ fn log_legends(rec: &RecordingStream, frames: &Frames) -> Result<(), RecordingSt
             .collect();
         rec.log_static(
             format!("{path}/bar"),
-            &rerun::LineStrips2D::new(strips)
+            &rerun_sdk::LineStrips2D::new(strips)
                 .with_class_ids(1..=classes)
                 .with_radii([Radius::new_scene_units((height / 2.0) as f32)]),
         )?;
@@ -395,7 +396,7 @@ fn log_profile_frames(
             .collect();
         rec.log_static(
             format!("{view}/frame/levels"),
-            &rerun::LineStrips2D::new(strips)
+            &rerun_sdk::LineStrips2D::new(strips)
                 .with_colors([grid_color])
                 .with_radii([thin]),
         )?;
@@ -437,7 +438,7 @@ fn log_profile_frames(
         let orange = Color::from_rgb(230, 160, 30);
         rec.log_static(
             format!("{view}/frame/applicators"),
-            &rerun::LineStrips2D::new(strips)
+            &rerun_sdk::LineStrips2D::new(strips)
                 .with_colors([orange])
                 .with_radii([Radius::new_ui_points(1.0)]),
         )?;
@@ -464,7 +465,7 @@ fn log_profile_frames(
     let cap = ((high - low) / 2.0 * frames.profile_height) as f32;
     rec.log_static(
         "profiles/mu/frame/target_band",
-        &rerun::LineStrips2D::new([vec![[cap, middle], [length as f32 - cap, middle]]])
+        &rerun_sdk::LineStrips2D::new([vec![[cap, middle], [length as f32 - cap, middle]]])
             .with_labels([format!("target band {low:.2}-{high:.2}")])
             .with_show_labels(true)
             .with_colors([Color::from_unmultiplied_rgba(60, 180, 90, 60)])

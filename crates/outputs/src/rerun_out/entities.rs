@@ -2,8 +2,8 @@
 //! names, a track's entities, labels, and the colours that make a rail
 //! read alike in every view.
 
-use rerun::components::Color;
-use rerun::{EntityPath, EntityPathPart};
+use crate::rerun_sdk::components::Color;
+use crate::rerun_sdk::{EntityPath, EntityPathPart};
 use tortwin_engine::sink::TrackInfo;
 use tortwin_recording::Quantity;
 

@@ -2,9 +2,9 @@
 
 use std::path::{Path, PathBuf};
 
-use rerun::external::re_log_types::InvalidApplicationIdError;
-use rerun::sink::SinkFlushError;
-use rerun::RecordingStreamError;
+use crate::rerun_sdk::external::re_log_types::InvalidApplicationIdError;
+use crate::rerun_sdk::sink::SinkFlushError;
+use crate::rerun_sdk::RecordingStreamError;
 
 use crate::files::FileError;
 

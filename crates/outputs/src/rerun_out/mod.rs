@@ -63,7 +63,7 @@
 //!
 //! # Blueprint
 //! The layout is written by hand into a blueprint store rather than through
-//! [`rerun::blueprint::Blueprint`]: the 0.36 Rust builder has no way to set
+//! [`rerun_sdk::blueprint::Blueprint`]: the 0.36 Rust builder has no way to set
 //! view properties (a time series' visible range, a plot legend), which
 //! this layout needs. It logs the same archetypes the builder does plus
 //! those properties under `view/<id>/<Archetype>`, and sends the store with
@@ -97,9 +97,9 @@
 //! [`Sink::begin`]: tortwin_engine::sink::Sink::begin
 //! [`Sink::finish`]: tortwin_engine::sink::Sink::finish
 //! [`FieldSnapshot::wheel_pass`]: tortwin_engine::sink::FieldSnapshot::wheel_pass
-//! [`RecordingStream::send_columns`]: rerun::RecordingStream::send_columns
-//! [`RecordingStream::send_blueprint`]: rerun::RecordingStream::send_blueprint
-//! [`EntityPath`]: rerun::EntityPath
+//! [`RecordingStream::send_columns`]: rerun_sdk::RecordingStream::send_columns
+//! [`RecordingStream::send_blueprint`]: rerun_sdk::RecordingStream::send_blueprint
+//! [`EntityPath`]: rerun_sdk::EntityPath
 
 mod batch;
 mod blueprint;
@@ -115,18 +115,19 @@ pub use error::RerunError;
 pub use sink::RerunSink;
 
 use crate::provenance::Provenance;
+use crate::rerun_sdk;
 
 /// Stores `provenance` as the recording property `provenance`: one text
 /// per [`Provenance::to_pairs`] key, shown in the viewer's recording panel.
 pub fn send_provenance(
-    rec: &rerun::RecordingStream,
+    rec: &rerun_sdk::RecordingStream,
     provenance: &Provenance,
-) -> rerun::RecordingStreamResult<()> {
-    let mut values = rerun::AnyValues::default();
+) -> rerun_sdk::RecordingStreamResult<()> {
+    let mut values = rerun_sdk::AnyValues::default();
     for (key, text) in provenance.to_pairs() {
         // The keys are fixed, non-empty names: always valid.
-        if let Ok(field) = rerun::ComponentIdentifier::try_new(&key) {
-            values = values.with_component::<rerun::components::Text>(field, [text]);
+        if let Ok(field) = rerun_sdk::ComponentIdentifier::try_new(&key) {
+            values = values.with_component::<rerun_sdk::components::Text>(field, [text]);
         }
     }
     rec.send_property("provenance", &values)

@@ -1,9 +1,10 @@
 //! The section as a page, logged once at the start (the plan and the
 //! profiles' frames are in `curve.rs`).
 
+use crate::rerun_sdk;
 use std::fmt::Write as _;
 
-use rerun::{RecordingStream, RecordingStreamError};
+use crate::rerun_sdk::{RecordingStream, RecordingStreamError};
 use tortwin_engine::sink::SectionInfo;
 
 use super::G_PER_KG;
@@ -15,7 +16,7 @@ pub(super) fn log_description(
 ) -> Result<(), RecordingStreamError> {
     rec.log_static(
         "section/description",
-        &rerun::TextDocument::from_markdown(describe(info)),
+        &rerun_sdk::TextDocument::from_markdown(describe(info)),
     )
 }
 

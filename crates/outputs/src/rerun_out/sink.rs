@@ -1,13 +1,14 @@
 //! The sink: the recording stream and its file, the time of each log, and
 //! what each of the engine's events becomes.
 
+use crate::rerun_sdk;
 use std::collections::{BTreeMap, BTreeSet, HashMap, HashSet};
 use std::path::Path;
 use std::time::Duration;
 
-use rerun::components::{MarkerShape, TextLogLevel};
-use rerun::log::ChunkBatcherConfig;
-use rerun::{
+use crate::rerun_sdk::components::{MarkerShape, TextLogLevel};
+use crate::rerun_sdk::log::ChunkBatcherConfig;
+use crate::rerun_sdk::{
     ApplicationId, AsComponents, EntityPath, RecordingStream, RecordingStreamBuilder, TimeCell,
 };
 use tortwin_engine::sink::{
@@ -258,7 +259,7 @@ impl RerunSink {
         // one beside it.
         self.style_once(
             &path,
-            &[&rerun::SeriesPoints::new()
+            &[&rerun_sdk::SeriesPoints::new()
                 .with_names(["measured", "simulated (twin)"])
                 .with_colors([color, pale])
                 .with_markers([MarkerShape::Circle, MarkerShape::Circle])
@@ -332,7 +333,7 @@ impl RerunSink {
         let history = (self.options.history_rows, self.options.history_every.max(1));
         rec.log_static(
             "run/summary",
-            &rerun::TextDocument::from_markdown(summarize(summary, history)),
+            &rerun_sdk::TextDocument::from_markdown(summarize(summary, history)),
         )
         .map_err(sdk_error(self.path(), || "summary".to_owned()))?;
         if self.options.blueprint {
@@ -433,7 +434,7 @@ impl Sink for RerunSink {
         self.rec()?
             .log(
                 "trains",
-                &rerun::TextLog::new(text).with_level(TextLogLevel::INFO),
+                &rerun_sdk::TextLog::new(text).with_level(TextLogLevel::INFO),
             )
             .map_err(sdk_error(self.path(), || {
                 format!("train {}", train.train_id)
@@ -450,7 +451,7 @@ impl Sink for RerunSink {
             );
             self.style_once(
                 &path,
-                &[&rerun::SeriesPoints::new()
+                &[&rerun_sdk::SeriesPoints::new()
                     .with_names([name])
                     .with_colors([rail_color(pulse.rail)])
                     .with_markers([MarkerShape::Diamond])
@@ -584,9 +585,9 @@ impl Sink for RerunSink {
                 let top = (track.block_index * block_rows) as f32 * spacing;
                 rec.log_static(
                     block_path(&track.entities.history, track.block_index),
-                    &rerun::Transform3D::from_translation_scale(
+                    &rerun_sdk::Transform3D::from_translation_scale(
                         [0.0, top, 0.0],
-                        rerun::components::Scale3D::from([spacing, spacing, 1.0]),
+                        rerun_sdk::components::Scale3D::from([spacing, spacing, 1.0]),
                     ),
                 )
                 .map_err(sdk_error(path, what))?;

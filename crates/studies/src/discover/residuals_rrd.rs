@@ -18,12 +18,17 @@
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::path::Path;
+use tortwin_outputs::rerun_sdk;
 
-use rerun::blueprint::components::TimelineName;
-use rerun::blueprint::components::{ColumnShare, ContainerKind, PanelState, PlayState, RowShare};
-use rerun::components::{Color, Radius};
-use rerun::external::re_sdk_types::blueprint::archetypes::TimePanelBlueprint;
-use rerun::{EntityPath, EntityPathPart, RecordingStream, RecordingStreamBuilder, TimeColumn};
+use tortwin_outputs::rerun_sdk::blueprint::components::TimelineName;
+use tortwin_outputs::rerun_sdk::blueprint::components::{
+    ColumnShare, ContainerKind, PanelState, PlayState, RowShare,
+};
+use tortwin_outputs::rerun_sdk::components::{Color, Radius};
+use tortwin_outputs::rerun_sdk::external::re_sdk_types::blueprint::archetypes::TimePanelBlueprint;
+use tortwin_outputs::rerun_sdk::{
+    EntityPath, EntityPathPart, RecordingStream, RecordingStreamBuilder, TimeColumn,
+};
 
 use super::data::{Dataset, Values};
 use super::diagnose;
@@ -54,19 +59,20 @@ fn color([r, g, b]: [u8; 3]) -> Color {
 pub(super) fn write_rrd(path: &Path, data: &Dataset, d: &Discovery, md: &str) -> Result<()> {
     let sdk = |what: &str| {
         let what = what.to_owned();
-        move |source: rerun::RecordingStreamError| RerunError::Sdk {
+        move |source: rerun_sdk::RecordingStreamError| RerunError::Sdk {
             path: path.to_path_buf(),
             what,
             source: Box::new(source),
         }
     };
     let mut file = PartialFile::beside(path)?;
-    let application_id =
-        rerun::ApplicationId::try_new("tortwin").map_err(|source| RerunError::ApplicationId {
+    let application_id = rerun_sdk::ApplicationId::try_new("tortwin").map_err(|source| {
+        RerunError::ApplicationId {
             path: path.to_path_buf(),
             id: "tortwin".to_owned(),
             source,
-        })?;
+        }
+    })?;
     // Declared after `file`: dropped first on an error, the stream closes
     // the temporary file before `file` deletes it.
     let rec = RecordingStreamBuilder::new(application_id.clone())
@@ -80,9 +86,12 @@ pub(super) fn write_rrd(path: &Path, data: &Dataset, d: &Discovery, md: &str) ->
         tortwin_outputs::rerun_out::send_provenance(&rec, provenance)
             .map_err(sdk("writing the provenance"))?;
     }
-    rec.log_static("finding", &rerun::TextDocument::from_markdown(finding(d)))
-        .map_err(sdk("the finding"))?;
-    rec.log_static("report", &rerun::TextDocument::from_markdown(md))
+    rec.log_static(
+        "finding",
+        &rerun_sdk::TextDocument::from_markdown(finding(d)),
+    )
+    .map_err(sdk("the finding"))?;
+    rec.log_static("report", &rerun_sdk::TextDocument::from_markdown(md))
         .map_err(sdk("the report"))?;
 
     let series = log_series(&rec, data, d).map_err(sdk("the residuals over time"))?;
@@ -164,7 +173,7 @@ fn log_series(
     rec: &RecordingStream,
     data: &Dataset,
     d: &Discovery,
-) -> rerun::RecordingStreamResult<Vec<(EntityPath, String)>> {
+) -> rerun_sdk::RecordingStreamResult<Vec<(EntityPath, String)>> {
     let mut rows: BTreeMap<(usize, usize, &str), Vec<usize>> = BTreeMap::new();
     for (i, row) in data.rows.iter().enumerate() {
         rows.entry((row.site, row.rail, row.quantity.as_str()))
@@ -189,7 +198,7 @@ fn log_series(
         let per_row = names.len();
         rec.log_static(
             path.clone(),
-            &rerun::SeriesPoints::new()
+            &rerun_sdk::SeriesPoints::new()
                 .with_names(names)
                 .with_colors(colors)
                 .with_marker_sizes(vec![2.0; per_row]),
@@ -211,7 +220,7 @@ fn log_series(
         rec.send_columns(
             path.clone(),
             [TimeColumn::new_timestamp_nanos_since_epoch("time", times)],
-            rerun::Scalars::new(values).columns(std::iter::repeat_n(per_row, n))?,
+            rerun_sdk::Scalars::new(values).columns(std::iter::repeat_n(per_row, n))?,
         )?;
         entities.push((
             path,
@@ -227,7 +236,7 @@ fn log_versus(
     rec: &RecordingStream,
     data: &Dataset,
     d: &Discovery,
-) -> rerun::RecordingStreamResult<Vec<(EntityPath, String)>> {
+) -> rerun_sdk::RecordingStreamResult<Vec<(EntityPath, String)>> {
     let Some(top) = d.covariates_before.first() else {
         return Ok(Vec::new());
     };
@@ -276,7 +285,7 @@ fn log_versus(
                 .collect();
             rec.log_static(
                 root.join(&EntityPath::from_single_string(which)),
-                &rerun::Points2D::new(points)
+                &rerun_sdk::Points2D::new(points)
                     .with_colors([Color::from_unmultiplied_rgba(rgb[0], rgb[1], rgb[2], 110)])
                     .with_radii([Radius::new_ui_points(1.5)]),
             )?;
@@ -296,7 +305,7 @@ fn log_versus(
             means.sort_by(|a, b| a[0].total_cmp(&b[0]));
             rec.log_static(
                 root.join(&EntityPath::from_single_string(format!("mean_{which}"))),
-                &rerun::LineStrips2D::new([means])
+                &rerun_sdk::LineStrips2D::new([means])
                     .with_colors([color(rgb)])
                     .with_radii([Radius::new_ui_points(2.5)])
                     .with_labels([format!("mean per bin, {which}")]),
@@ -320,12 +329,12 @@ fn log_frame(
     high: f64,
     largest: f64,
     name: &str,
-) -> rerun::RecordingStreamResult<()> {
+) -> rerun_sdk::RecordingStreamResult<()> {
     let grey = Color::from_rgb(130, 130, 130);
     let (w, h) = (PLOT_WIDTH as f32, PLOT_HALF_HEIGHT as f32);
     rec.log_static(
         root.join(&EntityPath::from_single_string("frame/lines")),
-        &rerun::LineStrips2D::new([vec![[0.0, 0.0], [w, 0.0]], vec![[0.0, -h], [0.0, h]]])
+        &rerun_sdk::LineStrips2D::new([vec![[0.0, 0.0], [w, 0.0]], vec![[0.0, -h], [0.0, h]]])
             .with_colors([grey])
             .with_radii([Radius::new_ui_points(0.75)]),
     )?;
@@ -347,7 +356,7 @@ fn log_frame(
     labels.push("residual".to_owned());
     rec.log_static(
         root.join(&EntityPath::from_single_string("frame/labels")),
-        &rerun::Points2D::new(positions)
+        &rerun_sdk::Points2D::new(positions)
             .with_labels(labels)
             .with_show_labels(true)
             .with_colors([grey])
@@ -371,7 +380,7 @@ fn layout(
     rec: &RecordingStream,
     series: &[(EntityPath, String)],
     versus: &[(EntityPath, String)],
-) -> rerun::RecordingStreamResult<()> {
+) -> rerun_sdk::RecordingStreamResult<()> {
     let bp = BlueprintWriter::new(rec);
     let finding = bp.view("TextDocument", "The finding", ["+ /finding"])?;
     let mut left = vec![finding];
