@@ -578,6 +578,7 @@ fn covariates(
     let mut gap = Vec::with_capacity(n);
     let mut rain = Vec::with_capacity(n);
     let mut temperature = Vec::with_capacity(n);
+    let mut humidity = Vec::with_capacity(n);
     let mut speed = Vec::with_capacity(n);
     let mut load = Vec::with_capacity(n);
     let mut time_of_day = Vec::with_capacity(n);
@@ -630,7 +631,9 @@ fn covariates(
                 rain.push(f64::NAN);
             }
         }
-        temperature.push(weather.state(now_ns).current.air_temperature_c);
+        let air = weather.state(now_ns).current;
+        temperature.push(air.air_temperature_c);
+        humidity.push(air.relative_humidity);
         let direction = train.map(|(_, p)| p.direction);
         distance.push(direction.map_or(f64::NAN, |d| {
             downstream_of_applicator_m(section, row.rail, d, x_m)
@@ -693,6 +696,11 @@ fn covariates(
             name: "air_temperature_c",
             description: "air temperature (°C)",
             values: Values::Continuous(temperature),
+        },
+        Covariate {
+            name: "relative_humidity",
+            description: "relative humidity (0-1)",
+            values: Values::Continuous(humidity),
         },
         Covariate {
             name: "train_speed_mps",

@@ -1635,6 +1635,9 @@ fn signature_of(covariate: &str) -> (Vec<Named>, Option<Driver>) {
             vec![Named::TemperatureConsumption],
             Some(Driver::AirTemperatureC),
         ),
+        // A generic driver without a catalogue effect: a surface that
+        // behaves differently when humid (effects.md, "Generic terms").
+        "relative_humidity" => (Vec::new(), Some(Driver::RelativeHumidity)),
         "train_speed_mps" => (vec![Named::SpeedTransfer], Some(Driver::SpeedMps)),
         "bogie_position" => (vec![Named::BogieBands], None),
         "distance_from_applicator_m" => (vec![Named::WheelEdgeReservoir], None),
