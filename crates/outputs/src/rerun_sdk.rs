@@ -8,10 +8,4 @@
 pub use re_sdk::log::TimeColumn;
 pub use re_sdk::*;
 pub use re_sdk_types::archetypes::*;
-pub use re_sdk_types::{archetypes, components, datatypes, AnyValues};
-
-/// The crates the SDK re-exports under `external`, and its types crate.
-pub mod external {
-    pub use re_sdk::external::*;
-    pub use re_sdk_types;
-}
+pub use re_sdk_types::{self, archetypes, components, datatypes, AnyValues};

@@ -12,15 +12,15 @@ use crate::rerun_sdk::blueprint::components::{
 use crate::rerun_sdk::components::Name;
 use crate::rerun_sdk::datatypes::{TimeRange, VisibleTimeRange};
 use crate::rerun_sdk::external::re_log_types::{LogMsg, RecordingId};
-use crate::rerun_sdk::external::re_sdk_types::blueprint::archetypes::{
-    ContainerBlueprint, PanelBlueprint, PlotLegend, TimeAxis, TimePanelBlueprint, ViewBlueprint,
-    ViewContents, ViewportBlueprint, VisibleTimeRanges, VisualBounds2D,
-};
-use crate::rerun_sdk::external::re_sdk_types::external::uuid::Uuid;
 use crate::rerun_sdk::{
     ApplicationId, Archetype, AsComponents, EntityPath, RecordingStream, RecordingStreamBuilder,
     RecordingStreamError,
 };
+use re_sdk_types::blueprint::archetypes::{
+    ContainerBlueprint, PanelBlueprint, PlotLegend, TimeAxis, TimePanelBlueprint, ViewBlueprint,
+    ViewContents, ViewportBlueprint, VisibleTimeRanges, VisualBounds2D,
+};
+use re_sdk_types::external::uuid::Uuid;
 use tortwin_recording::Quantity;
 
 use super::curve::Bounds;

@@ -25,7 +25,7 @@ use tortwin_outputs::rerun_sdk::blueprint::components::{
     ColumnShare, ContainerKind, PanelState, PlayState, RowShare,
 };
 use tortwin_outputs::rerun_sdk::components::{Color, Radius};
-use tortwin_outputs::rerun_sdk::external::re_sdk_types::blueprint::archetypes::TimePanelBlueprint;
+use tortwin_outputs::rerun_sdk::re_sdk_types::blueprint::archetypes::TimePanelBlueprint;
 use tortwin_outputs::rerun_sdk::{
     EntityPath, EntityPathPart, RecordingStream, RecordingStreamBuilder, TimeColumn,
 };
