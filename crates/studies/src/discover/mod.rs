@@ -578,9 +578,11 @@ pub fn discover(
             // about a reduction of (|threshold| + k ln n) σ² for k = 1.
             noise_now.map_or(0.0, |s| (options.bic_threshold.abs() + ln_n) * s * s),
             &forced,
+            calibration_start.is_some() && !constants_in,
             &mut responses,
         )?;
         drop(screening_stage);
+        let screened_beside = screening.beside_constant.clone();
         // A term on a direction already in the model (whatever its form
         // or range) would only stack on it.
         let in_model = |c: &Candidate| {
@@ -839,6 +841,93 @@ pub fn discover(
                 results.sort_by(|a, b| a.0.delta_bic.total_cmp(&b.0.delta_bic));
             }
         }
+        // The best generic direction everywhere on a quantity one constant
+        // scales (muD, muC, kt), in each of its forms with that constant
+        // free beside it: a factor is 1 at its driver's reference point,
+        // so with the constant held at the laboratory's value it can only
+        // bend the quantity about that point, and where the site's level
+        // differs as well a step on the driver (free on one side) fits
+        // better than the term's true form. The constant moved with the
+        // term is part of the candidate and counted in its BIC; it is
+        // calibrated and reported with the effects found. (muD 13 % high
+        // with a dry friction falling linearly with humidity: both
+        // averaged to the laboratory's level, step 0 kept muD, and a step
+        // on humidity was reported with a second term on precipitation.)
+        // The directions the screening ranked with their constant beside
+        // them are fitted so as well. Either only where it could compete
+        // with the step's best: a passing direction within
+        // [`CONTENDER_SHARE`] of its BIC drop, a screened one whose
+        // first-order reduction with the constant comes as close to the
+        // best's SSE reduction.
+        if calibration_start.is_some() && !constants_in {
+            let best = results
+                .iter()
+                .find(|(r, _, _)| r.passes_bic && r.passes_share)
+                .map(|(r, _, _)| (r.delta_bic, sse - r.sse));
+            let (best_bic, best_reduction) = best.unwrap_or((0.0, 0.0));
+            let passing = twin_direction(&results, &ev)
+                .filter(|(_, bic)| *bic <= CONTENDER_SHARE * best_bic)
+                .map(|(g, _)| g);
+            let screened = screened_beside
+                .into_iter()
+                .filter(|(_, with_constant)| *with_constant >= CONTENDER_SHARE * best_reduction)
+                .map(|(g, _)| g);
+            let mut twins: Vec<space::GenericSlot> = Vec::new();
+            for g in passing.into_iter().chain(screened) {
+                if twins.len() < TWIN_DIRECTIONS && !twins.iter().any(|t| t.same_direction(&g)) {
+                    twins.push(g);
+                }
+            }
+            for g in twins {
+                let Some(key) = twin_constant(g.acts_on) else {
+                    continue;
+                };
+                let at: Vec<usize> = results
+                    .iter()
+                    .enumerate()
+                    .filter(|(_, r)| {
+                        matches!(r.1.slots.first(), Some(Candidate::Generic(h)) if h.same_direction(&g))
+                            && r.1.base.product == current.product
+                    })
+                    .map(|(i, _)| i)
+                    .collect();
+                if at.is_empty() {
+                    continue;
+                }
+                progress.stage(&format!(
+                    "step {step}: {} with {} beside it",
+                    labels_of(&results, &at),
+                    key.name()
+                ));
+                let _stage = ev.cost.enter(fit::Stage::Refits);
+                let tried: Vec<_> = at.iter().map(|&i| &results[i]).collect();
+                let pairs = each_beside_constants(&ev, &tried, &[key], &start.product, noise_now)?;
+                for (c, space, u, pair_sse) in pairs {
+                    let Some(i) = at
+                        .iter()
+                        .copied()
+                        .find(|&i| results[i].1.slots.first() == Some(&c))
+                    else {
+                        continue;
+                    };
+                    let k = results[i].0.k + 1;
+                    let bic = n as f64 * (pair_sse / sse).ln() + k as f64 * ln_n;
+                    if bic < results[i].0.delta_bic {
+                        results[i].0.k = k;
+                        update(&mut results[i].0, &space, &u, pair_sse);
+                        results[i].0.label = format!(
+                            "{} with {} {} beside it",
+                            c.label(),
+                            key.name(),
+                            fmt_param(key.get(&space.base.product))
+                        );
+                        results[i].1 = space;
+                        results[i].2 = u;
+                    }
+                }
+            }
+            results.sort_by(|a, b| a.0.delta_bic.total_cmp(&b.0.delta_bic));
+        }
         // A named effect that describes the data (nearly) as well as the
         // best generic term is the better statement: it goes first.
         prefer_named(&mut results, n, options);
@@ -994,7 +1083,7 @@ pub fn discover(
                 take_constants = true;
                 break;
             }
-            if !cross_validated(&ev, result, space, u, cv_current, progress, step)? {
+            if !cross_validated(&ev, result, space, u, &current, cv_current, progress, step)? {
                 continue;
             }
             chosen = Some(k);
@@ -1083,7 +1172,8 @@ pub fn discover(
                     .collect();
                 if let Some(i) = best.filter(|&i| i != k) {
                     let (result, space, u) = &mut results[i];
-                    if cross_validated(&ev, result, space, u, cv_current, progress, step)? {
+                    if cross_validated(&ev, result, space, u, &current, cv_current, progress, step)?
+                    {
                         chosen = Some(i);
                     }
                 }
@@ -1236,7 +1326,8 @@ pub fn discover(
         current = space.config(u);
         sse = result.sse;
         accepted.push(c.clone());
-        record.accepted = Some(c.label());
+        // The label says so when a site constant was fitted beside it.
+        record.accepted = Some(result.label.clone());
 
         // Refit every effect of the model together: the one just added was
         // fitted with the others held at values that had to make up for it.
@@ -1819,6 +1910,10 @@ fn with_effects_free(
 /// Named effects fitted beside the site's constants when they are taken,
 /// and the best generic directions (offsets aside: they are the sensors').
 const GENERIC_BESIDE_CONSTANTS: usize = 3;
+/// The generic directions of a step fitted with the site constant that
+/// scales their quantity beside them: the best that passes, and those the
+/// screening ranked so.
+const TWIN_DIRECTIONS: usize = 2;
 
 /// The site constant that scales the quantity a generic term everywhere
 /// acts on, where one does: `kt` the transfer fraction (eq. 6), `mu_d` and
@@ -1832,6 +1927,30 @@ fn twin_constant(acts_on: ActsOn) -> Option<tortwin_model::product::ProductKey> 
         ActsOn::FrictionBoundary => Some(ProductKey::MuC),
         ActsOn::Consumption | ActsOn::PulseMass | ActsOn::Measurement => None,
     }
+}
+
+/// The best passing generic direction of a step that acts everywhere on a
+/// quantity one site constant scales ([`twin_constant`]), by a factor on a
+/// driver other than time, with its BIC drop.
+fn twin_direction(
+    results: &[(CandidateResult, Space, Vec<f64>)],
+    ev: &Evaluator<'_>,
+) -> Option<(space::GenericSlot, f64)> {
+    results
+        .iter()
+        .filter(|(r, _, _)| r.passes_bic && r.passes_share)
+        .find_map(|(r, space, _)| match space.slots.first() {
+            Some(c @ Candidate::Generic(g))
+                if g.applicator.is_none()
+                    && g.rail.is_none()
+                    && g.site.is_none()
+                    && g.driver.is_some_and(|d| d != Driver::Time)
+                    && !constant_in_disguise(c, ev) =>
+            {
+                twin_constant(g.acts_on).map(|_| (g.clone(), r.delta_bic))
+            }
+            _ => None,
+        })
 }
 
 /// The fewest of the site's constants `keys` that describe the data as
@@ -2058,11 +2177,13 @@ fn rival_of(results: &[(CandidateResult, Space, Vec<f64>)], k: usize) -> Option<
 /// Whether a step's result predicts held-out blocks better than the current
 /// model (`cv_current`, its SSE): by day, then by site where the recording
 /// has two sites or more; the cross-validations are kept in `result`.
+#[allow(clippy::too_many_arguments)]
 fn cross_validated(
     ev: &Evaluator<'_>,
     result: &mut CandidateResult,
     space: &Space,
     u: &[f64],
+    current: &ModelConfig,
     cv_current: f64,
     progress: &dyn Progress,
     step: usize,
@@ -2071,6 +2192,7 @@ fn cross_validated(
         "step {step}: cross-validating {} by day",
         result.label
     ));
+    let (space, u) = &validated_with_its_constant(space, u, current, ev.data);
     let cv = fit::cross_validate(ev, space, u, Blocking::Day)?;
     // A sensor's offset belongs to its site: other sites cannot predict
     // it, and need not.
@@ -2097,6 +2219,54 @@ fn cross_validated(
     result.cv_site = Some(cv);
     result.passes_cv_site = Some(passes);
     Ok(passes)
+}
+
+/// The space a candidate is cross-validated in. A generic term fitted with
+/// the site constant that scales its quantity beside it (on a base that
+/// differs from the step's model `current` in that constant alone) has the
+/// constant refitted in every fold, as what it is to the engine: a factor
+/// on that quantity from before the first passage on (a step in time that
+/// is a constant in disguise), on the step's model. Fitted on every block
+/// and held in the folds, the constant carried the held-out block into
+/// them: a transfer term on humidity with kt 47 % low beside it was
+/// "supported" by two sites where the friction had changed at the third,
+/// and predicted it better only through kt.
+fn validated_with_its_constant(
+    space: &Space,
+    u: &[f64],
+    current: &ModelConfig,
+    data: &Dataset,
+) -> (Space, Vec<f64>) {
+    let unchanged = || (space.clone(), u.to_vec());
+    let Some(Candidate::Generic(g)) = space.slots.first() else {
+        return unchanged();
+    };
+    let Some(key) = twin_constant(g.acts_on) else {
+        return unchanged();
+    };
+    let mut product = current.product;
+    key.set(&mut product, key.get(&space.base.product));
+    if space.base.product == current.product || product != space.base.product {
+        return unchanged();
+    }
+    let Some(first_ns) = data.passages.iter().map(|p| p.log_time_ns).min() else {
+        return unchanged();
+    };
+    let ratio = key.get(&space.base.product) / key.get(&current.product);
+    let constant = Candidate::Generic(space::GenericSlot::factor(
+        g.acts_on,
+        Driver::Time,
+        FormKind::Step,
+        space::Scope::default(),
+        Some(first_ns as f64 * 1e-9 - 1.0),
+        space::Reach::STEP,
+    ));
+    let mut base = space.base.clone();
+    base.product = current.product;
+    let mut u = u.to_vec();
+    u.push(constant.unit(0, ratio));
+    let slots = vec![space.slots[0].clone(), constant];
+    (Space { base, slots }, u)
 }
 
 /// How well each of `results` at `at` describes the data with the site's

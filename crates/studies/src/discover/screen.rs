@@ -34,6 +34,7 @@ use super::space::{Drivers, GenericSlot, Reach, Scope};
 use crate::Result;
 use tortwin_model::config::ModelConfig;
 use tortwin_model::generic::{ActsOn, Driver, FormKind};
+use tortwin_model::product::ProductKey;
 use tortwin_recording::Quantity;
 
 /// A time step is fitted when its screening reduction is at least this
@@ -50,6 +51,8 @@ const TOP_OFFSETS: usize = 2;
 const EPS_REACH: f64 = 0.05;
 /// A time step's screening factor.
 const EPS_STEP: f64 = 1.05;
+/// The relative perturbation of a site constant for its response.
+const EPS_CONSTANT: f64 = 0.01;
 /// A pulse step's: pulses land on a rail near its cap (m0 of eq. (1) no
 /// longer follows them), where a larger pulse is squeezed out at once and
 /// a slightly smaller one too; only a clearly smaller one shows, as a
@@ -268,6 +271,13 @@ pub struct Screened {
     /// Gauss–Newton estimate of the exp (or step) parameter.
     #[serde(skip)]
     estimate: f64,
+    /// Scored with the site constant that scales its quantity free beside
+    /// it (`None` when it scored better alone).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub beside: Option<&'static str>,
+    /// What it and that constant remove together, to first order.
+    #[serde(skip)]
+    with_constant: f64,
 }
 
 /// What the screening found in one step, for the report.
@@ -280,6 +290,11 @@ pub struct Screening {
     pub offsets: Vec<Screened>,
     /// Time change points tried (RFC 3339).
     pub change_points_utc: Vec<String>,
+    /// The directions proposed because they scored with their site
+    /// constant beside them, with what the two remove together to first
+    /// order: fitted with it at the step when that could compete.
+    #[serde(skip)]
+    pub(super) beside_constant: Vec<(GenericSlot, f64)>,
 }
 
 /// The generic candidates worth fitting at this step, with where each fit
@@ -293,6 +308,7 @@ pub(super) fn propose(
     noise: Option<f64>,
     min_reduction: f64,
     forced: &[Driver],
+    with_constants: bool,
     cache: &mut ResponseCache,
 ) -> Result<(Vec<(Candidate, Start)>, Screening)> {
     let data = ev.data;
@@ -477,6 +493,40 @@ pub(super) fn propose(
         }
     }
     responses.extend(reuse.iter().filter_map(|d| cache.get(d)));
+    // The responses to the site constants that scale a quantity (muD, muC,
+    // kt), while the constants are still to be found: a factor is 1 at its
+    // driver's reference point, so alone it cannot say that the site's
+    // level differs too, and a term whose driver explains the residual
+    // with a level beside it (muD 16 % high, falling linearly with the
+    // humidity) would rank below one that merely correlates.
+    let twins: Vec<(ProductKey, Vec<f64>)> = if with_constants {
+        [
+            ActsOn::FrictionDry,
+            ActsOn::FrictionBoundary,
+            ActsOn::Transfer,
+        ]
+        .into_par_iter()
+        .filter_map(super::twin_constant)
+        .map(|key| {
+            let mut cfg = current.clone();
+            key.set(
+                &mut cfg.product,
+                key.get(&current.product) * (1.0 + EPS_CONSTANT),
+            );
+            let perturbed = ev.simulate(&cfg)?;
+            Ok((
+                key,
+                perturbed
+                    .iter()
+                    .zip(simulated)
+                    .map(|(p, s)| p - s)
+                    .collect(),
+            ))
+        })
+        .collect::<Result<_>>()?
+    } else {
+        Vec::new()
+    };
 
     // Every scope of every direction, scored.
     let single_applicator = applicators.len() == 1;
@@ -518,15 +568,31 @@ pub(super) fn propose(
             if jj <= 0.0 || !jj.is_finite() {
                 continue;
             }
-            let slot_preview = label_of(resp.acts_on, resp.driver, &scope, resp.x0);
+            let mut label = label_of(resp.acts_on, resp.driver, &scope, resp.x0);
+            let (mut reduction, mut coefficient, mut beside) = (rj * rj / jj, rj / jj, None);
+            let mut with_constant = 0.0;
+            let twin = super::twin_constant(resp.acts_on)
+                .and_then(|key| twins.iter().find(|t| t.0 == key))
+                .filter(|_| resp.x0.is_none() && scope.keys() == 0);
+            if let Some((key, jc)) = twin {
+                if let Some((extra, both, a)) = beyond_constant(&residual, &resp.j, jc, active) {
+                    if extra > reduction {
+                        (reduction, coefficient, beside) = (extra, a, Some(key.name()));
+                        with_constant = both;
+                        label = format!("{label} with {} beside it", key.name());
+                    }
+                }
+            }
             screened.push(Screened {
-                label: slot_preview,
-                reduction: rj * rj / jj,
+                label,
+                reduction,
                 acts_on: resp.acts_on,
                 driver: resp.driver,
                 scope,
                 x0: resp.x0,
-                estimate: resp.neutral + (resp.eps - resp.neutral) * rj / jj,
+                estimate: resp.neutral + (resp.eps - resp.neutral) * coefficient,
+                beside,
+                with_constant,
             });
         }
     }
@@ -597,6 +663,7 @@ pub(super) fn propose(
         }
     }
     let mut taken: Vec<&Screened> = Vec::new();
+    let mut beside_constant: Vec<(GenericSlot, f64)> = Vec::new();
     for s in screened.iter().filter(|s| {
         s.x0.is_none()
             && top_drivers.contains(&s.driver)
@@ -617,6 +684,9 @@ pub(super) fn propose(
             None,
             drivers.reach(s.driver),
         );
+        if s.beside.is_some() {
+            beside_constant.push((slot.clone(), s.with_constant));
+        }
         let c = Candidate::Generic(slot);
         let u = c.unit(0, s.estimate);
         candidates.push((c, Start::Warm(vec![u])));
@@ -725,6 +795,8 @@ pub(super) fn propose(
             scope,
             x0: None,
             estimate: mean,
+            beside: None,
+            with_constant: 0.0,
         })
         .collect();
     for o in offsets.iter().filter(|o| worth(o.reduction)) {
@@ -741,8 +813,38 @@ pub(super) fn propose(
             .iter()
             .map(|&t| tortwin_model::config::format_utc(t))
             .collect(),
+        beside_constant,
     };
     Ok((candidates, screening))
+}
+
+/// What a response `j` removes from `residual` (over the `active` rows)
+/// beyond what the response `jc` of a constant removes alone, with both
+/// fitted together (least squares), what the two remove together, and
+/// `j`'s coefficient in that fit; `None` when the two cannot be told
+/// apart.
+fn beyond_constant(
+    residual: &[f64],
+    j: &[f64],
+    jc: &[f64],
+    active: &[bool],
+) -> Option<(f64, f64, f64)> {
+    let (mut jj, mut jcjc, mut jjc, mut rj, mut rjc) = (0.0, 0.0, 0.0, 0.0, 0.0);
+    for k in (0..residual.len()).filter(|&k| active[k]) {
+        jj += j[k] * j[k];
+        jcjc += jc[k] * jc[k];
+        jjc += j[k] * jc[k];
+        rj += residual[k] * j[k];
+        rjc += residual[k] * jc[k];
+    }
+    let det = jj * jcjc - jjc * jjc;
+    if det <= 1e-9 * jj * jcjc || !det.is_finite() {
+        return None;
+    }
+    let a = (rj * jcjc - rjc * jjc) / det;
+    let b = (rjc * jj - rj * jjc) / det;
+    let both = a * rj + b * rjc;
+    Some((both - rjc * rjc / jcjc, both, a))
 }
 
 fn label_of(acts_on: ActsOn, driver: Driver, scope: &Scope, x0: Option<f64>) -> String {
