@@ -226,6 +226,33 @@ pub struct CandidateResult {
     pub cv_site: Option<CrossValidation>,
     pub passes_cv_site: Option<bool>,
     pub engine_runs: usize,
+    /// A generic term fitted with the site constant that scales its
+    /// quantity beside it: that constant, and the term's BIC drop without
+    /// it (what the constant bought is the difference).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub beside: Option<ConstantBeside>,
+}
+
+/// The site constant a candidate was fitted with.
+#[derive(Debug, Clone, Serialize)]
+pub struct ConstantBeside {
+    pub constant: String,
+    pub value: f64,
+    pub delta_bic_alone: f64,
+}
+
+impl CandidateResult {
+    /// The BIC window in which contenders of another kind are weighed
+    /// against this one with the site's constants beside them: the BIC
+    /// threshold, or what a constant fitted beside it bought, if more
+    /// (the rivals must have constants of their own to compete).
+    fn rivals_window(&self, options: &Options) -> f64 {
+        let bought = self
+            .beside
+            .as_ref()
+            .map_or(0.0, |b| b.delta_bic_alone - self.delta_bic);
+        options.bic_threshold.abs().max(bought)
+    }
 }
 
 /// One round of the forward selection.
@@ -814,7 +841,10 @@ pub fn discover(
         // was reported).
         if constants_in && !constant_keys.is_empty() {
             let best = results.iter().position(|r| contends(r, &ev));
-            let rivals = best.map(|k| rivals_beside_constants(&results, k, true, &ev, options));
+            let rivals = best.map(|k| {
+                let window = options.bic_threshold.abs();
+                rivals_beside_constants(&results, k, true, &ev, window)
+            });
             if let Some(at) = rivals.filter(|at| at.len() > 1) {
                 progress.stage(&format!(
                     "step {step}: {} with the site's constants free",
@@ -913,6 +943,7 @@ pub fn discover(
                     let k = results[i].0.k + 1;
                     let bic = n as f64 * (pair_sse / sse).ln() + k as f64 * ln_n;
                     if bic < results[i].0.delta_bic {
+                        let alone = results[i].0.delta_bic;
                         results[i].0.k = k;
                         update(&mut results[i].0, &space, &u, pair_sse);
                         results[i].0.label = format!(
@@ -921,6 +952,11 @@ pub fn discover(
                             key.name(),
                             fmt_param(key.get(&space.base.product))
                         );
+                        results[i].0.beside = Some(ConstantBeside {
+                            constant: key.name().to_string(),
+                            value: key.get(&space.base.product),
+                            delta_bic_alone: alone,
+                        });
                         results[i].1 = space;
                         results[i].2 = u;
                     }
@@ -1106,7 +1142,8 @@ pub fn discover(
         if let (false, Some(k), Some((constants_alone, _, keys))) =
             (take_constants, chosen, constants.as_ref())
         {
-            let at = rivals_beside_constants(&results, k, true, &ev, options);
+            let window = results[k].0.rivals_window(options);
+            let at = rivals_beside_constants(&results, k, true, &ev, window);
             if at.len() > 1 {
                 progress.stage(&format!(
                     "step {step}: {} beside the site's constants",
@@ -1114,7 +1151,8 @@ pub fn discover(
                 ));
                 let _stage = ev.cost.enter(fit::Stage::Refits);
                 let tried: Vec<_> = at.iter().map(|&i| &results[i]).collect();
-                let best = best_beside_constants(&ev, &tried, keys, &start.product, noise_now)?;
+                let best =
+                    best_beside_constants(&ev, &tried, keys, &start.product, noise_now, options)?;
                 let choice = results[k].1.slots.first();
                 if let Some((c, own, u, pair_sse)) = best.filter(|b| Some(&b.0) != choice) {
                     let k_pair = keys.len() + c.dims();
@@ -1155,7 +1193,8 @@ pub fn discover(
             constants.as_ref(),
             calibration_start.as_ref(),
         ) {
-            let at = rivals_beside_constants(&results, k, false, &ev, options);
+            let window = results[k].0.rivals_window(options);
+            let at = rivals_beside_constants(&results, k, false, &ev, window);
             if at.len() > 1 {
                 progress.stage(&format!(
                     "step {step}: the site's constants calibrated beside {}",
@@ -1678,6 +1717,7 @@ impl Judge<'_> {
             cv_site: None,
             passes_cv_site: None,
             engine_runs: 0,
+            beside: None,
         }
     }
 }
@@ -2033,7 +2073,8 @@ fn effect_beside_constants(
             None => false,
         })
         .collect();
-    let Some((c, own, u, pair_sse)) = best_beside_constants(ev, &tried, keys, reference, noise)?
+    let Some((c, own, u, pair_sse)) =
+        best_beside_constants(ev, &tried, keys, reference, noise, options)?
     else {
         return Ok(None);
     };
@@ -2055,9 +2096,28 @@ fn best_beside_constants(
     keys: &[tortwin_model::product::ProductKey],
     reference: &tortwin_model::product::ProductParams,
     noise: Option<f64>,
+    options: &Options,
 ) -> Result<Option<Beside>> {
-    let pairs = each_beside_constants(ev, tried, keys, reference, noise)?;
-    Ok(pairs.into_iter().min_by(|a, b| a.3.total_cmp(&b.3)))
+    let mut pairs = each_beside_constants(ev, tried, keys, reference, noise)?;
+    pairs.sort_by(|a, b| a.3.total_cmp(&b.3));
+    // A named effect that describes the data as well as the best generic
+    // term beside the constants is the better statement there too, by
+    // [`prefer_named`]'s criterion (the generic consumption term on air
+    // temperature is temperature_consumption's form, 0.02 BIC units apart).
+    let n = ev.n_active() as f64;
+    let params = |c: &Candidate| (c.dims() + usize::from(c.is_step())) as f64;
+    let named = match pairs.first() {
+        Some(best) if best.0.is_generic() => pairs.iter().position(|p| {
+            !p.0.is_generic()
+                && n * (p.3 / best.3).ln() + (params(&p.0) - params(&best.0)) * n.ln()
+                    < options.bic_threshold.abs()
+        }),
+        _ => None,
+    };
+    Ok(match named {
+        Some(i) => Some(pairs.swap_remove(i)),
+        None => pairs.into_iter().next(),
+    })
 }
 
 /// Each of `tried` fitted beside the site's constants `keys` (the constants
@@ -2288,8 +2348,8 @@ fn calibrated_bic(
         .filter_map(|&i| {
             let (result, space, u) = &results[i];
             let effect = space.slots.first()?.clone();
-            let own = effect.dims() + usize::from(effect.is_step());
-            Some((i, result.sse, own, space.config(u), effect))
+            // A constant fitted beside the effect counts (`k`).
+            Some((i, result.sse, result.k, space.config(u), effect))
         })
         .map(|(i, fit_sse, own, cfg, effect)| {
             let cal = calibrate::calibrate(ev, &cfg, reference, &[effect], noise)?;
@@ -2314,7 +2374,7 @@ fn rivals_beside_constants(
     k: usize,
     named_rival: bool,
     ev: &Evaluator<'_>,
-    options: &Options,
+    window: f64,
 ) -> Vec<usize> {
     let mut at = vec![k];
     if named_rival {
@@ -2327,7 +2387,7 @@ fn rivals_beside_constants(
         if at.len() >= MAX_CONTENDERS {
             break;
         }
-        let close = (r.0.delta_bic - results[k].0.delta_bic).abs() <= options.bic_threshold.abs();
+        let close = (r.0.delta_bic - results[k].0.delta_bic).abs() <= window;
         let other_kind = r.1.slots.first().is_some_and(|c| {
             !same_kind(c, own)
                 && !matches!(c, Candidate::Generic(g) if g.acts_on == ActsOn::Measurement)
