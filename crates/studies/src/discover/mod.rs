@@ -851,17 +851,15 @@ pub fn discover(
                     labels_of(&results, &at)
                 ));
                 let _stage = ev.cost.enter(fit::Stage::Refits);
-                let tried: Vec<_> = at.iter().map(|&i| &results[i]).collect();
-                let pairs =
-                    each_beside_constants(&ev, &tried, &constant_keys, &start.product, noise_now)?;
-                for (c, space, u, pair_sse) in pairs {
-                    let Some(i) = at
-                        .iter()
-                        .copied()
-                        .find(|&i| results[i].1.slots.first() == Some(&c))
-                    else {
-                        continue;
-                    };
+                let pairs = beside_constants_at(
+                    &ev,
+                    &results,
+                    &at,
+                    &constant_keys,
+                    &start.product,
+                    noise_now,
+                )?;
+                for (i, space, u, pair_sse) in pairs {
                     if pair_sse < results[i].0.sse {
                         update(&mut results[i].0, &space, &u, pair_sse);
                         results[i].1 = space;
@@ -930,14 +928,10 @@ pub fn discover(
                     key.name()
                 ));
                 let _stage = ev.cost.enter(fit::Stage::Refits);
-                let tried: Vec<_> = at.iter().map(|&i| &results[i]).collect();
-                let pairs = each_beside_constants(&ev, &tried, &[key], &start.product, noise_now)?;
-                for (c, space, u, pair_sse) in pairs {
-                    let Some(i) = at
-                        .iter()
-                        .copied()
-                        .find(|&i| results[i].1.slots.first() == Some(&c))
-                    else {
+                let pairs =
+                    beside_constants_at(&ev, &results, &at, &[key], &start.product, noise_now)?;
+                for (i, space, u, pair_sse) in pairs {
+                    let Some(c) = space.slots.first().cloned() else {
                         continue;
                     };
                     let k = results[i].0.k + 1;
@@ -2118,6 +2112,29 @@ fn best_beside_constants(
         Some(i) => Some(pairs.swap_remove(i)),
         None => pairs.into_iter().next(),
     })
+}
+
+/// The results at `at` fitted beside the site's constants `keys`
+/// ([`each_beside_constants`]), each with its index in `results`.
+fn beside_constants_at(
+    ev: &Evaluator<'_>,
+    results: &[(CandidateResult, Space, Vec<f64>)],
+    at: &[usize],
+    keys: &[tortwin_model::product::ProductKey],
+    reference: &tortwin_model::product::ProductParams,
+    noise: Option<f64>,
+) -> Result<Vec<(usize, Space, Vec<f64>, f64)>> {
+    let tried: Vec<_> = at.iter().map(|&i| &results[i]).collect();
+    let pairs = each_beside_constants(ev, &tried, keys, reference, noise)?;
+    Ok(pairs
+        .into_iter()
+        .filter_map(|(c, space, u, sse)| {
+            at.iter()
+                .copied()
+                .find(|&i| results[i].1.slots.first() == Some(&c))
+                .map(|i| (i, space, u, sse))
+        })
+        .collect())
 }
 
 /// Each of `tried` fitted beside the site's constants `keys` (the constants
