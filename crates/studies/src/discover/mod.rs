@@ -2114,6 +2114,11 @@ fn best_beside_constants(
     })
 }
 
+/// A result fitted beside the site's constants: its index in the step's
+/// results, its space over a base that holds the constants, its
+/// coordinates and the SSE.
+type BesideAt = (usize, Space, Vec<f64>, f64);
+
 /// The results at `at` fitted beside the site's constants `keys`
 /// ([`each_beside_constants`]), each with its index in `results`.
 fn beside_constants_at(
@@ -2123,7 +2128,7 @@ fn beside_constants_at(
     keys: &[tortwin_model::product::ProductKey],
     reference: &tortwin_model::product::ProductParams,
     noise: Option<f64>,
-) -> Result<Vec<(usize, Space, Vec<f64>, f64)>> {
+) -> Result<Vec<BesideAt>> {
     let tried: Vec<_> = at.iter().map(|&i| &results[i]).collect();
     let pairs = each_beside_constants(ev, &tried, keys, reference, noise)?;
     Ok(pairs
