@@ -300,9 +300,13 @@ impl<'e, 'a> Problem<'e, 'a> {
     }
 
     /// Whether knob `j`'s column is exact: a constant's (tangents or
-    /// read-outs) or a followed effect parameter's.
+    /// read-outs), a followed effect parameter's, or a read-out term's
+    /// (its column, like a read-out constant's, from the read-outs the
+    /// replay with tangents kept: no replay of its own).
     fn is_exact(&self, j: usize) -> bool {
-        self.is_constant(j) || self.followed().iter().any(|&(k, _)| k == j)
+        self.is_constant(j)
+            || self.followed().iter().any(|&(k, _)| k == j)
+            || matches!(&self.knobs[j], Knob::Effect(Candidate::Generic(g), _) if g.acts_on.role() == Role::ReadOut)
     }
 
     /// The knobs' coordinates in `cfg`.
