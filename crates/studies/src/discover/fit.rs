@@ -306,6 +306,14 @@ pub(super) struct Evaluator<'a> {
     /// Rows that count in the SSE (false: treated as a gross outlier).
     pub(super) active: Vec<bool>,
     cache: Mutex<HashMap<Vec<u64>, Arc<Evaluation>>>,
+    /// The residual vectors of the last evaluations, by the same key: a
+    /// fit that goes on from points evaluated a while ago (a candidate's
+    /// first look, [`first_look`], then its fit to the end) finds them
+    /// here, at 8 bytes a row where the kept read-outs take about 40
+    /// times that, and replays nothing again.
+    residuals: Mutex<std::collections::VecDeque<KeptResidual>>,
+    /// How many residual vectors are kept.
+    keep_residuals: usize,
     /// The read-outs of the last replays, by their configuration's state
     /// part ([`ModelConfig::state_part`]): a configuration that differs
     /// from one of them only in read-out parameters is read, not replayed.
@@ -327,11 +335,17 @@ pub(super) struct Evaluator<'a> {
 
 /// The memory [`Evaluator`] keeps read-outs in, at most.
 const READOUTS_KEPT_BYTES: usize = 256 << 20;
+/// The memory it keeps residual vectors in, at most.
+const RESIDUALS_KEPT_BYTES: usize = 64 << 20;
 /// Checkpoints along a base's replay, and how many bases are kept.
 const CHECKPOINTS: usize = 16;
 const BASES_KEPT: usize = 4;
 /// Calibrations kept by their arguments (a few configurations each).
 const CALIBRATIONS_KEPT: usize = 8;
+
+/// A residual vector kept by the [`Evaluator`], by its configuration's
+/// cache key.
+type KeptResidual = (Vec<u64>, Arc<Vec<f64>>);
 
 /// A replay kept by the [`Evaluator`].
 #[derive(Clone)]
@@ -564,6 +578,10 @@ impl<'a> Evaluator<'a> {
             site_slot,
             active,
             cache: Mutex::new(HashMap::new()),
+            residuals: Default::default(),
+            keep_residuals: (RESIDUALS_KEPT_BYTES
+                / (data.rows.len().max(1) * std::mem::size_of::<f64>()))
+            .max(2),
             readouts: Default::default(),
             bases: Default::default(),
             keep_readouts: (READOUTS_KEPT_BYTES
@@ -748,6 +766,14 @@ impl<'a> Evaluator<'a> {
     /// Residuals (measured − simulated) of `cfg` by one engine run, and
     /// their SSE over the active rows (cached for [`Evaluator::evaluate`]).
     pub(super) fn residuals(&self, cfg: &ModelConfig) -> Result<(Vec<f64>, Arc<Evaluation>)> {
+        let key = cache_key(cfg);
+        let kept = lock_ignoring_poison(&self.residuals)
+            .iter()
+            .find(|(k, _)| *k == key)
+            .map(|(_, r)| r.clone());
+        if let (Some(residual), Some(eval)) = (kept, self.lock().get(&key).cloned()) {
+            return Ok((residual.as_ref().clone(), eval));
+        }
         let simulated = self.simulate(cfg)?;
         let residual: Vec<f64> = self
             .data
@@ -773,7 +799,12 @@ impl<'a> Evaluator<'a> {
             sse_by_day,
             sse_by_site,
         });
-        self.lock().insert(cache_key(cfg), eval.clone());
+        self.lock().insert(key.clone(), eval.clone());
+        let mut kept = lock_ignoring_poison(&self.residuals);
+        if kept.len() >= self.keep_residuals {
+            kept.pop_front();
+        }
+        kept.push_back((key, Arc::new(residual.clone())));
         Ok((residual, eval))
     }
 
@@ -842,6 +873,10 @@ pub(super) struct Fit {
     pub(super) eval: Arc<Evaluation>,
     /// Engine runs the fit cost (cache misses).
     pub(super) runs: usize,
+    /// A fit stopped after its first look ([`first_look`]): the least SSE
+    /// it could still reach, optimistically; `None` for a fit run to its
+    /// end.
+    pub(super) stopped: Option<f64>,
 }
 
 /// How a fit starts.
@@ -993,6 +1028,11 @@ const FLAT_REL: f64 = 1e-6;
 const FRESH_STEP: f64 = 0.1 / GRID_ND as f64;
 /// An optimum found on a bound of `u` is checked this far inwards.
 const BOUND_PROBE: f64 = 0.005;
+/// How much more than its local model promises a fit stopped after its
+/// first look ([`first_look`]) is taken to be able to gain still: the
+/// secant and the parabola are first-order guides, and a candidate is
+/// only left where even this much would not bring it near the best.
+pub(super) const OPTIMISM: f64 = 8.0;
 
 /// How far a warm start looks, and how long a fit of several parameters
 /// may run.
@@ -1161,7 +1201,226 @@ fn finish(obj: &Objective<'_, '_>) -> Result<Fit> {
         u,
         eval,
         runs: obj.runs.load(Ordering::Relaxed),
+        stopped: None,
     })
+}
+
+/// What a candidate's first evaluations say ([`first_look`]).
+pub(super) enum Look {
+    /// The fit ran to its end (nothing to gain from stopping it early).
+    Done(Fit),
+    /// The fit's best point so far, and the least SSE its continuation
+    /// could reach, optimistically ([`OPTIMISM`] times what the residuals'
+    /// or the SSE's local model still promises).
+    Open(Fit, f64),
+}
+
+/// The evaluations [`fit`] begins with, without the rest: for a warm
+/// start inside the box the line search's first two points (the start
+/// and its first secant step), for a fresh one the grid and the two
+/// points halfway beside its best; then the least SSE the rest of the
+/// search could reach, optimistically. A candidate that cannot come near
+/// the best of its step is then left there (discover's `fit_each`); one
+/// that can is fitted by [`fit`] from the same start, which finds these
+/// evaluations in the cache. A fit of no or of several parameters, and
+/// one whose best grid point lies on a bound (one probe inwards decides
+/// it), runs to its end here.
+pub(super) fn first_look(ev: &Evaluator<'_>, space: &Space, start: &Start) -> Result<Look> {
+    if space.dims() == 0 {
+        return fit(ev, space, start.clone(), None).map(Look::Done);
+    }
+    let obj = Objective {
+        ev,
+        space,
+        excluded: None,
+        error: Mutex::new(None),
+        seen: Mutex::new(Vec::new()),
+        runs: AtomicUsize::new(0),
+    };
+    let limits = FULL;
+    let optimistic = match start {
+        _ if space.dims() > 1 => {
+            let (u0, step) = match start {
+                Start::Warm(u) => (u.clone(), limits.warm_step),
+                Start::Fresh => {
+                    let grid = grid_points(space.dims(), GRID_ND);
+                    let costs: Vec<f64> = grid.par_iter().map(|u| obj.cost_at(u)).collect();
+                    obj.take_error()?;
+                    let best = (0..grid.len())
+                        .min_by(|&a, &b| costs[a].total_cmp(&costs[b]))
+                        .unwrap_or(0);
+                    (grid[best].clone(), FRESH_STEP)
+                }
+            };
+            match gauss_newton_promise(&obj, &u0, step)? {
+                Some((sse, promised)) => sse - OPTIMISM * promised,
+                None => return fit(ev, space, start.clone(), None).map(Look::Done),
+            }
+        }
+        Start::Warm(u) if u.iter().all(|&x| x > BOUND_PROBE && x < 1.0 - BOUND_PROBE) => {
+            let u0 = u.first().copied().unwrap_or(0.5);
+            let (lo, hi) = (
+                (u0 - limits.warm_half_width).max(0.0),
+                (u0 + limits.warm_half_width).min(1.0),
+            );
+            let first = u0.clamp(lo, hi);
+            let Some(u1) = first_secant_point(first, lo, hi).map(|u| u.clamp(lo, hi)) else {
+                return fit(ev, space, start.clone(), None).map(Look::Done);
+            };
+            let (a, b) = (obj.residual_at(&[first]), obj.residual_at(&[u1]));
+            obj.take_error()?;
+            let (Some((sse_a, r_a)), Some((sse_b, r_b))) = (a, b) else {
+                return fit(ev, space, start.clone(), None).map(Look::Done);
+            };
+            // The secant's promise from the better of the two points.
+            let du = u1 - first;
+            let best = if sse_b < sse_a { &r_b } else { &r_a };
+            let (mut jj, mut g) = (0.0, 0.0);
+            for ((x, y), r) in r_b.iter().zip(&r_a).zip(best) {
+                let j = (x - y) / du;
+                jj += j * j;
+                g += j * r;
+            }
+            let promised = if jj > 0.0 { g * g / jj } else { 0.0 };
+            if !promised.is_finite() {
+                return fit(ev, space, start.clone(), None).map(Look::Done);
+            }
+            sse_a.min(sse_b) - OPTIMISM * promised
+        }
+        Start::Warm(_) | Start::Fresh => {
+            let grid: Vec<f64> = (0..GRID_1D)
+                .map(|i| i as f64 / (GRID_1D - 1) as f64)
+                .collect();
+            let costs: Vec<f64> = grid.par_iter().map(|&u| obj.cost_at(&[u])).collect();
+            obj.take_error()?;
+            let best = (0..GRID_1D)
+                .min_by(|&a, &b| costs[a].total_cmp(&costs[b]))
+                .unwrap_or(0);
+            let worst = costs.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+            let flat = worst - costs[best] <= FLAT_REL * costs[best].abs();
+            let at_end = best == 0 || best + 1 == GRID_1D;
+            // As the fit does: one probe inwards from an end, and the fit
+            // ends there when it is no better.
+            let probed = if at_end && !flat {
+                let u = if best == 0 {
+                    BOUND_PROBE
+                } else {
+                    1.0 - BOUND_PROBE
+                };
+                let probe = obj.cost_at(&[u]);
+                obj.take_error()?;
+                Some(probe)
+            } else {
+                None
+            };
+            let inwards = probed.is_some_and(|p| p < costs[best]);
+            if flat || (at_end && !inwards) {
+                return fit(ev, space, start.clone(), None).map(Look::Done);
+            }
+            let half = 0.5 / (GRID_1D - 1) as f64;
+            let mids: Vec<f64> = [grid[best] - half, grid[best] + half]
+                .into_iter()
+                .filter(|u| (0.0..=1.0).contains(u))
+                .collect();
+            let mid_costs: Vec<f64> = mids.par_iter().map(|&u| obj.cost_at(&[u])).collect();
+            obj.take_error()?;
+            // The parabola through the best of these (the grid, the mids)
+            // and its neighbours half a spacing away, or at an end the
+            // next two inwards; its least value within them.
+            let mut points: Vec<(f64, f64)> =
+                grid.iter().copied().zip(costs.iter().copied()).collect();
+            points.extend(mids.into_iter().zip(mid_costs));
+            points.sort_by(|a, b| a.0.total_cmp(&b.0));
+            let Some(k) = (0..points.len()).min_by(|&a, &b| points[a].1.total_cmp(&points[b].1))
+            else {
+                return fit(ev, space, start.clone(), None).map(Look::Done);
+            };
+            let three = match k {
+                0 => 0,
+                k if k + 1 == points.len() => k - 2,
+                k => k - 1,
+            };
+            if points.len() < 3 || points.iter().any(|p| !p.1.is_finite()) {
+                return fit(ev, space, start.clone(), None).map(Look::Done);
+            }
+            let ((u0, f0), (u1, f1), (u2, f2)) =
+                (points[three], points[three + 1], points[three + 2]);
+            // Divided differences: the curvature, and the vertex.
+            let (s01, s12) = ((f1 - f0) / (u1 - u0), (f2 - f1) / (u2 - u1));
+            let curvature = 2.0 * (s12 - s01) / (u2 - u0);
+            if !(curvature > 0.0 && curvature.is_finite()) {
+                return fit(ev, space, start.clone(), None).map(Look::Done);
+            }
+            let vertex = (0.5 * (u0 + u1) - s01 / curvature).clamp(u0, u2);
+            let at = |u: f64| f0 + s01 * (u - u0) + 0.5 * curvature * (u - u0) * (u - u1);
+            let (_, f_best) = points[k];
+            // At an end, the probe inwards gained already: at least that.
+            let gained = (f_best - at(vertex)).max(0.0);
+            let probe_gain = probed.map_or(0.0, |p| (costs[best] - p).max(0.0));
+            f_best.min(probed.unwrap_or(f64::INFINITY)) - OPTIMISM * gained.max(probe_gain)
+        }
+    };
+    obj.take_error()?;
+    let (u, eval) = obj.best().ok_or(Error::NoFitPoint)?;
+    let fit = Fit {
+        u,
+        eval,
+        runs: obj.runs.load(Ordering::Relaxed),
+        stopped: None,
+    };
+    Ok(Look::Open(fit, optimistic.max(0.0)))
+}
+
+/// What [`levenberg_marquardt`] from `u0` begins with (the residuals
+/// there and the forward differences of `step`, inwards at a bound),
+/// and what the Gauss–Newton step of that Jacobian promises: the SSE at
+/// `u0` and its predicted fall; `None` where the point or the Jacobian
+/// says nothing.
+fn gauss_newton_promise(
+    obj: &Objective<'_, '_>,
+    u0: &[f64],
+    step: f64,
+) -> Result<Option<(f64, f64)>> {
+    use nalgebra::{DMatrix, DVector};
+    let u: Vec<f64> = u0.iter().map(|x| x.clamp(0.0, 1.0)).collect();
+    let Some((sse, r)) = obj.residual_at(&u) else {
+        return obj.take_error().map(|()| None);
+    };
+    type Probe = (f64, Option<(f64, Vec<f64>)>);
+    let probes: Vec<Probe> = (0..u.len())
+        .into_par_iter()
+        .map(|i| {
+            let mut v = u.clone();
+            let h = if u[i] + step <= 1.0 { step } else { -step };
+            v[i] += h;
+            (h, obj.residual_at(&v))
+        })
+        .collect();
+    obj.take_error()?;
+    let r = DVector::from_vec(r);
+    let mut jac = DMatrix::<f64>::zeros(r.len(), u.len());
+    for (i, (h, probe)) in probes.into_iter().enumerate() {
+        let Some((_, ri)) = probe else {
+            return Ok(None);
+        };
+        jac.set_column(i, &((DVector::from_vec(ri) - &r) / h));
+    }
+    let jtj = jac.transpose() * &jac;
+    let g = jac.transpose() * &r;
+    let promised = jtj
+        .cholesky()
+        .map(|c| g.dot(&c.solve(&g)))
+        .filter(|p| p.is_finite() && *p >= 0.0);
+    Ok(promised.map(|p| (sse, p)))
+}
+
+/// The line search's first secant step from `u` in `[lo, hi]`: a short
+/// step into the bracket's wider side; `None` when the bracket is too
+/// narrow for one.
+fn first_secant_point(u: f64, lo: f64, hi: f64) -> Option<f64> {
+    let h = (LINE_FIRST_STEP * (hi - lo)).max(2.0 * LINE_TOL);
+    let u1 = if hi - u >= u - lo { u + h } else { u - h };
+    ((u1.clamp(lo, hi) - u).abs() >= LINE_TOL).then_some(u1)
 }
 
 /// A point of [`line_search`]: where, its SSE and the residuals it counts.
@@ -1195,15 +1454,9 @@ fn line_search(obj: &Objective<'_, '_>, u0: f64, lo: f64, hi: f64) -> Result<f64
         return Ok(u0);
     };
     // The first secant: a short step into the bracket's wider side.
-    let h = (LINE_FIRST_STEP * (hi - lo)).max(2.0 * LINE_TOL);
-    let u1 = if hi - first.u >= first.u - lo {
-        first.u + h
-    } else {
-        first.u - h
-    };
-    if (u1.clamp(lo, hi) - first.u).abs() < LINE_TOL {
+    let Some(u1) = first_secant_point(first.u, lo, hi) else {
         return Ok(first.u);
-    }
+    };
     let Some(second) = point(u1)? else {
         return Ok(first.u);
     };
@@ -1561,6 +1814,48 @@ mod tests {
         let best = scanned(&ev, &space, &scan);
         assert!(f.eval.sse <= best * (1.0 + 1e-9), "{} > {best}", f.eval.sse);
         assert!(f.runs <= 40, "{} replays", f.runs);
+    }
+
+    /// A first look (`first_look`) is the beginning of the fit, not a
+    /// detour: for every effect of a recording that holds them all, taken
+    /// out of its truth, the fit from the same start after the look costs
+    /// only the rest of the fit's replays and ends where a fit from
+    /// nothing ends; and where the look stops, the least SSE it expects
+    /// is below the SSE the whole fit reaches (the optimism holds).
+    #[test]
+    fn a_first_look_begins_the_fit_and_its_hope_is_not_too_low() {
+        let (data, truth) = bundled("curve_day_all_effects");
+        let silent = crate::progress::Silent;
+        let mut open = 0;
+        for c in Candidate::all().into_iter().filter(|c| c.dims() > 0) {
+            let mut base = truth.clone();
+            c.unset(&mut base.effects);
+            let space = Space {
+                base,
+                slots: vec![c.clone()],
+            };
+            let alone = Evaluator::new(&data, Vec::new(), &silent);
+            let whole = fit(&alone, &space, Start::Fresh, None).expect("fit");
+            let ev = Evaluator::new(&data, Vec::new(), &silent);
+            let look = first_look(&ev, &space, &Start::Fresh).expect("look");
+            let (seen, runs) = match &look {
+                Look::Done(f) => (f.eval.sse, f.runs),
+                Look::Open(f, optimistic) => {
+                    open += 1;
+                    assert!(
+                        *optimistic <= whole.eval.sse,
+                        "{c:?}: hoped for {optimistic}, the fit reaches {}",
+                        whole.eval.sse
+                    );
+                    (f.eval.sse, f.runs)
+                }
+            };
+            assert!(seen >= whole.eval.sse * (1.0 - 1e-12), "{c:?}");
+            let rest = fit(&ev, &space, Start::Fresh, None).expect("fit");
+            assert_eq!(rest.eval.sse, whole.eval.sse, "{c:?}");
+            assert_eq!(runs + rest.runs, whole.runs, "{c:?}: replays");
+        }
+        assert!(open >= 3, "only {open} looks stopped short of their fits");
     }
 
     #[test]

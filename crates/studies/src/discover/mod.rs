@@ -231,6 +231,18 @@ pub struct CandidateResult {
     /// it (what the constant bought is the difference).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub beside: Option<ConstantBeside>,
+    /// The fit was stopped after its first look: even optimistically it
+    /// could not come near the step's best (`params`, `sse` and
+    /// `delta_bic` are its best point so far).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub fit_stopped: Option<FitStopped>,
+}
+
+/// A candidate's fit stopped early ([`CandidateResult::fit_stopped`]).
+#[derive(Debug, Clone, Serialize)]
+pub struct FitStopped {
+    /// The BIC drop its fit could reach at best, optimistically.
+    pub optimistic_delta_bic: f64,
 }
 
 /// The site constant a candidate was fitted with.
@@ -655,7 +667,16 @@ pub fn discover(
             &format!("step {step}: fitting {} candidates", candidates.len()),
             candidates.len() as u64,
         );
-        let fits = fit_each(&ev, &current, &candidates, progress)?;
+        let bic_of = BicOf { sse, n };
+        let fits = fit_each(
+            &ev,
+            &current,
+            &candidates,
+            progress,
+            &bic_of,
+            0.0,
+            FORMS_FOR,
+        )?;
         // The best directions (acts_on × driver × scope), whichever form
         // found them, in every other form: a factor clamped at 0 shows
         // first as a step, a power first as an exp.
@@ -699,7 +720,13 @@ pub fn discover(
                 &format!("step {step}: fitting {} more forms", more.len()),
                 more.len() as u64,
             );
-            fits.extend(fit_each(&ev, &current, &more, progress)?);
+            let so_far = fits
+                .iter()
+                .map(|(c, _, f)| bic_of.of(f.eval.sse, c.dims() + usize::from(c.is_step())))
+                .fold(0.0, f64::min);
+            fits.extend(fit_each(
+                &ev, &current, &more, progress, &bic_of, so_far, 0,
+            )?);
         }
         let judge = Judge {
             sse,
@@ -718,14 +745,21 @@ pub fn discover(
                 let mut r = judge.result(c.name(), c.label(), f.eval.sse, k);
                 r.params = c.named(&params);
                 r.engine_runs = f.runs;
+                r.fit_stopped = f.stopped.map(|optimistic| FitStopped {
+                    optimistic_delta_bic: bic_of.of(optimistic, k),
+                });
                 (r, space, f.u)
             })
             .collect();
         // A named effect that could not pass the BIC while the residual was
-        // larger will not pass on a smaller one.
+        // larger will not pass on a smaller one (one whose fit stopped
+        // early: not even optimistically).
         for (r, space, _) in &results {
             if let Some(c) = space.slots.first().filter(|c| !c.is_generic()) {
-                let bic = n as f64 * (r.sse / sse).ln() + c.dims() as f64 * ln_n;
+                let bic = match &r.fit_stopped {
+                    Some(stopped) => stopped.optimistic_delta_bic,
+                    None => n as f64 * (r.sse / sse).ln() + c.dims() as f64 * ln_n,
+                };
                 if bic >= options.bic_threshold {
                     hopeless.push(c.clone());
                 }
@@ -1090,34 +1124,79 @@ pub fn discover(
         let cv_current = sse;
         let mut chosen = None;
         let mut take_constants = false;
-        for (k, (result, space, u)) in results.iter_mut().enumerate() {
-            if !(result.passes_bic && result.passes_share) {
-                continue;
-            }
-            // A change in time before the first measurement it could
-            // affect is a site constant, not a change: never an effect.
-            if space
-                .slots
-                .first()
-                .is_some_and(|c| constant_in_disguise(c, &ev))
-            {
-                continue;
-            }
-            // The site's constants explain the data as well as what is
-            // left: they are taken at this step. A constant that differs
-            // for the whole recording is the plainer story, so an effect
-            // must beat them by the BIC threshold (a consumption term on
-            // creepage that is 122 % of the model's at 0 and 117 % at
-            // 0.002 is kc 19 % low: 2.6 BIC units apart).
-            if constants_pass.is_some_and(|d| d <= result.delta_bic - options.bic_threshold) {
-                take_constants = true;
+        // Candidates whose fits stopped early lie beyond what the walk
+        // below reaches unless everything better is turned down: before
+        // it would decide at a candidate one of them could precede (or
+        // turn everything down while one could still pass), they are
+        // fitted to the end and the walk begins again.
+        let mut walks = 0;
+        'walk: loop {
+            walks += 1;
+            let stopped_floor = results
+                .iter()
+                .filter_map(|r| r.0.fit_stopped.as_ref())
+                .map(|s| s.optimistic_delta_bic)
+                .fold(f64::INFINITY, f64::min);
+            let mut reached_stopped = false;
+            for (k, (result, space, u)) in results.iter_mut().enumerate() {
+                if !(result.passes_bic && result.passes_share) {
+                    continue;
+                }
+                if result.delta_bic >= stopped_floor {
+                    reached_stopped = true;
+                    break;
+                }
+                // A change in time before the first measurement it could
+                // affect is a site constant, not a change: never an effect.
+                if space
+                    .slots
+                    .first()
+                    .is_some_and(|c| constant_in_disguise(c, &ev))
+                {
+                    continue;
+                }
+                // The site's constants explain the data as well as what is
+                // left: they are taken at this step. A constant that differs
+                // for the whole recording is the plainer story, so an effect
+                // must beat them by the BIC threshold (a consumption term on
+                // creepage that is 122 % of the model's at 0 and 117 % at
+                // 0.002 is kc 19 % low: 2.6 BIC units apart).
+                if constants_pass.is_some_and(|d| d <= result.delta_bic - options.bic_threshold) {
+                    take_constants = true;
+                    break;
+                }
+                if !cross_validated(&ev, result, space, u, &current, cv_current, progress, step)? {
+                    continue;
+                }
+                chosen = Some(k);
                 break;
             }
-            if !cross_validated(&ev, result, space, u, &current, cv_current, progress, step)? {
-                continue;
+            let none_taken = chosen.is_none() && !take_constants;
+            if walks > 1
+                || !(reached_stopped || none_taken && stopped_floor < options.bic_threshold)
+            {
+                break 'walk;
             }
-            chosen = Some(k);
-            break;
+            progress.stage(&format!(
+                "step {step}: the candidates left early, to the end"
+            ));
+            for r in results.iter_mut().filter(|r| r.0.fit_stopped.is_some()) {
+                let Some(c) = r.1.slots.first() else { continue };
+                let start = candidates
+                    .iter()
+                    .chain(&more)
+                    .find(|(d, _)| d == c)
+                    .map_or_else(|| Start::Warm(r.2.clone()), |(_, s)| s.clone());
+                let f = fit::fit(&ev, &r.1, start, None)?;
+                if f.eval.sse < r.0.sse {
+                    update(&mut r.0, &r.1, &f.u, f.eval.sse);
+                    r.2 = f.u;
+                }
+                r.0.engine_runs += f.runs;
+                r.0.fit_stopped = None;
+            }
+            results.sort_by(|a, b| a.0.delta_bic.total_cmp(&b.0.delta_bic));
+            (chosen, take_constants) = (None, false);
         }
         // An effect chosen over the site's constants may stand in for both
         // them and another effect that the laboratory's constants kept
@@ -1712,6 +1791,7 @@ impl Judge<'_> {
             passes_cv_site: None,
             engine_runs: 0,
             beside: None,
+            fit_stopped: None,
         }
     }
 }
@@ -2789,26 +2869,147 @@ fn named_family(c: &Candidate) -> Option<Candidate> {
 
 /// Fits each candidate alone on top of `current`, in parallel, telling
 /// `progress` how many are done.
+///
+/// Most candidates of a step cannot come near its best, and their fits
+/// to the end were half of what a discover cost (2026-11-30: 3 040 of
+/// 6 305 run-equivalents over tests/discover.rs and
+/// tests/discover_generic.rs). So each first gets a look
+/// ([`fit::first_look`]: a warm start's first two points, or a fresh
+/// grid); a named effect or a generic term on the product (whose
+/// evaluations are replays) is then fitted to the end only where, with
+/// [`fit::OPTIMISM`] times what its local model still promises, its BIC
+/// drop could reach [`PRUNE_SHARE`] of the step's best so far (`at_least`
+/// or the best look), or where its direction is among the `forms_for`
+/// best (those are fitted in their other forms next, [`FORMS_FOR`]). The
+/// rest stop where they are, marked ([`fit::Fit::stopped`]): every rule
+/// that weighs a candidate against the best (contenders, rivals, time
+/// steps placed) looks within that share, and the choice completes them
+/// before it would reach one ([`complete_stopped`]). Read-out terms and
+/// time steps cost a fraction of a replay each and are fitted to the end
+/// at once.
 fn fit_each(
     ev: &Evaluator<'_>,
     current: &ModelConfig,
     candidates: &[(Candidate, Start)],
     progress: &dyn Progress,
+    bic: &BicOf,
+    at_least: f64,
+    forms_for: usize,
 ) -> Result<Vec<(Candidate, Space, fit::Fit)>> {
     let finished = std::sync::atomic::AtomicU64::new(0);
-    candidates
+    let space_of = |c: &Candidate| Space {
+        base: current.clone(),
+        slots: vec![c.clone()],
+    };
+    let looks: Vec<fit::Look> = candidates
         .par_iter()
         .map(|(c, start)| {
-            let space = Space {
-                base: current.clone(),
-                slots: vec![c.clone()],
+            let space = space_of(c);
+            let look = if may_stop(c) {
+                fit::first_look(ev, &space, start)
+            } else {
+                fit::fit(ev, &space, start.clone(), None).map(fit::Look::Done)
             };
-            let fit = fit::fit(ev, &space, start.clone(), None).map(|f| (c.clone(), space, f));
-            let n = finished.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
-            progress.done(n);
-            fit
+            if matches!(look, Ok(fit::Look::Done(_))) {
+                let n = finished.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
+                progress.done(n);
+            }
+            look
+        })
+        .collect::<Result<_>>()?;
+    let k_of = |c: &Candidate| c.dims() + usize::from(c.is_step());
+    let seen = |look: &fit::Look| match look {
+        fit::Look::Done(f) | fit::Look::Open(f, _) => f.eval.sse,
+    };
+    let best = candidates
+        .iter()
+        .zip(&looks)
+        .map(|((c, _), look)| bic.of(seen(look), k_of(c)))
+        .fold(at_least, f64::min);
+    // The best directions of generic terms on a driver, by what their
+    // looks reached: they are fitted in every other form next, so they
+    // are fitted to the end here.
+    let mut directions: Vec<(f64, &space::GenericSlot)> = candidates
+        .iter()
+        .zip(&looks)
+        .filter_map(|((c, _), look)| match c {
+            Candidate::Generic(g) if g.driver.is_some_and(|d| d != Driver::Time) => {
+                Some((seen(look), g))
+            }
+            _ => None,
+        })
+        .filter(|(sse, _)| *sse < bic.sse)
+        .collect();
+    directions.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let mut top: Vec<&space::GenericSlot> = Vec::new();
+    for (_, g) in directions {
+        if top.len() < forms_for && !top.iter().any(|t| t.same_direction(g)) {
+            top.push(g);
+        }
+    }
+    let wanted = |c: &Candidate, optimistic: f64| {
+        best >= 0.0
+            || bic.of(optimistic, k_of(c)) <= PRUNE_SHARE * best
+            || matches!(c, Candidate::Generic(g) if top.iter().any(|t| t.same_direction(g)))
+    };
+    looks
+        .into_par_iter()
+        .zip(candidates.par_iter())
+        .map(|(look, (c, start))| {
+            let space = space_of(c);
+            let fit = match look {
+                fit::Look::Done(f) => f,
+                fit::Look::Open(f, optimistic) if wanted(c, optimistic) => {
+                    let mut full = fit::fit(ev, &space, start.clone(), None)?;
+                    full.runs += f.runs;
+                    let n = finished.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
+                    progress.done(n);
+                    full
+                }
+                fit::Look::Open(mut f, optimistic) => {
+                    f.stopped = Some(optimistic);
+                    let n = finished.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
+                    progress.done(n);
+                    f
+                }
+            };
+            Ok((c.clone(), space, fit))
         })
         .collect()
+}
+
+/// Whether a candidate's fit may stop after its first look
+/// ([`fit_each`]): a named effect, or a generic term on the product along
+/// a driver other than time (their evaluations are replays from the
+/// start).
+fn may_stop(c: &Candidate) -> bool {
+    match c {
+        Candidate::Named(_) => true,
+        Candidate::Generic(g) => {
+            g.acts_on.role() == tortwin_model::role::Role::State
+                && g.driver.is_some_and(|d| d != Driver::Time)
+        }
+    }
+}
+
+/// A stopped fit goes on only where its BIC drop, optimistically, could
+/// reach this share of the step's best ([`fit_each`]): every rule that
+/// weighs candidates against the best looks within it (placing time
+/// steps at 0.5, contenders and twins at [`CONTENDER_SHARE`]).
+const PRUNE_SHARE: f64 = 0.5;
+
+/// The BIC drop of a candidate against the step's model.
+struct BicOf {
+    /// The step model's SSE and the measurements counted.
+    sse: f64,
+    n: usize,
+}
+
+impl BicOf {
+    fn of(&self, sse: f64, k: usize) -> f64 {
+        let n = self.n as f64;
+        n * (sse / self.sse).ln() + k as f64 * n.ln()
+    }
 }
 
 /// Moves the best passing named effect in front of the generic terms when
