@@ -1126,9 +1126,11 @@ pub fn discover(
         let mut take_constants = false;
         // Candidates whose fits stopped early lie beyond what the walk
         // below reaches unless everything better is turned down: before
-        // it would decide at a candidate one of them could precede (or
-        // turn everything down while one could still pass), they are
-        // fitted to the end and the walk begins again.
+        // it would decide at a candidate one of them could precede or
+        // rival (within the window in which rivals of another kind are
+        // weighed beside the site's constants), or turn everything down
+        // while one could still pass, they are fitted to the end and the
+        // walk begins again.
         let mut walks = 0;
         'walk: loop {
             walks += 1;
@@ -1142,7 +1144,7 @@ pub fn discover(
                 if !(result.passes_bic && result.passes_share) {
                     continue;
                 }
-                if result.delta_bic >= stopped_floor {
+                if result.delta_bic + result.rivals_window(options) >= stopped_floor {
                     reached_stopped = true;
                     break;
                 }
@@ -1196,6 +1198,9 @@ pub fn discover(
                 r.0.fit_stopped = None;
             }
             results.sort_by(|a, b| a.0.delta_bic.total_cmp(&b.0.delta_bic));
+            prefer_named(&mut results, n, options);
+            prefer_direct_drivers(&mut results);
+            prefer_narrow_offsets(&mut results, n);
             (chosen, take_constants) = (None, false);
         }
         // An effect chosen over the site's constants may stand in for both
@@ -2881,10 +2886,12 @@ fn named_family(c: &Candidate) -> Option<Candidate> {
 /// drop could reach [`PRUNE_SHARE`] of the step's best so far (`at_least`
 /// or the best look), or where its direction is among the `forms_for`
 /// best (those are fitted in their other forms next, [`FORMS_FOR`]). The
-/// rest stop where they are, marked ([`fit::Fit::stopped`]): every rule
-/// that weighs a candidate against the best (contenders, rivals, time
-/// steps placed) looks within that share, and the choice completes them
-/// before it would reach one ([`complete_stopped`]). Read-out terms and
+/// rest stop where they are, marked ([`fit::Fit::stopped`]): the rules
+/// that weigh a candidate against the best (contenders with the model's
+/// effects free and twins beside their constant within
+/// [`CONTENDER_SHARE`], time steps placed within half) look within that
+/// share, and the choice fits them to the end before it would decide
+/// where one could precede or rival its candidate. Read-out terms and
 /// time steps cost a fraction of a replay each and are fitted to the end
 /// at once.
 fn fit_each(
