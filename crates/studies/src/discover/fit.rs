@@ -1131,47 +1131,17 @@ fn fit_with(
             }
         }
         if !done {
-            // The grid includes both ends: several effects are off (or
-            // nearly) at an end, and an optimum there is found at once.
-            let grid: Vec<f64> = (0..GRID_1D)
-                .map(|i| i as f64 / (GRID_1D - 1) as f64)
-                .collect();
-            let costs: Vec<f64> = grid.par_iter().map(|&u| obj.cost_at(&[u])).collect();
-            obj.take_error()?;
-            let best = (0..GRID_1D)
-                .min_by(|&a, &b| costs[a].total_cmp(&costs[b]))
-                .unwrap_or(0);
-            let worst = costs.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-            // A flat objective (an effect the recording cannot show, e.g.
-            // rain wash-off without rain): nothing to refine.
-            let at_end = best == 0 || best + 1 == GRID_1D;
-            let flat = worst - costs[best] <= FLAT_REL * costs[best].abs();
-            // An optimum at a bound: a search would creep towards it for many
-            // evaluations. One step inwards tells whether it lies there.
-            let on_bound = at_end && !flat && {
-                let inwards = if best == 0 {
-                    BOUND_PROBE
-                } else {
-                    1.0 - BOUND_PROBE
-                };
-                obj.cost_at(&[inwards]) >= costs[best]
-            };
-            if !flat && !on_bound {
-                // Halfway to the best point's neighbours, then the line
-                // search within half a spacing of the best of them.
-                let half = 0.5 / (GRID_1D - 1) as f64;
-                let mids: Vec<f64> = [grid[best] - half, grid[best] + half]
-                    .into_iter()
-                    .filter(|u| (0.0..=1.0).contains(u))
-                    .collect();
-                let mid_costs: Vec<f64> = mids.par_iter().map(|&u| obj.cost_at(&[u])).collect();
-                obj.take_error()?;
-                let (mut u, mut at_u) = (grid[best], costs[best]);
-                for (&m, &c) in mids.iter().zip(&mid_costs) {
+            let g = coarse_grid(&obj)?;
+            if let Some(mids) = g.mids(&obj)? {
+                // The line search within half a spacing of the best of
+                // the grid and the mids.
+                let (mut u, mut at_u) = (g.grid[g.best], g.costs[g.best]);
+                for &(m, c) in &mids {
                     if c < at_u {
                         (u, at_u) = (m, c);
                     }
                 }
+                let half = 0.5 / (GRID_1D - 1) as f64;
                 line_search(&obj, u, (u - half).max(0.0), (u + half).min(1.0))?;
             }
         }
@@ -1288,48 +1258,17 @@ pub(super) fn first_look(ev: &Evaluator<'_>, space: &Space, start: &Start) -> Re
             sse_a.min(sse_b) - OPTIMISM * promised
         }
         Start::Warm(_) | Start::Fresh => {
-            let grid: Vec<f64> = (0..GRID_1D)
-                .map(|i| i as f64 / (GRID_1D - 1) as f64)
-                .collect();
-            let costs: Vec<f64> = grid.par_iter().map(|&u| obj.cost_at(&[u])).collect();
-            obj.take_error()?;
-            let best = (0..GRID_1D)
-                .min_by(|&a, &b| costs[a].total_cmp(&costs[b]))
-                .unwrap_or(0);
-            let worst = costs.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-            let flat = worst - costs[best] <= FLAT_REL * costs[best].abs();
-            let at_end = best == 0 || best + 1 == GRID_1D;
-            // As the fit does: one probe inwards from an end, and the fit
-            // ends there when it is no better.
-            let probed = if at_end && !flat {
-                let u = if best == 0 {
-                    BOUND_PROBE
-                } else {
-                    1.0 - BOUND_PROBE
-                };
-                let probe = obj.cost_at(&[u]);
-                obj.take_error()?;
-                Some(probe)
-            } else {
-                None
-            };
-            let inwards = probed.is_some_and(|p| p < costs[best]);
-            if flat || (at_end && !inwards) {
+            let g = coarse_grid(&obj)?;
+            let Some(mids) = g.mids(&obj)? else {
                 return fit(ev, space, start.clone(), None).map(Look::Done);
-            }
-            let half = 0.5 / (GRID_1D - 1) as f64;
-            let mids: Vec<f64> = [grid[best] - half, grid[best] + half]
-                .into_iter()
-                .filter(|u| (0.0..=1.0).contains(u))
-                .collect();
-            let mid_costs: Vec<f64> = mids.par_iter().map(|&u| obj.cost_at(&[u])).collect();
-            obj.take_error()?;
+            };
+            let (grid, costs, best, probed) = (&g.grid, &g.costs, g.best, g.probed);
             // The parabola through the best of these (the grid, the mids)
             // and its neighbours half a spacing away, or at an end the
             // next two inwards; its least value within them.
             let mut points: Vec<(f64, f64)> =
                 grid.iter().copied().zip(costs.iter().copied()).collect();
-            points.extend(mids.into_iter().zip(mid_costs));
+            points.extend(mids);
             points.sort_by(|a, b| a.0.total_cmp(&b.0));
             let Some(k) = (0..points.len()).min_by(|&a, &b| points[a].1.total_cmp(&points[b].1))
             else {
@@ -1369,6 +1308,75 @@ pub(super) fn first_look(ev: &Evaluator<'_>, space: &Space, start: &Start) -> Re
         stopped: None,
     };
     Ok(Look::Open(fit, optimistic.max(0.0)))
+}
+
+/// A fit of one parameter's coarse grid ([`GRID_1D`] points, both ends
+/// included: several effects are off, or nearly, at an end, and an
+/// optimum there is found at once), evaluated in parallel.
+struct CoarseGrid {
+    grid: Vec<f64>,
+    costs: Vec<f64>,
+    best: usize,
+    /// The SSE one step inwards from the best point where that is an end
+    /// of a grid that is not flat.
+    probed: Option<f64>,
+    /// Nothing to refine: the grid is flat (an effect the recording
+    /// cannot show, e.g. rain wash-off without rain), or its best point is
+    /// an end and one step inwards is no better (a search would creep
+    /// towards the bound for many evaluations).
+    settled: bool,
+}
+
+fn coarse_grid(obj: &Objective<'_, '_>) -> Result<CoarseGrid> {
+    let grid: Vec<f64> = (0..GRID_1D)
+        .map(|i| i as f64 / (GRID_1D - 1) as f64)
+        .collect();
+    let costs: Vec<f64> = grid.par_iter().map(|&u| obj.cost_at(&[u])).collect();
+    obj.take_error()?;
+    let best = (0..GRID_1D)
+        .min_by(|&a, &b| costs[a].total_cmp(&costs[b]))
+        .unwrap_or(0);
+    let worst = costs.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    let flat = worst - costs[best] <= FLAT_REL * costs[best].abs();
+    let at_end = best == 0 || best + 1 == GRID_1D;
+    let probed = if at_end && !flat {
+        let u = if best == 0 {
+            BOUND_PROBE
+        } else {
+            1.0 - BOUND_PROBE
+        };
+        let probe = obj.cost_at(&[u]);
+        obj.take_error()?;
+        Some(probe)
+    } else {
+        None
+    };
+    let settled = flat || probed.is_some_and(|p| p >= costs[best]);
+    Ok(CoarseGrid {
+        grid,
+        costs,
+        best,
+        probed,
+        settled,
+    })
+}
+
+impl CoarseGrid {
+    /// The points halfway to the best point's neighbours (one at an
+    /// end), evaluated: (u, SSE); `None` where the grid is settled.
+    fn mids(&self, obj: &Objective<'_, '_>) -> Result<Option<Vec<(f64, f64)>>> {
+        if self.settled {
+            return Ok(None);
+        }
+        let half = 0.5 / (GRID_1D - 1) as f64;
+        let mids: Vec<f64> = [self.grid[self.best] - half, self.grid[self.best] + half]
+            .into_iter()
+            .filter(|u| (0.0..=1.0).contains(u))
+            .collect();
+        let costs: Vec<f64> = mids.par_iter().map(|&u| obj.cost_at(&[u])).collect();
+        obj.take_error()?;
+        Ok(Some(mids.into_iter().zip(costs).collect()))
+    }
 }
 
 /// What [`levenberg_marquardt`] from `u0` begins with (the residuals
