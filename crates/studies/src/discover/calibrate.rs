@@ -35,7 +35,9 @@
 //! both), and no more than [`NULL_SHARE`] of it lies in an undetermined
 //! direction. Its 95 % interval is that standard error, the larger of the
 //! model-based and the train-clustered (sandwich) one: the measurements of
-//! one train share its errors.
+//! one train share its errors. Where constants end held at their reference
+//! values (4. below), what their own intervals allow them to push into a
+//! determined constant widens its interval ([`lean_of_held`]).
 //!
 //! **3. Combinations.** What else the recording determines is carried by
 //! representatives: constants taken in the order of their information
@@ -1353,6 +1355,7 @@ fn calibrate_anew(
                     theta: theta_all[k],
                     value_theta: 0.0,
                     sd,
+                    lean: 0.0,
                     determined: true,
                     partners: Vec::new(),
                     pinned: theta_all[k].abs() <= Z95 * sd,
@@ -1514,6 +1517,7 @@ fn calibrate_anew(
                 theta: theta[k],
                 value_theta: theta[k],
                 sd: c.sd[slot],
+                lean: 0.0,
                 determined: false,
                 partners: partners_of(&problem, &c.absorbs, slot, &free),
                 pinned: false,
@@ -1525,6 +1529,7 @@ fn calibrate_anew(
                 theta: held_at.iter().find(|p| p.0 == k).map_or(0.0, |p| p.1),
                 value_theta: 0.0,
                 sd: held_at.iter().find(|p| p.0 == k).map_or(f64::NAN, |p| p.2),
+                lean: 0.0,
                 determined: false,
                 partners: Vec::new(),
                 pinned: true,
@@ -1537,6 +1542,9 @@ fn calibrate_anew(
         if let Some(f) = fits[k].as_mut() {
             f.value_theta = theta[k];
         }
+    }
+    if let Some(c) = &cond {
+        lean_of_held(&mut fits, c, &free);
     }
     let fitted = free;
     let model = problem.config(&theta);
@@ -1556,6 +1564,44 @@ fn calibrate_anew(
     ))
 }
 
+/// What the constants held at their reference values can push into the
+/// determined constants fitted beside them. A held constant `u` (a
+/// determined one whose interval holds its reference value, a
+/// representative held there, one the likelihood-ratio test let go) is
+/// not known to be at its reference value: the recording puts it at its
+/// estimate `θ_u` within its standard error `s_u`, and the fitted knobs
+/// absorb a deviation of it as `A θ_u` (`A` from [`conditional`]). So a
+/// determined constant `k` has a spread of at least
+/// `√(s_k|held² + Σ_u (A_ku s_u)²)` (its conditional one and what the held
+/// ones add), kept where that exceeds its spread with everything free, and
+/// its interval reaches from the value the model carries to where the held
+/// constants' estimates would move it (`-Σ_u A_ku θ_u`, [`Fit::lean`]).
+/// The seed 20261146 campaign showed why: `km_kg` -33 % held at the
+/// laboratory's value (its interval held both) moved `mu_d` by -1.7 %,
+/// five of its standard errors.
+fn lean_of_held(fits: &mut [Option<Fit>], cond: &Conditional, fitted: &[usize]) {
+    let held: Vec<(usize, f64, f64)> = fits
+        .iter()
+        .enumerate()
+        .filter(|(u, _)| !fitted.contains(u))
+        .filter_map(|(u, f)| f.as_ref().map(|f| (u, f.theta, f.sd)))
+        .filter(|&(_, theta, sd)| theta.is_finite() && sd.is_finite())
+        .collect();
+    for (slot, &k) in fitted.iter().enumerate() {
+        let Some(fit) = fits[k].as_mut().filter(|f| f.determined && !f.pinned) else {
+            continue;
+        };
+        let (mut lean, mut var) = (0.0, cond.sd[slot].powi(2));
+        for &(u, theta, sd) in &held {
+            let a = cond.absorbs[(slot, u)];
+            lean -= a * theta;
+            var += (a * sd).powi(2);
+        }
+        fit.lean = lean;
+        fit.sd = fit.sd.max(var.sqrt());
+    }
+}
+
 /// A damped step tried: the constants, the simulated measurements, the
 /// step taken and the sum of squared residuals.
 type Trial = (Vec<f64>, DVector<f64>, DVector<f64>, f64);
@@ -1570,6 +1616,10 @@ struct Fit {
     value_theta: f64,
     /// Its standard error (of `ln p`).
     sd: f64,
+    /// For a determined constant fitted beside constants held at their
+    /// reference values: where those constants' own estimates would move
+    /// it (`θ`), the side its interval widens to ([`lean_of_held`]).
+    lean: f64,
     determined: bool,
     /// For a representative: the held constants whose deviation it carries,
     /// with the exponent.
@@ -1731,14 +1781,20 @@ fn describe_fitted(
     let estimate = reference * fit.theta.exp();
     // A determined constant's interval is centred on the value the model
     // carries (the fit with the representatives; its spread is the one
-    // with every other constant free); one held at its reference value
-    // shows the interval that holds it.
+    // with every other constant free, or what the held constants add
+    // where that is more: [`lean_of_held`]); one held at its reference
+    // value shows the interval that holds it.
     let centre = if fit.determined && !fit.pinned {
         reference * fit.value_theta.exp()
     } else {
         estimate
     };
     let ci = interval(centre, fit.sd);
+    // Widened on the side the held constants lean to.
+    let ci = [
+        ci[0] * fit.lean.min(0.0).exp(),
+        ci[1] * fit.lean.max(0.0).exp(),
+    ];
     let ci_text = format!("{}–{}", fmt_param(ci[0]), fmt_param(ci[1]));
     let reference_text = if base.start.is_some() {
         format!("the starting model's {}", fmt_param(reference))
@@ -2036,6 +2092,55 @@ mod tests {
         );
         // Nothing is held that is far from its reference.
         assert!(held(&[10.0 * s0, 10.0 * s1]).is_empty());
+    }
+
+    #[test]
+    fn a_constant_held_at_its_reference_widens_the_interval_of_one_it_leans_on() {
+        // The truth: knob 1 at 0.3, knob 0 at 0. Knob 1 is held at its
+        // reference value (0) with the estimate 0.25 ± 0.2 its interval
+        // allows; knob 0, fitted alone, takes up `A · 0.3` of it, many of
+        // its own standard errors away from the truth.
+        let n = 400;
+        let a = |i: usize| ((i as f64) * 0.37).sin();
+        let b = |i: usize| 0.5 * ((i as f64) * 0.37).sin() + 0.2 * ((i as f64) * 0.91).cos();
+        let j = jacobian(n, &[&a, &b]);
+        let sigma = 0.01;
+        let r = DVector::from_fn(n, |i, _| if (i * 7919) % 13 < 6 { sigma } else { -sigma });
+        let singles: Vec<usize> = (0..n).collect();
+        let cond = conditional(&j, &r, &singles, &[0]).unwrap();
+        let absorbed = cond.absorbs[(0, 1)];
+        let value = absorbed * 0.3;
+        let fit = |theta: f64, sd: f64, determined: bool, pinned: bool| Fit {
+            theta,
+            value_theta: theta,
+            sd,
+            lean: 0.0,
+            determined,
+            partners: Vec::new(),
+            pinned,
+            flat: false,
+        };
+        let sd0 = cond.sd[0];
+        assert!(value.abs() > 10.0 * sd0, "the bias is {} standard errors", value / sd0);
+        let mut fits = vec![
+            Some(fit(value, sd0, true, false)),
+            Some(fit(0.25, 0.2, false, true)),
+        ];
+        lean_of_held(&mut fits, &cond, &[0]);
+        let f = fits[0].as_ref().unwrap();
+        assert!((f.lean + absorbed * 0.25).abs() < 1e-12);
+        let expected = (sd0 * sd0 + (absorbed * 0.2).powi(2)).sqrt();
+        assert!((f.sd - expected).abs() < 1e-12 * expected);
+        let (lo, hi) = (
+            value + f.lean.min(0.0) - Z95 * f.sd,
+            value + f.lean.max(0.0) + Z95 * f.sd,
+        );
+        assert!(lo <= 0.0 && 0.0 <= hi, "{lo}..{hi} holds the truth");
+        assert!(lo <= value && value <= hi, "and the value the model carries");
+        // A constant kept without an interval of its own adds nothing.
+        let mut alone = vec![Some(fit(value, sd0, true, false)), None];
+        lean_of_held(&mut alone, &cond, &[0]);
+        assert_eq!(alone[0].as_ref().unwrap().sd, sd0);
     }
 
     #[test]
