@@ -2121,7 +2121,11 @@ mod tests {
             flat: false,
         };
         let sd0 = cond.sd[0];
-        assert!(value.abs() > 10.0 * sd0, "the bias is {} standard errors", value / sd0);
+        assert!(
+            value.abs() > 10.0 * sd0,
+            "the bias is {} standard errors",
+            value / sd0
+        );
         let mut fits = vec![
             Some(fit(value, sd0, true, false)),
             Some(fit(0.25, 0.2, false, true)),
@@ -2136,7 +2140,10 @@ mod tests {
             value + f.lean.max(0.0) + Z95 * f.sd,
         );
         assert!(lo <= 0.0 && 0.0 <= hi, "{lo}..{hi} holds the truth");
-        assert!(lo <= value && value <= hi, "and the value the model carries");
+        assert!(
+            lo <= value && value <= hi,
+            "and the value the model carries"
+        );
         // A constant kept without an interval of its own adds nothing.
         let mut alone = vec![Some(fit(value, sd0, true, false)), None];
         lean_of_held(&mut alone, &cond, &[0]);
