@@ -900,12 +900,58 @@ struct Objective<'e, 'a> {
     seen: Mutex<Vec<(Vec<f64>, Arc<Evaluation>)>>,
     /// Engine runs this objective caused (cache misses).
     runs: AtomicUsize,
+    /// At most this many engine runs ([`look_further`]): an evaluation
+    /// that would need one more is not made, and the fit ends where it is.
+    budget: Option<usize>,
+    /// The budget stopped an evaluation.
+    exhausted: std::sync::atomic::AtomicBool,
+    /// With a budget: the residuals of every point of a line search, for
+    /// the promise of what is left ([`secant_promise`]).
+    line_points: Mutex<Vec<(f64, f64, Vec<f64>)>>,
 }
 
-impl Objective<'_, '_> {
+impl<'e, 'a> Objective<'e, 'a> {
+    fn new(
+        ev: &'e Evaluator<'a>,
+        space: &'e Space,
+        excluded: Option<(Blocking, usize)>,
+        budget: Option<usize>,
+    ) -> Self {
+        Objective {
+            ev,
+            space,
+            excluded,
+            error: Mutex::new(None),
+            seen: Mutex::new(Vec::new()),
+            runs: AtomicUsize::new(0),
+            budget,
+            exhausted: std::sync::atomic::AtomicBool::new(false),
+            line_points: Mutex::new(Vec::new()),
+        }
+    }
+
+    /// Whether evaluating `cfg` would exceed the budget (it needs an
+    /// engine run and the budget is spent); marks the objective exhausted.
+    fn over_budget(&self, cfg: &ModelConfig) -> bool {
+        let Some(budget) = self.budget else {
+            return false;
+        };
+        if self.runs.load(Ordering::Relaxed) < budget
+            || self.ev.lock().contains_key(&cache_key(cfg))
+        {
+            return false;
+        }
+        self.exhausted.store(true, Ordering::Relaxed);
+        true
+    }
+
     fn eval(&self, u: &[f64]) -> Option<Arc<Evaluation>> {
         let u: Vec<f64> = u.iter().map(|x| x.clamp(0.0, 1.0)).collect();
-        match self.ev.evaluate_counted(&self.space.config(&u)) {
+        let cfg = self.space.config(&u);
+        if self.over_budget(&cfg) {
+            return None;
+        }
+        match self.ev.evaluate_counted(&cfg) {
             Ok((e, ran)) => {
                 if ran {
                     self.runs.fetch_add(1, Ordering::Relaxed);
@@ -930,6 +976,9 @@ impl Objective<'_, '_> {
     /// ([`Evaluator::simulate`]).
     fn residual_at(&self, u: &[f64]) -> Option<(f64, Vec<f64>)> {
         let cfg = self.space.config(u);
+        if self.over_budget(&cfg) {
+            return None;
+        }
         let cached = self.ev.lock().contains_key(&cache_key(&cfg));
         match self.ev.residuals(&cfg) {
             Ok((residual, e)) => {
@@ -946,7 +995,14 @@ impl Objective<'_, '_> {
                     .filter(|&(k, _)| self.counts(k))
                     .map(|(_, r)| *r)
                     .collect();
-                Some((e.sse_without(self.excluded), counted))
+                let sse = e.sse_without(self.excluded);
+                if self.budget.is_some() && u.len() == 1 {
+                    self.line_points
+                        .lock()
+                        .unwrap_or_else(|e| e.into_inner())
+                        .push((u[0], sse, counted.clone()));
+                }
+                Some((sse, counted))
             }
             Err(err) => {
                 let mut slot = self.error.lock().unwrap_or_else(|e| e.into_inner());
@@ -1088,15 +1144,14 @@ fn fit_with(
     excluded: Option<(Blocking, usize)>,
     limits: Limits,
 ) -> Result<Fit> {
-    let dims = space.dims();
-    let obj = Objective {
-        ev,
-        space,
-        excluded,
-        error: Mutex::new(None),
-        seen: Mutex::new(Vec::new()),
-        runs: AtomicUsize::new(0),
-    };
+    let obj = Objective::new(ev, space, excluded, None);
+    run_fit(&obj, start, limits)?;
+    finish(&obj)
+}
+
+/// The search of [`fit_with`] on `obj`, from `start`.
+fn run_fit(obj: &Objective<'_, '_>, start: Start, limits: Limits) -> Result<()> {
+    let dims = obj.space.dims();
     if dims == 0 {
         obj.cost_at(&[]);
     } else if dims == 1 {
@@ -1118,7 +1173,7 @@ fn fit_with(
             let inner_edge = |u: f64, lo: f64, hi: f64| {
                 (u - lo < edge && lo > 0.0) || (hi - u < edge && hi < 1.0)
             };
-            let u = line_search(&obj, u0, lo, hi)?;
+            let u = line_search(obj, u0, lo, hi)?;
             done = !inner_edge(u, lo, hi);
             // On an inner edge of the bracket: the optimum has moved away.
             // Once more from there, in a bracket twice as wide (three or
@@ -1126,13 +1181,13 @@ fn fit_with(
             if !done {
                 let wide = 2.0 * limits.warm_half_width;
                 let (lo, hi) = ((u - wide).max(0.0), (u + wide).min(1.0));
-                let u = line_search(&obj, u, lo, hi)?;
+                let u = line_search(obj, u, lo, hi)?;
                 done = !inner_edge(u, lo, hi);
             }
         }
         if !done {
-            let g = coarse_grid(&obj)?;
-            if let Some(mids) = g.mids(&obj)? {
+            let g = coarse_grid(obj)?;
+            if let Some(mids) = g.mids(obj)? {
                 // The line search within half a spacing of the best of
                 // the grid and the mids.
                 let (mut u, mut at_u) = (g.grid[g.best], g.costs[g.best]);
@@ -1142,7 +1197,7 @@ fn fit_with(
                     }
                 }
                 let half = 0.5 / (GRID_1D - 1) as f64;
-                line_search(&obj, u, (u - half).max(0.0), (u + half).min(1.0))?;
+                line_search(obj, u, (u - half).max(0.0), (u + half).min(1.0))?;
             }
         }
     } else {
@@ -1158,10 +1213,9 @@ fn fit_with(
                 (grid[best].clone(), FRESH_STEP)
             }
         };
-        levenberg_marquardt(&obj, &u0, step, limits.max_steps)?;
-        return finish(&obj);
+        levenberg_marquardt(obj, &u0, step, limits.max_steps)?;
     }
-    finish(&obj)
+    Ok(())
 }
 
 fn finish(obj: &Objective<'_, '_>) -> Result<Fit> {
@@ -1173,6 +1227,54 @@ fn finish(obj: &Objective<'_, '_>) -> Result<Fit> {
         runs: obj.runs.load(Ordering::Relaxed),
         stopped: None,
     })
+}
+
+/// [`fit`] from `start` for at most `budget` more engine runs (the
+/// evaluations made before, by a look or an earlier call, come from the
+/// cache): `Done` where the fit ends within them, else the best point so
+/// far and the least SSE the rest could reach, optimistically
+/// ([`OPTIMISM`] times the promise of the line search's latest secant,
+/// [`secant_promise`]). A fit of several parameters runs to its end.
+pub(super) fn look_further(
+    ev: &Evaluator<'_>,
+    space: &Space,
+    start: &Start,
+    budget: usize,
+) -> Result<Look> {
+    if space.dims() != 1 {
+        return fit(ev, space, start.clone(), None).map(Look::Done);
+    }
+    let obj = Objective::new(ev, space, None, Some(budget));
+    run_fit(&obj, start.clone(), FULL)?;
+    let fit = finish(&obj)?;
+    if !obj.exhausted.load(Ordering::Relaxed) {
+        return Ok(Look::Done(fit));
+    }
+    let points = obj.line_points.lock().unwrap_or_else(|e| e.into_inner());
+    let optimistic =
+        secant_promise(&points).map_or(0.0, |promised| fit.eval.sse - OPTIMISM * promised);
+    Ok(Look::Open(fit, optimistic.max(0.0)))
+}
+
+/// What the residuals' secant between the best of `points` (u, SSE,
+/// residuals) and the one nearest to it promises still: the fall of the
+/// SSE to the minimum of their linear model (`(J·r)² / (J·J)`); `None`
+/// with fewer than two points or a secant that says nothing.
+fn secant_promise(points: &[(f64, f64, Vec<f64>)]) -> Option<f64> {
+    let best = points.iter().min_by(|a, b| a.1.total_cmp(&b.1))?;
+    let other = points
+        .iter()
+        .filter(|p| (p.0 - best.0).abs() >= LINE_TOL)
+        .min_by(|a, b| (a.0 - best.0).abs().total_cmp(&(b.0 - best.0).abs()))?;
+    let du = other.0 - best.0;
+    let (mut jj, mut g) = (0.0, 0.0);
+    for (o, b) in other.2.iter().zip(&best.2) {
+        let j = (o - b) / du;
+        jj += j * j;
+        g += j * b;
+    }
+    let promised = g * g / jj;
+    (jj > 0.0 && promised.is_finite()).then_some(promised)
 }
 
 /// What a candidate's first evaluations say ([`first_look`]).
@@ -1199,14 +1301,7 @@ pub(super) fn first_look(ev: &Evaluator<'_>, space: &Space, start: &Start) -> Re
     if space.dims() == 0 {
         return fit(ev, space, start.clone(), None).map(Look::Done);
     }
-    let obj = Objective {
-        ev,
-        space,
-        excluded: None,
-        error: Mutex::new(None),
-        seen: Mutex::new(Vec::new()),
-        runs: AtomicUsize::new(0),
-    };
+    let obj = Objective::new(ev, space, None, None);
     let limits = FULL;
     let optimistic = match start {
         _ if space.dims() > 1 => {
@@ -1864,6 +1959,55 @@ mod tests {
             assert_eq!(runs + rest.runs, whole.runs, "{c:?}: replays");
         }
         assert!(open >= 3, "only {open} looks stopped short of their fits");
+    }
+
+    #[test]
+    fn rounds_after_a_look_walk_the_fit_and_their_hope_is_not_too_low() {
+        // Each named effect of one parameter, taken out of the truth and
+        // fitted in rounds of three replays after its look: the rounds
+        // are the fit cut in pieces (the same end, the same replays in
+        // all), each round's optimistic SSE is below what the fit reaches,
+        // and no round replays more than its budget.
+        let (data, truth) = bundled("curve_day_all_effects");
+        let silent = crate::progress::Silent;
+        let mut rounds = 0;
+        for c in Candidate::all().into_iter().filter(|c| c.dims() == 1) {
+            let mut base = truth.clone();
+            c.unset(&mut base.effects);
+            let space = Space {
+                base,
+                slots: vec![c.clone()],
+            };
+            let alone = Evaluator::new(&data, Vec::new(), &silent);
+            let whole = fit(&alone, &space, Start::Fresh, None).expect("fit");
+            let ev = Evaluator::new(&data, Vec::new(), &silent);
+            let mut look = first_look(&ev, &space, &Start::Fresh).expect("look");
+            let mut runs = 0;
+            loop {
+                match look {
+                    Look::Done(f) => {
+                        runs += f.runs;
+                        assert_eq!(f.eval.sse, whole.eval.sse, "{c:?}");
+                        break;
+                    }
+                    Look::Open(f, optimistic) => {
+                        assert!(
+                            optimistic <= whole.eval.sse,
+                            "{c:?}: hoped for {optimistic}, the fit reaches {}",
+                            whole.eval.sse
+                        );
+                        assert!(f.eval.sse >= whole.eval.sse * (1.0 - 1e-12), "{c:?}");
+                        runs += f.runs;
+                        look = look_further(&ev, &space, &Start::Fresh, 3).expect("round");
+                        let (Look::Open(f, _) | Look::Done(f)) = &look;
+                        assert!(f.runs <= 3 + 1, "{c:?}: {} replays in a round", f.runs);
+                        rounds += 1;
+                    }
+                }
+            }
+            assert_eq!(runs, whole.runs, "{c:?}: replays");
+        }
+        assert!(rounds >= 3, "only {rounds} rounds");
     }
 
     #[test]

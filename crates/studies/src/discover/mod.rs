@@ -2881,12 +2881,14 @@ fn named_family(c: &Candidate) -> Option<Candidate> {
 /// tests/discover_generic.rs). So each first gets a look
 /// ([`fit::first_look`]: a warm start's first two points, or a fresh
 /// grid); a named effect or a generic term on the product (whose
-/// evaluations are replays) is then fitted to the end only where, with
-/// [`fit::OPTIMISM`] times what its local model still promises, its BIC
-/// drop could reach [`PRUNE_SHARE`] of the step's best so far (`at_least`
-/// or the best look), or where its direction is among the `forms_for`
-/// best (those are fitted in their other forms next, [`FORMS_FOR`]). The
-/// rest stop where they are, marked ([`fit::Fit::stopped`]): the rules
+/// evaluations are replays) goes on only where, with [`fit::OPTIMISM`]
+/// times what its local model still promises, its BIC drop could reach
+/// [`PRUNE_SHARE`] of the step's best so far (`at_least` or the best
+/// point of any fit), in rounds of [`ROUND_RUNS`] replays
+/// ([`fit::look_further`]) after which its hope and the best are weighed
+/// again; one whose direction is among the `forms_for` best is fitted to
+/// its end at once (those are fitted in their other forms next,
+/// [`FORMS_FOR`]). The rest stop where they are, marked ([`fit::Fit::stopped`]): the rules
 /// that weigh a candidate against the best (contenders with the model's
 /// effects free and twins beside their constant within
 /// [`CONTENDER_SHARE`], time steps placed within half) look within that
@@ -2954,36 +2956,89 @@ fn fit_each(
             top.push(g);
         }
     }
-    let wanted = |c: &Candidate, optimistic: f64| {
-        best >= 0.0
-            || bic.of(optimistic, k_of(c)) <= PRUNE_SHARE * best
-            || matches!(c, Candidate::Generic(g) if top.iter().any(|t| t.same_direction(g)))
+    let is_top = |c: &Candidate| matches!(c, Candidate::Generic(g) if top.iter().any(|t| t.same_direction(g)));
+    let wanted = |c: &Candidate, optimistic: f64, best: f64| {
+        best >= 0.0 || bic.of(optimistic, k_of(c)) <= PRUNE_SHARE * best || is_top(c)
     };
-    looks
-        .into_par_iter()
-        .zip(candidates.par_iter())
-        .map(|(look, (c, start))| {
-            let space = space_of(c);
-            let fit = match look {
-                fit::Look::Done(f) => f,
-                fit::Look::Open(f, optimistic) if wanted(c, optimistic) => {
-                    let mut full = fit::fit(ev, &space, start.clone(), None)?;
-                    full.runs += f.runs;
-                    let n = finished.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
-                    progress.done(n);
-                    full
+    let done = || {
+        let n = finished.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
+        progress.done(n);
+    };
+    // Rounds: every open fit that could still come near the best goes on
+    // for ROUND_RUNS more replays (a direction fitted in its other forms
+    // next to its end), the best is taken again, and what can no longer
+    // reach its share stops.
+    let mut states = looks;
+    let mut best = best;
+    loop {
+        best = candidates
+            .iter()
+            .zip(&states)
+            .map(|((c, _), look)| bic.of(seen(look), k_of(c)))
+            .fold(best, f64::min);
+        let open: Vec<usize> = (0..states.len())
+            .filter(|&i| match &states[i] {
+                fit::Look::Open(f, optimistic) => {
+                    f.stopped.is_none() && wanted(&candidates[i].0, *optimistic, best)
+                }
+                fit::Look::Done(_) => false,
+            })
+            .collect();
+        for (i, state) in states.iter_mut().enumerate() {
+            if let fit::Look::Open(f, optimistic) = state {
+                if f.stopped.is_none() && !open.contains(&i) {
+                    f.stopped = Some(*optimistic);
+                    done();
+                }
+            }
+        }
+        if open.is_empty() {
+            break;
+        }
+        let further: Vec<fit::Look> = open
+            .par_iter()
+            .map(|&i| {
+                let (c, start) = &candidates[i];
+                let space = space_of(c);
+                if is_top(c) {
+                    fit::fit(ev, &space, start.clone(), None).map(fit::Look::Done)
+                } else {
+                    fit::look_further(ev, &space, start, ROUND_RUNS)
+                }
+            })
+            .collect::<Result<_>>()?;
+        for (i, look) in open.into_iter().zip(further) {
+            let before = match &states[i] {
+                fit::Look::Done(f) | fit::Look::Open(f, _) => f.runs,
+            };
+            states[i] = match look {
+                fit::Look::Done(mut f) => {
+                    f.runs += before;
+                    done();
+                    fit::Look::Done(f)
                 }
                 fit::Look::Open(mut f, optimistic) => {
-                    f.stopped = Some(optimistic);
-                    let n = finished.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1;
-                    progress.done(n);
-                    f
+                    f.runs += before;
+                    fit::Look::Open(f, optimistic)
                 }
             };
-            Ok((c.clone(), space, fit))
+        }
+    }
+    Ok(candidates
+        .iter()
+        .zip(states)
+        .map(|((c, _), state)| {
+            let fit = match state {
+                fit::Look::Done(f) | fit::Look::Open(f, _) => f,
+            };
+            (c.clone(), space_of(c), fit)
         })
-        .collect()
+        .collect())
 }
+
+/// The replays an open fit goes on for in one round of [`fit_each`]
+/// before its hope is weighed again (a line search's step is one).
+const ROUND_RUNS: usize = 3;
 
 /// Whether a candidate's fit may stop after its first look
 /// ([`fit_each`]): a named effect, or a generic term on the product along
