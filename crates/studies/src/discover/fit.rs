@@ -908,6 +908,9 @@ struct Objective<'e, 'a> {
     /// With a budget: the residuals of every point of a line search, for
     /// the promise of what is left ([`secant_promise`]).
     line_points: Mutex<Vec<(f64, f64, Vec<f64>)>>,
+    /// With a budget: what the Gauss–Newton step of Levenberg–Marquardt's
+    /// latest Jacobian promised from its latest point.
+    lm_promise: Mutex<Option<f64>>,
 }
 
 impl<'e, 'a> Objective<'e, 'a> {
@@ -927,6 +930,7 @@ impl<'e, 'a> Objective<'e, 'a> {
             budget,
             exhausted: std::sync::atomic::AtomicBool::new(false),
             line_points: Mutex::new(Vec::new()),
+            lm_promise: Mutex::new(None),
         }
     }
 
@@ -1234,14 +1238,15 @@ fn finish(obj: &Objective<'_, '_>) -> Result<Fit> {
 /// cache): `Done` where the fit ends within them, else the best point so
 /// far and the least SSE the rest could reach, optimistically
 /// ([`OPTIMISM`] times the promise of the line search's latest secant,
-/// [`secant_promise`]). A fit of several parameters runs to its end.
+/// [`secant_promise`], or for several parameters of the Gauss–Newton step
+/// of Levenberg–Marquardt's latest Jacobian).
 pub(super) fn look_further(
     ev: &Evaluator<'_>,
     space: &Space,
     start: &Start,
     budget: usize,
 ) -> Result<Look> {
-    if space.dims() != 1 {
+    if space.dims() == 0 {
         return fit(ev, space, start.clone(), None).map(Look::Done);
     }
     let obj = Objective::new(ev, space, None, Some(budget));
@@ -1250,9 +1255,12 @@ pub(super) fn look_further(
     if !obj.exhausted.load(Ordering::Relaxed) {
         return Ok(Look::Done(fit));
     }
-    let points = obj.line_points.lock().unwrap_or_else(|e| e.into_inner());
-    let optimistic =
-        secant_promise(&points).map_or(0.0, |promised| fit.eval.sse - OPTIMISM * promised);
+    let promised = if space.dims() == 1 {
+        secant_promise(&obj.line_points.lock().unwrap_or_else(|e| e.into_inner()))
+    } else {
+        *obj.lm_promise.lock().unwrap_or_else(|e| e.into_inner())
+    };
+    let optimistic = promised.map_or(0.0, |promised| fit.eval.sse - OPTIMISM * promised);
     Ok(Look::Open(fit, optimistic.max(0.0)))
 }
 
@@ -1660,6 +1668,14 @@ fn levenberg_marquardt(
     for _ in 0..max_steps {
         let jtj = jac.transpose() * &jac;
         let g = jac.transpose() * &r;
+        if obj.budget.is_some() {
+            let full = jtj
+                .clone()
+                .cholesky()
+                .map(|c| g.dot(&c.solve(&g)))
+                .filter(|p| p.is_finite() && *p >= 0.0);
+            *obj.lm_promise.lock().unwrap_or_else(|e| e.into_inner()) = full;
+        }
         let floor = LM_DIAG_FLOOR * jtj.diagonal().max().max(f64::MIN_POSITIVE);
         let delta = loop {
             let mut a = jtj.clone();
@@ -1963,15 +1979,15 @@ mod tests {
 
     #[test]
     fn rounds_after_a_look_walk_the_fit_and_their_hope_is_not_too_low() {
-        // Each named effect of one parameter, taken out of the truth and
-        // fitted in rounds of three replays after its look: the rounds
+        // Each named effect, taken out of the truth and fitted in rounds
+        // of three replays after its look: the rounds
         // are the fit cut in pieces (the same end, the same replays in
         // all), each round's optimistic SSE is below what the fit reaches,
         // and no round replays more than its budget.
         let (data, truth) = bundled("curve_day_all_effects");
         let silent = crate::progress::Silent;
         let mut rounds = 0;
-        for c in Candidate::all().into_iter().filter(|c| c.dims() == 1) {
+        for c in Candidate::all().into_iter().filter(|c| c.dims() > 0) {
             let mut base = truth.clone();
             c.unset(&mut base.effects);
             let space = Space {
