@@ -439,6 +439,57 @@ fn a_clogged_nozzle_at_a_site_with_a_high_kt_is_named_not_a_transfer_step() {
     );
 }
 
+/// Issue 28: a clogged nozzle (A1 at half from 12:00 on the second day) on
+/// the tangent at a site whose `k0_kg` is 21 % and `mu_c` 24 % above and
+/// `cn` 25 % below the laboratory's (the campaign of 2026-11-30, seed
+/// 20261147, site 20: this recording). With the constants still off, a
+/// step of the transfer everywhere at the same moment came 290 BIC units
+/// ahead of the nozzle at the first step and was taken; the constants came
+/// at the second. A step in time is now fitted again as its twins (the
+/// pulse mass at each applicator, the transfer, the consumption) beside
+/// the model as it stands, and the nozzle replaces the transfer step.
+#[test]
+fn a_transfer_step_taken_before_the_constants_gives_way_to_its_twin_the_nozzle() {
+    let dir = tempfile::tempdir().unwrap();
+    let truth_text =
+        "[product]\ncn = 9.016668905202298\nk0_kg = 1.262722598432897e-09\nmu_c = 0.18585128964732467\n";
+    let rec = synth(
+        dir.path(),
+        "tangent",
+        2435,
+        truth_text,
+        &["generic:acts_on=pulse_mass,applicator=A1,driver=time,form=step,t0_utc=2024-04-09T12:00:00Z,f=0.5"],
+    );
+    let report = common::discover_report(&rec, &dir.path().join("report"));
+    let found = report["effects_found"].as_array().unwrap();
+    assert_eq!(found.len(), 1, "effects found: {found:?}");
+    common::assert_nozzle_step(&found[0], "A1");
+    let f = found[0]["params"]["f"].as_f64().unwrap();
+    assert!((f - 0.5).abs() <= 0.25 * 0.5, "f = {f}");
+    // The transfer step was taken first and gave way later.
+    let steps = report["steps"].as_array().unwrap();
+    assert!(
+        steps[0]["accepted"]
+            .as_str()
+            .is_some_and(|a| a.starts_with("generic transfer × time")),
+        "{}",
+        steps[0]["accepted"]
+    );
+    assert!(
+        steps.iter().any(|s| s["removed"]
+            .as_str()
+            .is_some_and(|r| r.contains("for generic pulse_mass × time"))),
+        "{steps:?}"
+    );
+    assert!(
+        report["rmse_after"].as_f64().unwrap() < 1.05 * SIGMA,
+        "{}",
+        report["rmse_after"]
+    );
+    let truth = ModelConfig::from_overlay_str(truth_text, "truth").unwrap();
+    assert!(determined_hold_the_truth(&report, &truth) >= 3);
+}
+
 /// Issue 28: a dry friction 16 % above the laboratory's that falls with the
 /// relative humidity (a linear term, -0.5 per unit of humidity about 0.5)
 /// on a curve (the campaign of 2026-11-29, seed 20261142, site 5: this
