@@ -1935,6 +1935,31 @@ mod tests {
         assert!(f.runs <= 40, "{} replays", f.runs);
     }
 
+    /// Each named effect taken out of `truth` (a recording that holds them
+    /// all): the candidate, its space, and its fit from nothing on an
+    /// evaluator of its own (nothing cached).
+    fn each_effect_out_of_its_truth(
+        data: &Dataset,
+        truth: &ModelConfig,
+    ) -> Vec<(Candidate, Space, Fit)> {
+        let silent = crate::progress::Silent;
+        Candidate::all()
+            .into_iter()
+            .filter(|c| c.dims() > 0)
+            .map(|c| {
+                let mut base = truth.clone();
+                c.unset(&mut base.effects);
+                let space = Space {
+                    base,
+                    slots: vec![c.clone()],
+                };
+                let alone = Evaluator::new(data, Vec::new(), &silent);
+                let whole = fit(&alone, &space, Start::Fresh, None).expect("fit");
+                (c, space, whole)
+            })
+            .collect()
+    }
+
     /// A first look (`first_look`) is the beginning of the fit, not a
     /// detour: for every effect of a recording that holds them all, taken
     /// out of its truth, the fit from the same start after the look costs
@@ -1946,15 +1971,7 @@ mod tests {
         let (data, truth) = bundled("curve_day_all_effects");
         let silent = crate::progress::Silent;
         let mut open = 0;
-        for c in Candidate::all().into_iter().filter(|c| c.dims() > 0) {
-            let mut base = truth.clone();
-            c.unset(&mut base.effects);
-            let space = Space {
-                base,
-                slots: vec![c.clone()],
-            };
-            let alone = Evaluator::new(&data, Vec::new(), &silent);
-            let whole = fit(&alone, &space, Start::Fresh, None).expect("fit");
+        for (c, space, whole) in each_effect_out_of_its_truth(&data, &truth) {
             let ev = Evaluator::new(&data, Vec::new(), &silent);
             let look = first_look(&ev, &space, &Start::Fresh).expect("look");
             let (seen, runs) = match &look {
@@ -1987,15 +2004,7 @@ mod tests {
         let (data, truth) = bundled("curve_day_all_effects");
         let silent = crate::progress::Silent;
         let mut rounds = 0;
-        for c in Candidate::all().into_iter().filter(|c| c.dims() > 0) {
-            let mut base = truth.clone();
-            c.unset(&mut base.effects);
-            let space = Space {
-                base,
-                slots: vec![c.clone()],
-            };
-            let alone = Evaluator::new(&data, Vec::new(), &silent);
-            let whole = fit(&alone, &space, Start::Fresh, None).expect("fit");
+        for (c, space, whole) in each_effect_out_of_its_truth(&data, &truth) {
             let ev = Evaluator::new(&data, Vec::new(), &silent);
             let mut look = first_look(&ev, &space, &Start::Fresh).expect("look");
             let mut runs = 0;

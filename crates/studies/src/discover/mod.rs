@@ -1429,9 +1429,8 @@ pub fn discover(
                 &mut current,
                 &mut sse,
                 (&start.product, &constant_keys, noise_now),
-                options,
+                (options, progress, step),
             )? {
-                progress.stage(&format!("step {step}: {twin} describes it better"));
                 removed.push(format!("a step in time, for {twin}"));
             }
             if !removed.is_empty() {
@@ -1566,17 +1565,15 @@ pub fn discover(
                 hopeless.push(c);
             }
         }
-        if let Some(twin) = swap_time_twins(
+        swap_time_twins(
             &ev,
             data,
             &mut accepted,
             &mut current,
             &mut sse,
             (&start.product, &constant_keys, noise_now),
-            options,
-        )? {
-            progress.stage(&format!("step {step}: {twin} describes it better"));
-        }
+            (options, progress, step),
+        )?;
         rmse_by_step.push((format!("+ {}", c.label()), rmse(sse, n)));
         // An effect taken earlier that the site's constants explain as well
         // (BIC with the constants' parameters counted) is replaced by them:
@@ -2628,7 +2625,8 @@ fn without_each(
 /// is about 300 better). Each accepted step in time is fitted again as
 /// each twin at its moment, beside the model as it is now; the best twin
 /// replaces it where it lowers the BIC by the threshold, and the constants
-/// taken so far are refitted with it. Returns the twin's label.
+/// taken so far are refitted with it. Returns the twin's label (and says
+/// it to `progress`).
 fn swap_time_twins(
     ev: &Evaluator<'_>,
     data: &Dataset,
@@ -2640,7 +2638,7 @@ fn swap_time_twins(
         &[tortwin_model::product::ProductKey],
         Option<f64>,
     ),
-    options: &Options,
+    (options, progress, step): (&Options, &dyn Progress, usize),
 ) -> Result<Option<String>> {
     let _stage = ev.cost.enter(fit::Stage::Refits);
     let product = [ActsOn::Transfer, ActsOn::Consumption, ActsOn::PulseMass];
@@ -2712,6 +2710,7 @@ fn swap_time_twins(
     *current = space.config(&fit.u);
     *sse = fit.eval.sse;
     let label = twin.label();
+    progress.stage(&format!("step {step}: {label} describes it better"));
     accepted[i] = twin;
     let (reference, keys, noise) = constants;
     if !keys.is_empty() {
