@@ -16,7 +16,7 @@ use std::time::Duration;
 
 use criterion::{criterion_group, criterion_main, Criterion};
 
-use tortwin_studies::jobs::discover::{run, DiscoverArgs};
+use tortwin_jobs::discover::{run, DiscoverArgs};
 
 fn case(dir: &std::path::Path, name: &str, hidden: &str) -> DiscoverArgs {
     let recording = dir.join(format!("{name}.mcap"));
@@ -61,7 +61,7 @@ fn case(dir: &std::path::Path, name: &str, hidden: &str) -> DiscoverArgs {
 
 fn discover_3_days(c: &mut Criterion) {
     // As the command line: this thread is one of rayon's.
-    tortwin_studies::jobs::join_rayon_pool();
+    tortwin_jobs::join_rayon_pool();
     let dir = tempfile::tempdir().expect("a temporary directory");
     let ageing = case(dir.path(), "ageing", "rail_ageing:tau_s=7200");
     let nozzle = case(
@@ -89,12 +89,12 @@ fn discover_3_days(c: &mut Criterion) {
 /// Jacobians cost: one replay of the recording, plain and with the
 /// tangents of the ten state constants.
 fn calibrate_3_days(c: &mut Criterion) {
+    use tortwin_discover::data::Dataset;
+    use tortwin_jobs::discover::{calibrate, CalibrateArgs};
     use tortwin_model::config::ModelConfig;
     use tortwin_model::effects::Named;
     use tortwin_model::tangent::{EffectParam, STATE_KEYS};
-    use tortwin_studies::discover::data::Dataset;
-    use tortwin_studies::jobs::discover::{calibrate, CalibrateArgs};
-    tortwin_studies::jobs::join_rayon_pool();
+    tortwin_jobs::join_rayon_pool();
     let dir = tempfile::tempdir().expect("a temporary directory");
     let truth = dir.path().join("truth.toml");
     std::fs::write(&truth, "[product]\nmu_d = 0.52\nkc = 0.80\n").expect("written");

@@ -11,7 +11,7 @@ use std::path::PathBuf;
 
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 
-use tortwin_studies::jobs::replay::{replay, ReplayArgs};
+use tortwin_jobs::replay::{replay, ReplayArgs};
 
 fn args(recording: PathBuf, out: &std::path::Path) -> ReplayArgs {
     ReplayArgs {
@@ -23,7 +23,7 @@ fn args(recording: PathBuf, out: &std::path::Path) -> ReplayArgs {
 
 fn replay_with_outputs(c: &mut Criterion) {
     // As the command line: this thread is one of rayon's.
-    tortwin_studies::jobs::join_rayon_pool();
+    tortwin_jobs::join_rayon_pool();
     let mut group = c.benchmark_group("replay");
     group.sample_size(10);
     let out = tempfile::tempdir().expect("a temporary directory");

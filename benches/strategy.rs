@@ -11,12 +11,12 @@ use std::time::Duration;
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 
 use tortwin_model::config::ModelConfig;
-use tortwin_studies::strategy::search::{Method, Searcher, Space, SpaceConfig};
-use tortwin_studies::strategy::{evaluate, Plan, Strategy, Target, Traffic};
+use tortwin_strategy::search::{Method, Searcher, Space, SpaceConfig};
+use tortwin_strategy::{evaluate, Plan, Strategy, Target, Traffic};
 
 fn strategies_per_second(c: &mut Criterion) {
     // As the command line: this thread is one of rayon's.
-    tortwin_studies::jobs::join_rayon_pool();
+    tortwin_jobs::join_rayon_pool();
     let traffic = Traffic::read(std::path::Path::new(concat!(
         env!("CARGO_MANIFEST_DIR"),
         "/recordings/demo_day.mcap"

@@ -1,5 +1,5 @@
 //! The `tortwin` command line: parses the arguments, runs the job from the
-//! library (`tortwin_studies::jobs`), shows its progress on stderr, prints
+//! library (`tortwin_jobs`), shows its progress on stderr, prints
 //! its summary and maps errors to exit codes (docs/spec/interfaces.md): 2
 //! for bad input (recording, tables, configuration, command line), 1
 //! otherwise.
@@ -10,62 +10,15 @@ use std::sync::Mutex;
 use std::time::{Duration, Instant};
 
 use anyhow::Result;
-use clap::{Parser, Subcommand};
+use clap::Parser as _;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
-use tortwin_studies::jobs::{self, discover, paper, replay, strategy, summary, synth, tables};
-use tortwin_studies::Progress;
-
-#[derive(Debug, Parser)]
-#[command(
-    name = "tortwin",
-    version,
-    about = "Digital twin of a track section for top-of-rail friction management",
-    after_help = "Exit status: 0 on success, 2 on bad input or usage (the message names the \
-                  file and where in it), 1 otherwise. Documentation: docs/ in the repository."
-)]
-struct Cli {
-    #[command(subcommand)]
-    command: Command,
-}
-
-#[derive(Debug, Subcommand)]
-enum Command {
-    /// Replay a recording of a track section and publish the friction field
-    /// (rerun recording, MCAP for Foxglove).
-    Replay(replay::ReplayArgs),
-    /// Build a recording from CSV tables (section.toml, passages.csv,
-    /// pulses.csv, weather.csv, measurements.csv; docs/spec/csv-tables.md).
-    Import(tables::ImportArgs),
-    /// Replay a recording into tables: measurements with simulated values
-    /// and residuals, the field per train (long format) and per-train
-    /// summaries, as Parquet and CSV.
-    Export(tables::ExportArgs),
-    /// Recompute the paper's Figures 7 and 13–17 as CSV and SVG.
-    Paper(paper::PaperArgs),
-    /// Write a synthetic recording (traffic, pulses, weather, noisy
-    /// measurements from a truth model with optional hidden effects).
-    Synth(synth::SynthArgs),
-    /// Find the effects the model misses in a recording: residuals,
-    /// covariates, candidate effects fitted and selected (BIC, share of the
-    /// excess over the noise, cross-validation by day and by site); writes
-    /// report.json, report.md with plots, model.toml and residuals.rrd.
-    Discover(discover::DiscoverArgs),
-    /// Calibrate the site's constants (muD, muC, km, kc, kt, cN, m0, ...)
-    /// on a recording: which ones it determines, their values with 95 %
-    /// intervals, which only in combination; writes report.json
-    /// (site_constants), report.md, model.toml and residuals.rrd.
-    Calibrate(discover::CalibrateArgs),
-    /// Evaluate application strategies (pulse mass, interval, applicator
-    /// positions, rails) over a section's traffic: share of the section in
-    /// the target band, carry-on distance, over-application, product per
-    /// day; search, Pareto front, recommendation; writes strategy.json,
-    /// report.md with plots and recommended.rrd.
-    Strategy(strategy::StrategyArgs),
-}
+use tortwin_jobs::{self as jobs, discover, paper, replay, strategy, summary, synth, tables};
+use tortwin_jobs::{Cli, Command};
+use tortwin_study::Progress;
 
 fn main() -> ExitCode {
-    tortwin_studies::jobs::join_rayon_pool();
+    tortwin_jobs::join_rayon_pool();
     // Ctrl-C or a SIGTERM deletes the run's temporary files before exiting
     // (130, 143): nothing half-written is left behind.
     if let Err(err) = tortwin_files::clean_up_on_signals() {
@@ -89,8 +42,8 @@ fn main() -> ExitCode {
 /// classifies its own errors; writing the summary to stdout is never the
 /// input's fault.
 fn is_input_error(err: &anyhow::Error) -> bool {
-    err.downcast_ref::<tortwin_studies::Error>()
-        .is_some_and(tortwin_studies::Error::is_input)
+    err.downcast_ref::<tortwin_study::Error>()
+        .is_some_and(tortwin_study::Error::is_input)
 }
 
 fn run(command: Command) -> Result<()> {
@@ -183,7 +136,7 @@ fn say(text: &str) -> Result<()> {
     let text = jobs::printable(text, true);
     match out.write_all(text.as_bytes()).and_then(|()| out.flush()) {
         Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => Ok(()),
-        Err(e) if tortwin_model::error::is_environment(&e) => Err(tortwin_studies::Error::from(
+        Err(e) if tortwin_model::error::is_environment(&e) => Err(tortwin_study::Error::from(
             tortwin_model::error::UsageError(format!(
                 "writing the summary to standard output: {e}"
             )),

@@ -6,7 +6,7 @@
 
 use std::path::Path;
 
-use tortwin_studies::jobs::replay::{replay, ReplayArgs};
+use tortwin_jobs::replay::{replay, ReplayArgs};
 
 mod common;
 use common::Recorder;

@@ -17,9 +17,9 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use common::{check, tortwin};
+use tortwin_discover::{self as discover, data::Dataset, Options, Silent};
 use tortwin_model::config::ModelConfig;
 use tortwin_recording::{EventKind, Quantity};
-use tortwin_studies::discover::{self, data::Dataset, Options, Silent};
 
 const SIGMA: f64 = 0.01;
 

@@ -10,8 +10,8 @@ mod common;
 use std::path::{Path, PathBuf};
 
 use common::{check, tortwin};
+use tortwin_discover::data::Dataset;
 use tortwin_model::config::{GenericTerm, ModelConfig, TermEffect};
-use tortwin_studies::discover::data::Dataset;
 
 const SIGMA: f64 = 0.01;
 

@@ -10,13 +10,13 @@ use std::collections::HashMap;
 use std::path::PathBuf;
 
 use tortwin_engine::{Engine, EngineOptions};
+use tortwin_jobs::replay::{replay, ReplayArgs};
 use tortwin_model::config::ModelConfig;
 use tortwin_model::{contact, product};
 use tortwin_recording::{
     Applicator, Axle, AxleRef, BogiePosition, Creepage, Direction, Event, EventKind, Measured,
     Measurement, Passage, Pulse, Quantity, RecordingReader, Section, Site, Weather,
 };
-use tortwin_studies::jobs::replay::{replay, ReplayArgs};
 
 mod common;
 use common::{MeasurementRow, Recorder};

@@ -12,7 +12,7 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 use sha2::{Digest, Sha256};
-use tortwin_studies::jobs::replay::{replay, ReplayArgs};
+use tortwin_jobs::replay::{replay, ReplayArgs};
 
 fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))

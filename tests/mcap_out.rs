@@ -13,9 +13,9 @@ use tortwin_engine::sink::{
     FieldSnapshot, MeasurementOutput, PulseEvent, RunSummary, SectionInfo, Sink, SnapshotKind,
     TrackInfo, TrainEvent,
 };
+use tortwin_jobs::replay::{replay, ReplayArgs};
 use tortwin_outputs::mcap_out::{McapCompression, McapSink, NonFiniteValue};
 use tortwin_recording::{Applicator, Direction, Quantity, Section, Site};
-use tortwin_studies::jobs::replay::{replay, ReplayArgs};
 
 const ORIGIN_NS: u64 = 1_700_000_000_000_000_000;
 const TRAIN_NS: u64 = ORIGIN_NS + 60_000_000_000;

@@ -11,7 +11,7 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use tortwin_studies::jobs::paper::{paper, PaperArgs, PaperReport};
+use tortwin_jobs::paper::{paper, PaperArgs, PaperReport};
 
 const FIGURES: [&str; 6] = ["fig07", "fig13", "fig14", "fig15", "fig16", "fig17"];
 
@@ -171,7 +171,7 @@ fn figure_13_numbers_printed_are_the_papers() {
         "{:?}",
         n.wheel_mass_at_500_mg
     );
-    let text = tortwin_studies::jobs::paper::render(&report);
+    let text = tortwin_jobs::paper::render(&report);
     for f in FIGURES {
         assert!(
             text.contains(&format!("{f}.csv")) && text.contains(&format!("{f}.svg")),

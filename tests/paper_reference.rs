@@ -6,7 +6,7 @@
 use std::path::PathBuf;
 
 use tortwin_model::config::ModelConfig;
-use tortwin_studies::paper::{twin_disc, WaysideScenario};
+use tortwin_strategy::paper::{twin_disc, WaysideScenario};
 
 fn reference(name: &str) -> Vec<Vec<f64>> {
     let path = PathBuf::from(env!("CARGO_MANIFEST_DIR"))

@@ -12,11 +12,11 @@ use std::path::PathBuf;
 
 use common::truth_of;
 
+use tortwin_discover::data::Dataset;
 use tortwin_model::config::ModelConfig;
 use tortwin_model::product::ProductKey;
 use tortwin_model::role::Role;
 use tortwin_recording::Quantity;
-use tortwin_studies::discover::data::Dataset;
 
 fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))

@@ -5,7 +5,7 @@
 
 use std::path::{Path, PathBuf};
 
-use tortwin_studies::jobs::replay::{replay, ReplayArgs};
+use tortwin_jobs::replay::{replay, ReplayArgs};
 
 mod common;
 use common::recording::copy_recording;
@@ -223,7 +223,7 @@ fn split_and_compare(config: Option<&str>) {
 fn replay_err(a: &ReplayArgs) -> String {
     // The library's errors are typed: an input error is its own variant.
     let err = replay(a, &mut []).unwrap_err();
-    let input = matches!(err, tortwin_studies::Error::Input(_));
+    let input = matches!(err, tortwin_study::Error::Input(_));
     // Printed with its causes, as the binary prints it.
     let err = anyhow::Error::from(err);
     assert!(input, "not an input error: {err:#}");

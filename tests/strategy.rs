@@ -16,11 +16,9 @@ use tortwin_engine::sink::{FieldSnapshot, Sink, SnapshotKind};
 use tortwin_engine::{Engine, EngineOptions};
 use tortwin_model::config::ModelConfig;
 use tortwin_recording::{Direction, EventKind};
-use tortwin_studies::paper::WaysideScenario;
-use tortwin_studies::strategy::search::{
-    self, Evaluated, Method, Searcher, Space, SpaceConfig, Values,
-};
-use tortwin_studies::strategy::{self, evaluate, Plan, Strategy, Target, Traffic};
+use tortwin_strategy::paper::WaysideScenario;
+use tortwin_strategy::search::{self, Evaluated, Method, Searcher, Space, SpaceConfig, Values};
+use tortwin_strategy::{self as strategy, evaluate, Plan, Strategy, Target, Traffic};
 
 fn demo() -> Traffic {
     Traffic::read(&common::demo_day()).expect("the bundled recording")
@@ -217,7 +215,7 @@ impl Sink for SnapshotCount {
 fn figures_as_documented(
     count: &SnapshotCount,
     r: usize,
-    f: &tortwin_studies::strategy::RailFigures,
+    f: &tortwin_strategy::RailFigures,
     strategy: &Strategy,
     grid: &tortwin_engine::Grid,
     traffic: &Traffic,
@@ -492,7 +490,7 @@ fn small_space() -> SpaceConfig {
 /// within the tolerance of the best admissible, least product (whole
 /// micrograms), then higher coverage, then fewer pulses.
 fn best_by_hand<'a>(
-    all: &'a [(Strategy, tortwin_studies::strategy::Figures)],
+    all: &'a [(Strategy, tortwin_strategy::Figures)],
     target: &Target,
 ) -> &'a Strategy {
     let best = all
@@ -987,13 +985,13 @@ fn carry_on_distance_of_figure_13() {
 /// product per rail; the product is the day's applied mass.
 #[test]
 fn per_train_figures_add_up_to_the_days() {
-    use tortwin_studies::jobs::replay::{replay_run, ReplayArgs};
+    use tortwin_jobs::replay::{replay_run, ReplayArgs};
 
     let args = ReplayArgs {
         per_train: true,
         ..ReplayArgs::new(common::demo_day())
     };
-    let run = replay_run(&args, None, &mut [], &tortwin_studies::Silent).unwrap();
+    let run = replay_run(&args, None, &mut [], &tortwin_study::Silent).unwrap();
     let rows = run.per_train.expect("per-train rows");
     let traffic = demo();
     let day = evaluate(
@@ -1010,7 +1008,7 @@ fn per_train_figures_add_up_to_the_days() {
         let mine: Vec<_> = rows.iter().filter(|r| r.rail == rail.rail).collect();
         let passes: u64 = mine.iter().map(|r| r.wheel_passes).sum();
         assert_eq!(passes, rail.wheel_passes, "{}", rail.rail);
-        let share = |f: fn(&tortwin_studies::strategy::TrainRail) -> f64| {
+        let share = |f: fn(&tortwin_strategy::TrainRail) -> f64| {
             mine.iter()
                 .map(|r| f(r) * r.wheel_passes as f64)
                 .sum::<f64>()

@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 use std::process::Output;
 
 use tortwin_engine::sink::RunSummary;
-use tortwin_studies::jobs::replay::{replay as replay_job, ReplayArgs};
+use tortwin_jobs::replay::{replay as replay_job, ReplayArgs};
 
 /// A small day: quick to write and to replay.
 const SMALL: &[&str] = &["--trains-per-day", "10"];

@@ -6,8 +6,8 @@ mod common;
 
 use std::path::{Path, PathBuf};
 
+use tortwin_jobs::replay::{replay, ReplayArgs};
 use tortwin_recording::tables::{export::export_dir, import::import_dir};
-use tortwin_studies::jobs::replay::{replay, ReplayArgs};
 
 fn bundled(name: &str) -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))

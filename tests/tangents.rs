@@ -14,11 +14,11 @@ use std::path::{Path, PathBuf};
 
 use common::truth_of;
 
+use tortwin_discover::data::Dataset;
 use tortwin_model::config::{ModelConfig, TermEffect};
 use tortwin_model::effects::Named;
 use tortwin_model::generic::{ActsOn, Form};
 use tortwin_model::tangent::{EffectParam, EFFECT_SLOTS, STATE_KEYS};
-use tortwin_studies::discover::data::Dataset;
 
 fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))

@@ -32,15 +32,15 @@ use pyo3::exceptions::{PyException, PyRuntimeError};
 use pyo3::prelude::*;
 use pyo3::types::PyBytes;
 
+use tortwin_discover::data::Dataset;
+use tortwin_discover::Discovery;
 use tortwin_engine::sink::Sink;
 use tortwin_engine::EngineState;
+use tortwin_jobs::replay::{replay_run, SavedState};
+use tortwin_jobs::{self as jobs, Cli, Command, ConfigSource};
 use tortwin_outputs::tables::{Formats, MemoryTable, TableOptions, TableSink};
-use tortwin_studies::discover::data::Dataset;
-use tortwin_studies::discover::Discovery;
-use tortwin_studies::jobs::replay::{replay_run, SavedState};
-use tortwin_studies::jobs::{self, ConfigSource};
-use tortwin_studies::strategy::TrainRail;
-use tortwin_studies::{Error, Progress};
+use tortwin_strategy::TrainRail;
+use tortwin_study::{Error, Progress};
 
 create_exception!(
     tortwin,
@@ -57,21 +57,13 @@ create_exception!(
      where in it (topic, log_time, index; the configuration key)."
 );
 
-/// The commands the package runs, parsed as the binary parses them.
-#[derive(Debug, Parser)]
-#[command(name = "tortwin", no_binary_name = true)]
-enum Command {
-    Replay(jobs::replay::ReplayArgs),
-    Synth(jobs::synth::SynthArgs),
-    Discover(jobs::discover::DiscoverArgs),
-    Calibrate(jobs::discover::CalibrateArgs),
-    Strategy(jobs::strategy::StrategyArgs),
-}
-
 /// `argv` as a command; a bad argument is an [`InputError`] with clap's
 /// message.
 fn parse(argv: Vec<String>) -> PyResult<Command> {
-    Command::try_parse_from(argv).map_err(|e| InputError::new_err(e.to_string()))
+    let words = std::iter::once("tortwin".to_owned()).chain(argv);
+    Cli::try_parse_from(words)
+        .map(|cli| cli.command)
+        .map_err(|e| InputError::new_err(e.to_string()))
 }
 
 fn to_py(err: Error) -> PyErr {

@@ -7,10 +7,10 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
 use clap::Parser;
+use tortwin_jobs::replay::{replay_run, ReplayArgs};
+use tortwin_jobs::synth::{synth, SynthArgs};
 use tortwin_model::config::ModelConfig;
-use tortwin_studies::jobs::replay::{replay_run, ReplayArgs};
-use tortwin_studies::jobs::synth::{synth, SynthArgs};
-use tortwin_studies::Silent;
+use tortwin_study::Silent;
 
 /// The configurations of the repository, as seeds for the config target.
 const CONFIG_SEEDS: [&str; 2] = [

@@ -8,10 +8,10 @@ use std::sync::Arc;
 
 use anyhow::{Context, Result};
 use rand::Rng;
-use tortwin_studies::jobs::replay::{replay_run, ReplayArgs, Replayed};
-use tortwin_studies::jobs::tables::{import, ImportArgs};
-use tortwin_studies::jobs::ConfigSource;
-use tortwin_studies::Silent;
+use tortwin_jobs::replay::{replay_run, ReplayArgs, Replayed};
+use tortwin_jobs::tables::{import, ImportArgs};
+use tortwin_jobs::ConfigSource;
+use tortwin_study::Silent;
 
 use crate::mutate;
 use crate::seeds::Seeds;
@@ -411,7 +411,7 @@ fn not_finite(run: &Replayed) -> Option<String> {
     None
 }
 
-fn classify(e: &tortwin_studies::Error) -> Outcome {
+fn classify(e: &tortwin_study::Error) -> Outcome {
     let text = e.full_message();
     if e.is_input() {
         Outcome::Rejected(text)

@@ -1,0 +1,387 @@
+//! `tortwin replay`: a recording in, the friction field out.
+
+use serde::Deserialize;
+use std::path::{Path, PathBuf};
+
+use tortwin_engine::sink::{
+    Fanout, FieldSnapshot, MeasurementOutput, PulseEvent, RunSummary, SectionInfo, Sink,
+    SinkResult, SinkThread, TrainEvent, WheelContacts,
+};
+use tortwin_engine::{Engine, EngineOptions, EngineState};
+use tortwin_model::error::UsageError;
+use tortwin_outputs::mcap_out::{McapCompression, McapSink};
+use tortwin_outputs::provenance::Provenance;
+use tortwin_outputs::rerun_out::{RerunOptions, RerunSink};
+use tortwin_recording::error::InputError;
+use tortwin_recording::reader::{read_ahead, ReaderContext};
+use tortwin_recording::RecordingReader;
+
+use super::load_config;
+use tortwin_strategy::{PerTrain, Target, TrainRail};
+use tortwin_study::progress::{Progress, Silent};
+use tortwin_study::{Error, Result};
+
+#[derive(Debug, Clone)]
+#[cfg_attr(feature = "cli", derive(clap::Args))]
+pub struct ReplayArgs {
+    /// The recording to replay (MCAP, docs/spec/recording-format.md), e.g.
+    /// recordings/demo_day.mcap in the repository.
+    pub recording: PathBuf,
+    /// Model configuration overlaid on the built-in defaults (TOML; only
+    /// the keys it changes, e.g. a `tortwin discover` model.toml).
+    #[cfg_attr(feature = "cli", arg(long))]
+    pub config: Option<super::ConfigSource>,
+    /// Write the MCAP output here (Foxglove-readable).
+    #[cfg_attr(feature = "cli", arg(long))]
+    pub out_mcap: Option<PathBuf>,
+    /// Write the rerun recording here (open with `rerun FILE.rrd`).
+    #[cfg_attr(feature = "cli", arg(long))]
+    pub out_rrd: Option<PathBuf>,
+    /// Start from the state an earlier replay wrote with --state-out.
+    #[cfg_attr(feature = "cli", arg(long))]
+    pub state_in: Option<PathBuf>,
+    /// Write the section's state at the end, for the next recording.
+    #[cfg_attr(feature = "cli", arg(long))]
+    pub state_out: Option<PathBuf>,
+    /// Snapshot the field after every wheel pass in the rerun recording
+    /// (default: after every train).
+    #[cfg_attr(feature = "cli", arg(long))]
+    pub every_wheel: bool,
+    /// Do not print the summary.
+    #[cfg_attr(feature = "cli", arg(long, short))]
+    pub quiet: bool,
+    /// Count every train's contacts in the default target band, its
+    /// carry-on and its product ([`Replayed::per_train`]; the fleet's
+    /// metrics). Not a command-line flag.
+    #[cfg_attr(feature = "cli", arg(skip))]
+    pub per_train: bool,
+}
+
+impl ReplayArgs {
+    /// A quiet replay of `recording` with the default model and no outputs;
+    /// set the fields a caller needs.
+    pub fn new(recording: impl Into<PathBuf>) -> Self {
+        Self {
+            recording: recording.into(),
+            config: None,
+            out_mcap: None,
+            out_rrd: None,
+            state_in: None,
+            state_out: None,
+            every_wheel: false,
+            quiet: true,
+            per_train: false,
+        }
+    }
+}
+
+/// Reads a state written by `--state-out`.
+pub fn read_state(path: &Path) -> Result<EngineState, InputError> {
+    let text =
+        tortwin_outputs::files::read_text_input(path, tortwin_outputs::files::MAX_STATE_BYTES)
+            .map_err(|e| InputError::file(path, format!("cannot read the state: {e}")))?;
+    // The path names the field a value that does not read sits in.
+    let mut json = serde_json::Deserializer::from_str(&text);
+    let mut track = serde_path_to_error::Track::new();
+    let state = EngineState::deserialize(serde_path_to_error::Deserializer::new(
+        &mut json, &mut track,
+    ))
+    .and_then(|state| json.end().map(|()| state))
+    .map_err(|e| {
+        let at = track.path();
+        let field = if at.iter().next().is_some() {
+            format!("field `{at}`: ")
+        } else {
+            String::new()
+        };
+        InputError::file(path, format!("not a tortwin state: {field}{e}"))
+    })?;
+    Ok(state)
+}
+
+/// Replays `args.recording` through the engine into the outputs the
+/// arguments ask for, plus `extra` sinks. Returns the run's summary.
+pub fn replay(args: &ReplayArgs, extra: &mut [&mut dyn Sink]) -> Result<RunSummary> {
+    replay_with(args, extra, &Silent)
+}
+
+/// [`replay`], telling `progress` how far the recording has been read.
+pub fn replay_with(
+    args: &ReplayArgs,
+    extra: &mut [&mut dyn Sink],
+    progress: &dyn Progress,
+) -> Result<RunSummary> {
+    replay_run(args, None, extra, progress).map(|run| run.summary)
+}
+
+/// The whole command: starts from `start` (a state held in memory) or
+/// else from `args.state_in`, replays through [`replay_from`], writes
+/// `args.state_out`, and returns what the replay left.
+pub fn replay_run(
+    args: &ReplayArgs,
+    start: Option<SavedState<'_>>,
+    extra: &mut [&mut dyn Sink],
+    progress: &dyn Progress,
+) -> Result<Replayed> {
+    // The inputs read from here on are this job's (tortwin_files::InputScope).
+    let _inputs = tortwin_outputs::files::InputScope::enter();
+    let saved;
+    let start = match (start, &args.state_in) {
+        (Some(start), _) => Some(start),
+        (None, Some(path)) => {
+            saved = read_state(path)?;
+            Some(SavedState {
+                state: &saved,
+                name: path.display().to_string(),
+                file: Some(path),
+            })
+        }
+        (None, None) => None,
+    };
+    let run = replay_from(args, start, extra, progress)?;
+    if let Some(path) = &args.state_out {
+        let text = serde_json::to_string(&run.state).map_err(|source| Error::Json {
+            what: "the state",
+            source,
+        })?;
+        tortwin_outputs::files::write_atomically(path, text.as_bytes())?;
+    }
+    Ok(run)
+}
+
+/// A state to start a replay from.
+pub struct SavedState<'a> {
+    pub state: &'a EngineState,
+    /// What error messages call it (the file's path, "the state passed in").
+    pub name: String,
+    /// The file it was read from, for the provenance.
+    pub file: Option<&'a Path>,
+}
+
+/// What a replay leaves: its summary and the section's state at the end
+/// (what `--state-out` writes).
+pub struct Replayed {
+    pub summary: RunSummary,
+    pub state: EngineState,
+    /// Per train and rail, with `ReplayArgs::per_train`.
+    pub per_train: Option<Vec<TrainRail>>,
+}
+
+/// Replays `args.recording` from `start` (or a fresh section), into the
+/// outputs the arguments ask for and `extra`; `args.state_in` and
+/// `args.state_out` are the caller's (see [`replay_run`]). Stops with
+/// [`Error::Cancelled`] when `progress` says so.
+pub fn replay_from(
+    args: &ReplayArgs,
+    start: Option<SavedState<'_>>,
+    extra: &mut [&mut dyn Sink],
+    progress: &dyn Progress,
+) -> Result<Replayed> {
+    let _inputs = tortwin_outputs::files::InputScope::enter();
+    let cfg = load_config(args.config.as_ref())?;
+    let outputs = [&args.out_mcap, &args.out_rrd, &args.state_out];
+    for (k, a) in outputs.iter().enumerate() {
+        if let Some(a) = a {
+            if outputs[k + 1..].iter().any(|b| b.as_ref() == Some(a)) {
+                return Err(
+                    UsageError(format!("two outputs would be written to {}", a.display())).into(),
+                );
+            }
+        }
+    }
+    let ctx = match &start {
+        Some(s) => ReaderContext {
+            origin_ns: Some(s.state.origin_ns),
+            occupied_until_s: s.state.occupied_until_s.unwrap_or(f64::NEG_INFINITY),
+        },
+        None => ReaderContext::default(),
+    };
+    // The inputs' sha256 (for the outputs' provenance) is read on a thread
+    // of its own while the reader's layout pass reads the recording: both
+    // take a few tenths of a second on a year's recording. A recording that
+    // cannot be read is reported first, as if one came after the other.
+    let provenance_inputs = {
+        let mut inputs = vec![args.recording.as_path()];
+        inputs.extend(args.config.as_ref().and_then(super::ConfigSource::path));
+        inputs.extend(start.as_ref().and_then(|s| s.file));
+        inputs
+    };
+    let wants_provenance = args.out_mcap.is_some() || args.out_rrd.is_some();
+    let (reader, provenance) = std::thread::scope(|scope| {
+        let hashing =
+            wants_provenance.then(|| scope.spawn(|| Provenance::of_run(&provenance_inputs, &cfg)));
+        let reader = RecordingReader::open(&args.recording, ctx);
+        let provenance = hashing.map(|h| h.join().unwrap_or_else(|p| std::panic::resume_unwind(p)));
+        (reader, provenance)
+    });
+    let reader = reader?;
+    let provenance = provenance.transpose()?;
+    let opts = EngineOptions {
+        snapshot_every_wheel: args.every_wheel,
+        every_wheel_contacts: args.per_train,
+        ..EngineOptions::default()
+    };
+    let section = reader.section().clone();
+    let source = args.config.as_ref().map_or_else(
+        || "built-in defaults".to_string(),
+        super::ConfigSource::name,
+    );
+    tortwin_engine::generic::check_terms_against(&cfg.effects.generic, &section, &source)?;
+    let mut per_train = args
+        .per_train
+        .then(|| PerTrain::new(&section, &cfg, &Target::default()))
+        .transpose()?;
+    let mut engine = match &start {
+        Some(s) => Engine::from_state(section, cfg, opts, s.state)
+            .map_err(|e| InputError::file(Path::new(&s.name), e.to_string()))?,
+        None => Engine::new(section, cfg, opts, reader.origin_ns()),
+    };
+
+    let mcap = args
+        .out_mcap
+        .as_deref()
+        .map(|p| {
+            let compression = McapCompression::for_recording(reader.message_count());
+            McapSink::create(p, provenance.as_ref(), compression)
+        })
+        .transpose()?;
+    let rrd = args
+        .out_rrd
+        .as_deref()
+        .map(|p| {
+            let options = RerunOptions {
+                provenance: provenance.clone(),
+                ..RerunOptions::default()
+            };
+            RerunSink::create(p, options)
+        })
+        .transpose()?;
+    // The files are encoded and written on a thread of their own while the
+    // engine steps (the same calls in the same order: the same files).
+    let mut files = if mcap.is_some() || rrd.is_some() {
+        let files = FileOutputs { mcap, rrd };
+        let path = args.out_mcap.as_ref().or(args.out_rrd.as_ref());
+        Some(
+            SinkThread::spawn("tortwin-outputs", files).map_err(|source| Error::Io {
+                what: "cannot start the thread that writes",
+                path: path.cloned().unwrap_or_default(),
+                source,
+            })?,
+        )
+    } else {
+        None
+    };
+    let mut fanout = Fanout::default();
+    if let Some(s) = per_train.as_mut() {
+        fanout.sinks.push(s);
+    }
+    if let Some(s) = files.as_mut() {
+        fanout.sinks.push(s);
+    }
+    for s in extra.iter_mut() {
+        fanout.sinks.push(&mut **s);
+    }
+
+    progress.stage_of(
+        &format!("replaying {} (messages)", args.recording.display()),
+        reader.message_count(),
+    );
+    // The /section message was read when the reader opened. The rest are
+    // read ahead on a thread of their own while the engine steps.
+    let message_count = reader.message_count();
+    let (stepped, reader) = read_ahead(reader, |events| -> Result<()> {
+        let mut messages = 1u64;
+        for event in events {
+            let event = event?;
+            messages += 1;
+            if messages.is_multiple_of(1024) {
+                progress.done(messages);
+                tortwin_study::progress::check(progress)?;
+            }
+            engine
+                .push(event, &mut fanout)
+                .map_err(|source| Error::Replay {
+                    what: args.recording.display().to_string(),
+                    source,
+                })?;
+        }
+        Ok(())
+    });
+    stepped?;
+    let summary = engine.finish(&mut fanout, reader.unknown_topic_messages())?;
+    progress.done(message_count);
+    drop(fanout);
+    Ok(Replayed {
+        summary,
+        state: engine.state(),
+        per_train: per_train.map(|p| p.rows().to_vec()),
+    })
+}
+
+/// The MCAP and rerun outputs as one sink, for their thread.
+struct FileOutputs {
+    mcap: Option<McapSink>,
+    rrd: Option<RerunSink>,
+}
+
+impl FileOutputs {
+    fn each(&mut self, mut call: impl FnMut(&mut dyn Sink) -> SinkResult) -> SinkResult {
+        if let Some(s) = self.mcap.as_mut() {
+            call(s)?;
+        }
+        if let Some(s) = self.rrd.as_mut() {
+            call(s)?;
+        }
+        Ok(())
+    }
+}
+
+impl Sink for FileOutputs {
+    fn begin(&mut self, info: &SectionInfo<'_>) -> SinkResult {
+        self.each(|s| s.begin(info))
+    }
+    fn train(&mut self, train: &TrainEvent<'_>) -> SinkResult {
+        self.each(|s| s.train(train))
+    }
+    fn pulse(&mut self, pulse: &PulseEvent<'_>) -> SinkResult {
+        self.each(|s| s.pulse(pulse))
+    }
+    fn measurement(&mut self, m: &MeasurementOutput<'_>) -> SinkResult {
+        self.each(|s| s.measurement(m))
+    }
+    fn field(&mut self, f: &FieldSnapshot<'_>) -> SinkResult {
+        self.each(|s| s.field(f))
+    }
+    fn wheel_contacts(&mut self, w: &WheelContacts<'_>) -> SinkResult {
+        self.each(|s| s.wheel_contacts(w))
+    }
+    fn finish(&mut self, summary: &RunSummary) -> SinkResult {
+        self.each(|s| s.finish(summary))
+    }
+}
+
+/// The lines that say where the outputs are and how to open them.
+pub fn render_outputs(args: &ReplayArgs) -> String {
+    let mut out = String::new();
+    for (what, path) in [
+        ("rerun recording", &args.out_rrd),
+        ("MCAP output", &args.out_mcap),
+    ] {
+        if let Some(path) = path {
+            out += &format!("{what}: {}\n", path.display());
+        }
+    }
+    if let Some(path) = &args.out_rrd {
+        out += &format!(
+            "open it with: pip install rerun-sdk==0.36.3 && rerun {}\n",
+            path.display()
+        );
+    }
+    if let Some(path) = &args.out_mcap {
+        out += &format!(
+            "or open {} in Foxglove (https://app.foxglove.dev, Open local file)\n",
+            path.display()
+        );
+    }
+    out
+}
