@@ -1000,140 +1000,17 @@ impl Topic {
     }
 }
 
-const SECTION_SCHEMA: &str = r##"{
-  "$schema": "https://json-schema.org/draft/2020-12/schema",
-  "title": "tortwin.Section",
-  "description": "The track section and the twin's calculation grid, at the recording's origin.",
-  "type": "object",
-  "required": ["section_id", "length_m", "rails", "rail_head_radius_m",
-               "nominal_wheel_diameter_m", "grid_d_m", "tracks", "applicators", "sites"],
-  "properties": {
-    "section_id": {"type": "string"},
-    "length_m": {"type": "number", "exclusiveMinimum": 0},
-    "rails": {"type": "array", "minItems": 1, "items": {"type": "string"}},
-    "curve_radius_m": {"type": "number", "exclusiveMinimum": 0, "description": "absent on tangent track"},
-    "rail_head_radius_m": {"type": "number", "exclusiveMinimum": 0},
-    "nominal_wheel_diameter_m": {"type": "number", "exclusiveMinimum": 0},
-    "grid_d_m": {"type": "array", "items": {"type": "number"},
-                 "description": "grid point positions d_i = i * C in m"},
-    "tracks": {
-      "type": "array",
-      "description": "every surface the twin keeps: one per rail, two on the high rail with bogie bands",
-      "items": {
-        "type": "object",
-        "required": ["track", "rail", "band"],
-        "properties": {
-          "track": {"type": "integer", "minimum": 0},
-          "rail": {"type": "string"},
-          "band": {"type": "string"}
-        }
-      }
-    },
-    "applicators": {
-      "type": "array",
-      "items": {
-        "type": "object",
-        "required": ["id", "position_m", "rails", "nominal_pulse_g", "grid_index", "grid_d_m"],
-        "properties": {
-          "id": {"type": "string"},
-          "position_m": {"type": "number"},
-          "rails": {"type": "array", "items": {"type": "string"}},
-          "nominal_pulse_g": {"type": "number", "minimum": 0},
-          "grid_index": {"type": "integer", "minimum": 0},
-          "grid_d_m": {"type": "number"}
-        }
-      }
-    },
-    "sites": {
-      "type": "array",
-      "items": {
-        "type": "object",
-        "required": ["id", "position_m", "grid_index", "grid_d_m"],
-        "properties": {
-          "id": {"type": "string"},
-          "position_m": {"type": "number"},
-          "grid_index": {"type": "integer", "minimum": 0},
-          "grid_d_m": {"type": "number"}
-        }
-      }
-    }
-  }
-}"##;
+// tortwin's own topics' schemas, .json files beside Foxglove's
+// (crates/outputs/schemas/tortwin/README.md).
+const SECTION_SCHEMA: &str = include_str!("../../schemas/tortwin/section.json");
 
-const TRAIN_SCHEMA: &str = r##"{
-  "$schema": "https://json-schema.org/draft/2020-12/schema",
-  "title": "tortwin.Train",
-  "description": "A train that entered the section; log_time is when its front crossed the entry end.",
-  "type": "object",
-  "required": ["train_id", "direction", "speed_mps", "axles", "end_time_ns", "duration_s"],
-  "properties": {
-    "train_id": {"type": "string"},
-    "direction": {"type": "string", "enum": ["up", "down"]},
-    "speed_mps": {"type": "number", "exclusiveMinimum": 0},
-    "axles": {"type": "integer", "minimum": 1},
-    "end_time_ns": {"type": "integer", "minimum": 0,
-                    "description": "ns since the Unix epoch when the last axle left the section"},
-    "duration_s": {"type": "number", "minimum": 0}
-  }
-}"##;
+const TRAIN_SCHEMA: &str = include_str!("../../schemas/tortwin/train.json");
 
-const PULSE_SCHEMA: &str = r##"{
-  "$schema": "https://json-schema.org/draft/2020-12/schema",
-  "title": "tortwin.Pulse",
-  "description": "The pulses of product an applicator laid on a rail since the previous train left (or since the start), written when the next train has left the section (or at the end of the run).",
-  "type": "object",
-  "required": ["applicator_id", "rail", "pulses", "mass_g", "first_time_ns", "last_time_ns"],
-  "properties": {
-    "applicator_id": {"type": "string"},
-    "rail": {"type": "string"},
-    "pulses": {"type": "integer", "minimum": 1},
-    "mass_g": {"type": "number", "minimum": 0, "description": "all the pulses' product"},
-    "first_time_ns": {"type": "integer", "minimum": 0, "description": "ns since the Unix epoch of the first pulse"},
-    "last_time_ns": {"type": "integer", "minimum": 0, "description": "ns since the Unix epoch of the last pulse"}
-  }
-}"##;
+const PULSE_SCHEMA: &str = include_str!("../../schemas/tortwin/pulse.json");
 
-const MEASUREMENT_SCHEMA: &str = r##"{
-  "$schema": "https://json-schema.org/draft/2020-12/schema",
-  "title": "tortwin.Measurement",
-  "description": "An input measurement and the twin's value for it, at the measurement's log_time.",
-  "type": "object",
-  "required": ["site_id", "rail", "quantity", "measured", "simulated"],
-  "properties": {
-    "site_id": {"type": "string"},
-    "rail": {"type": "string"},
-    "quantity": {"type": "string", "enum": ["mu", "adhesion", "rail_mu"]},
-    "train_id": {"type": "string"},
-    "axle_index": {"type": "integer", "minimum": 0},
-    "measured": {"type": "number"},
-    "simulated": {"type": "number"},
-    "index_in_file": {"type": "integer", "minimum": 0,
-                      "description": "the input message's index in its recording"}
-  },
-  "if": {"properties": {"quantity": {"const": "rail_mu"}}},
-  "then": {"not": {"anyOf": [{"required": ["train_id"]}, {"required": ["axle_index"]}]}},
-  "else": {"required": ["train_id", "axle_index"]}
-}"##;
+const MEASUREMENT_SCHEMA: &str = include_str!("../../schemas/tortwin/measurement.json");
 
-const FIELD_SCHEMA: &str = r##"{
-  "$schema": "https://json-schema.org/draft/2020-12/schema",
-  "title": "tortwin.Field",
-  "description": "The friction field of one rail band after a train. mu, adhesion and wheel_mass_mg are those seen by the train's last wheel on that rail; every array runs over the grid points grid_d_m of /twin/section. mu and adhesion are rounded to 1e-4, the masses to 3 significant digits, masses below 1e-4 mg (which move mu by less than 3e-7) written as 0.",
-  "type": "object",
-  "required": ["train_id", "rail", "band", "wheel_pass", "mu", "adhesion",
-               "rail_mass_mg", "wheel_mass_mg"],
-  "properties": {
-    "train_id": {"type": "string"},
-    "rail": {"type": "string"},
-    "band": {"type": "string"},
-    "wheel_pass": {"type": "integer", "minimum": 0,
-                   "description": "wheels that have rolled over this rail so far"},
-    "mu": {"type": "array", "items": {"type": "number"}},
-    "adhesion": {"type": "array", "items": {"type": "number"}},
-    "rail_mass_mg": {"type": "array", "items": {"type": "number"}},
-    "wheel_mass_mg": {"type": "array", "items": {"type": "number"}}
-  }
-}"##;
+const FIELD_SCHEMA: &str = include_str!("../../schemas/tortwin/field.json");
 
 #[cfg(test)]
 mod tests {
