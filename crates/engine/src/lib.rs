@@ -15,8 +15,6 @@
 //! Everything that simulates (replay, paper scenarios, synthetic truth runs,
 //! fits, strategies) drives this one engine with [`Engine::push`].
 
-#![warn(unreachable_pub)]
-
 pub mod generic;
 pub mod readout;
 mod roll;

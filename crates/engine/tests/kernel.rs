@@ -7,6 +7,10 @@
 //! bundled recordings: the paper's model, every named effect, bands and
 //! rain, generic terms, with and without tangents.
 
+// A test asserts by panicking (clippy.toml allows it inside #[test] functions;
+// this file's helpers are test code too).
+#![allow(clippy::panic, clippy::expect_used, clippy::unwrap_used)]
+
 use std::path::PathBuf;
 
 use tortwin_engine::sink::{MeasurementOutput, Sink, SinkResult};

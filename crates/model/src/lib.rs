@@ -15,8 +15,6 @@
 //! - [`tangent`]: the masses' derivatives with respect to the constants
 //!   that move them, stepped beside the masses (one replay for all).
 
-#![warn(unreachable_pub)]
-
 pub mod config;
 pub mod contact;
 pub mod effects;

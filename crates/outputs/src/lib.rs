@@ -3,8 +3,6 @@
 //! tables ([`tables`]), all [`tortwin_engine::sink::Sink`]s, and files that
 //! appear only when complete ([`files`]).
 
-#![warn(unreachable_pub)]
-
 pub use tortwin_files as files;
 pub mod foxglove;
 pub mod geometry;

@@ -40,8 +40,6 @@
 //! plot by its title and a file by its path. Files are written whole or
 //! not at all ([`tortwin_outputs::files`]).
 
-#![warn(unreachable_pub)]
-
 mod axis;
 mod colour;
 mod csv;

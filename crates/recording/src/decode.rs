@@ -28,7 +28,7 @@ use crate::wire::{MeasurementMsg, PassageMsg, PerRail, PulseMsg, SectionMsg, Wea
 /// (its path in the message, e.g. `axles[3].offset_m`; `log_time` for the
 /// message's time) where there is one.
 #[derive(Debug, Clone, PartialEq, Eq)]
-pub struct DecodeError {
+pub(crate) struct DecodeError {
     pub field: Option<String>,
     pub message: String,
 }
@@ -59,7 +59,7 @@ impl From<String> for DecodeError {
 }
 
 /// A message's JSON as the wire struct `T`, or why not.
-pub fn parse<'de, T: FromJson<'de>>(data: &'de [u8]) -> Result<T, DecodeError> {
+pub(crate) fn parse<'de, T: FromJson<'de>>(data: &'de [u8]) -> Result<T, DecodeError> {
     // Tracking the path costs about a third of the parse: a message that
     // parses needs no path, and one that does not is parsed again with it
     // (the same bytes fail at the same place).
@@ -170,7 +170,7 @@ fn within(range: &Range, name: impl FnOnce() -> String, x: f64) -> Result<f64, D
 
 /// A message's log_time as the signed nanosecond count every time in
 /// tortwin is: past [`limits::LAST_LOG_TIME_NS`] (2262-04-11) is an error.
-pub fn log_time(log_time_ns: u64) -> Result<i64, DecodeError> {
+pub(crate) fn log_time(log_time_ns: u64) -> Result<i64, DecodeError> {
     i64::try_from(log_time_ns).map_err(|_| {
         DecodeError::at(
             "log_time",
@@ -268,7 +268,7 @@ pub const MAX_GRID_POINTS: usize = 200_000;
 pub const MAX_AXLES: usize = 10_000;
 
 /// The `/section` message as the typed [`Section`].
-pub fn section(msg: &SectionMsg) -> Result<Section, DecodeError> {
+pub(crate) fn section(msg: &SectionMsg) -> Result<Section, DecodeError> {
     let length_m = within(
         &limits::SECTION_LENGTH_M,
         || "length_m".into(),
@@ -427,7 +427,7 @@ struct TrainSeen {
 /// trains seen so far (their number grows with the recording, one entry a
 /// train) and the section's occupation.
 #[derive(Debug, Clone)]
-pub struct Decoder {
+pub(crate) struct Decoder {
     section: Section,
     origin_ns: i64,
     trains: HashMap<String, TrainSeen>,
@@ -439,7 +439,7 @@ pub struct Decoder {
 impl Decoder {
     /// `occupied_until_s`: when the last train before this recording left
     /// the section (s from `origin_ns`; `NEG_INFINITY` for none).
-    pub fn new(section: Section, origin_ns: i64, occupied_until_s: f64) -> Self {
+    pub(crate) fn new(section: Section, origin_ns: i64, occupied_until_s: f64) -> Self {
         Self {
             section,
             origin_ns,
@@ -449,15 +449,15 @@ impl Decoder {
         }
     }
 
-    pub fn section(&self) -> &Section {
+    pub(crate) fn section(&self) -> &Section {
         &self.section
     }
 
-    pub fn origin_ns(&self) -> i64 {
+    pub(crate) fn origin_ns(&self) -> i64 {
         self.origin_ns
     }
 
-    pub fn occupied_until_s(&self) -> f64 {
+    pub(crate) fn occupied_until_s(&self) -> f64 {
         self.occupied_until_s
     }
 
@@ -468,7 +468,7 @@ impl Decoder {
     }
 
     /// A `/train/passage` at `log_time_ns`; it becomes the next train.
-    pub fn passage(&mut self, msg: PassageMsg, log_time_ns: u64) -> Result<Passage, DecodeError> {
+    pub(crate) fn passage(&mut self, msg: PassageMsg, log_time_ns: u64) -> Result<Passage, DecodeError> {
         let rails = &self.section.rails;
         let speed_mps = within(
             &limits::SPEED_MPS,
@@ -611,7 +611,7 @@ impl Decoder {
     }
 
     /// An `/applicator/pulse`: on a rail its applicator lists.
-    pub fn pulse(&self, msg: &PulseMsg) -> Result<Pulse, DecodeError> {
+    pub(crate) fn pulse(&self, msg: &PulseMsg) -> Result<Pulse, DecodeError> {
         let section = &self.section;
         let id = msg.applicator_id.as_str();
         let Some((applicator, a)) = section
@@ -654,7 +654,7 @@ impl Decoder {
 
     /// A `/measurement/friction`: a `mu` or `adhesion` measurement names a
     /// train already seen and one of its axles.
-    pub fn measurement(&self, msg: MeasurementMsg) -> Result<Measurement, DecodeError> {
+    pub(crate) fn measurement(&self, msg: MeasurementMsg) -> Result<Measurement, DecodeError> {
         let section = &self.section;
         let site = section
             .sites
@@ -751,7 +751,7 @@ impl Decoder {
     }
 
     /// An `/environment/weather`.
-    pub fn weather(&self, msg: &WeatherMsg) -> Result<Weather, DecodeError> {
+    pub(crate) fn weather(&self, msg: &WeatherMsg) -> Result<Weather, DecodeError> {
         Ok(Weather {
             air_temperature_c: within(
                 &limits::AIR_TEMPERATURE_C,

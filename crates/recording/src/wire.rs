@@ -283,7 +283,7 @@ pub(crate) mod json {
     );
 
     /// [`FromJson`] where serde wants a seed (array elements, map values).
-    pub struct Seed<T>(PhantomData<T>);
+    pub(crate) struct Seed<T>(PhantomData<T>);
 
     impl<T> Default for Seed<T> {
         fn default() -> Self {
@@ -318,7 +318,7 @@ pub(crate) mod json {
 
     /// A finite JSON number; an integer is a valid float (converted as
     /// serde_json converts it), `true` is not.
-    pub fn number<'de, D: Deserializer<'de>>(deserializer: D) -> Result<f64, D::Error> {
+    pub(crate) fn number<'de, D: Deserializer<'de>>(deserializer: D) -> Result<f64, D::Error> {
         struct Number;
         impl<'de> Visitor<'de> for Number {
             type Value = f64;
@@ -339,7 +339,7 @@ pub(crate) mod json {
     }
 
     /// A JSON number or `null`; the field must be there.
-    pub fn nullable_number<'de, D: Deserializer<'de>>(
+    pub(crate) fn nullable_number<'de, D: Deserializer<'de>>(
         deserializer: D,
     ) -> Result<Option<f64>, D::Error> {
         struct Nullable;
@@ -363,7 +363,7 @@ pub(crate) mod json {
 
     /// A non-negative JSON integer (`7`, not `7.0`), absent or `null` for
     /// `None`.
-    pub fn optional_index<'de, D: Deserializer<'de>>(
+    pub(crate) fn optional_index<'de, D: Deserializer<'de>>(
         deserializer: D,
     ) -> Result<Option<usize>, D::Error> {
         struct Index;
@@ -391,7 +391,7 @@ pub(crate) mod json {
     }
 
     /// A JSON array of [`FromJson`] values.
-    pub fn array<'de, D: Deserializer<'de>, T: FromJson<'de>>(
+    pub(crate) fn array<'de, D: Deserializer<'de>, T: FromJson<'de>>(
         deserializer: D,
     ) -> Result<Vec<T>, D::Error> {
         struct Array<T>(PhantomData<T>);

@@ -27,10 +27,10 @@ use serde::{Deserialize, Serialize};
 
 use super::metrics::{Figures, Target};
 use super::{evaluate, Plan, Strategy, Traffic};
-use crate::error::optimiser;
-use crate::{Error, Result};
 use tortwin_model::config::ModelConfig;
 use tortwin_model::error::UsageError;
+use tortwin_study::error::optimiser;
+use tortwin_study::{Error, Result};
 
 /// The most values one dimension of a space may have (a list's length, a
 /// range's `steps`, the candidate positions): a thousand is finer than any
@@ -520,8 +520,10 @@ impl<'a> Searcher<'a> {
         starts
             .par_iter()
             .try_for_each(|&k| self.nelder_mead(k, Objective::Coverage))?;
-        let best = self.best_coverage_key();
-        self.polish(best, Objective::Coverage)?;
+        // (The coarse lattice is never empty: there is always a best.)
+        if let Some(best) = self.best_coverage_key() {
+            self.polish(best, Objective::Coverage)?;
+        }
 
         // Stage 2: the least product within the tolerance of that coverage.
         let objective = self.product_objective();
@@ -557,7 +559,7 @@ impl<'a> Searcher<'a> {
         starts
     }
 
-    fn best_coverage_key(&self) -> Key {
+    fn best_coverage_key(&self) -> Option<Key> {
         self.all()
             .iter()
             .min_by(|a, b| {
@@ -566,7 +568,6 @@ impl<'a> Searcher<'a> {
                     .then(a.key.cmp(&b.key))
             })
             .map(|e| e.key)
-            .expect("the coarse lattice is never empty")
     }
 
     /// Stage 1's cost: the coverage, constraint as a penalty.

@@ -47,7 +47,7 @@ pub const MAX_CHUNK_BYTES: u64 = 256 << 20;
 
 /// The layout pass keeps the messages of the file's first chunks, while
 /// their uncompressed sizes add up to at most this, for the replay.
-pub const KEPT_CHUNK_BYTES: u64 = 16 << 20;
+pub(super) const KEPT_CHUNK_BYTES: u64 = 16 << 20;
 
 /// A message of the format (a topic tortwin reads) larger than this is
 /// refused before it is parsed: a `/train/passage` of 10 000 axles is about
