@@ -12,6 +12,10 @@
 //!   mu0, A, B_s_per_m, kA, kS -> mu_slip, eps, eps_M, Fx_N, Fy_N (total
 //!   lateral force including spin), T_over_Q.
 
+// A test asserts by panicking (clippy.toml allows it inside #[test] functions;
+// this file's helpers are test code too).
+#![allow(clippy::panic, clippy::expect_used, clippy::unwrap_used)]
+
 use std::collections::HashMap;
 use std::path::PathBuf;
 
@@ -43,7 +47,8 @@ impl Row {
 }
 
 fn golden_rows() -> Vec<Row> {
-    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/reference/contact_golden.csv");
+    let path =
+        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../tests/reference/contact_golden.csv");
     let text = std::fs::read_to_string(&path)
         .unwrap_or_else(|e| panic!("cannot read {}: {e}", path.display()));
     let mut lines = text.lines().filter(|l| !l.trim().is_empty());

@@ -5,6 +5,10 @@
 //! the tracks rolled as a wavefront, on one thread or several, end in the
 //! same bits as the wheels rolled one at a time in the serial order.
 
+// A test asserts by panicking (clippy.toml allows it inside #[test] functions;
+// this file's helpers are test code too).
+#![allow(clippy::panic, clippy::expect_used, clippy::unwrap_used)]
+
 use proptest::prelude::*;
 
 use tortwin_engine::sink::{FieldSnapshot, Sink, WheelContacts};

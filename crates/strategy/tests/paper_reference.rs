@@ -3,6 +3,10 @@
 //! paper_fig13.csv), to 1e-9 relative; and model.md's check of the Figure 13
 //! numbers that the paper states in its text.
 
+// A test asserts by panicking (clippy.toml allows it inside #[test] functions;
+// this file's helpers are test code too).
+#![allow(clippy::panic, clippy::expect_used, clippy::unwrap_used)]
+
 use std::path::PathBuf;
 
 use tortwin_model::config::ModelConfig;
@@ -10,7 +14,7 @@ use tortwin_strategy::paper::{twin_disc, WaysideScenario};
 
 fn reference(name: &str) -> Vec<Vec<f64>> {
     let path = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("tests/reference")
+        .join("../../tests/reference")
         .join(name);
     let text = std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
     text.lines()
