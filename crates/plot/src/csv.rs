@@ -38,14 +38,14 @@ pub fn csv_text<R: AsRef<[f64]>>(
 }
 
 /// Writes [`csv_text`] to `path` (whole or not at all, see
-/// [`tortwin_outputs::files`]).
+/// [`tortwin_files`]).
 pub fn write_csv<R: AsRef<[f64]>>(
     path: &Path,
     header: &[&str],
     rows: impl IntoIterator<Item = R>,
 ) -> Result<(), PlotError> {
     let text = csv_text(header, rows).map_err(|e| e.for_file(path))?;
-    tortwin_outputs::files::write_atomically(path, text.as_bytes())?;
+    tortwin_files::write_atomically(path, text.as_bytes())?;
     Ok(())
 }
 

@@ -3,7 +3,7 @@
 
 use std::path::PathBuf;
 
-use tortwin_outputs::files::FileError;
+use tortwin_files::FileError;
 
 /// What plotters reports when drawing into SVG text fails.
 pub type DrawError = plotters::drawing::DrawingAreaErrorKind<std::io::Error>;
@@ -109,7 +109,7 @@ pub enum PlotError {
 
 impl PlotError {
     /// Whether the user asked for the impossible: a file in an output
-    /// folder that cannot be made (`tortwin_outputs::files::FileError::is_input`).
+    /// folder that cannot be made (`tortwin_files::FileError::is_input`).
     pub fn is_input(&self) -> bool {
         match self {
             PlotError::File(e) => e.is_input(),

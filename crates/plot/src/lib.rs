@@ -38,7 +38,7 @@
 //! labels) and `layout.rs` (fonts, text sizes, boxes in pixels).
 //! `error.rs`: [`PlotError`], what cannot be drawn or written, naming the
 //! plot by its title and a file by its path. Files are written whole or
-//! not at all ([`tortwin_outputs::files`]).
+//! not at all ([`tortwin_files`]).
 
 mod axis;
 mod colour;

@@ -267,10 +267,10 @@ impl LinePlot {
     }
 
     /// Writes the figure as an SVG file (whole or not at all, see
-    /// [`tortwin_outputs::files`]).
+    /// [`tortwin_files`]).
     pub fn write_svg(&self, path: &Path) -> Result<(), PlotError> {
         let svg = self.render_svg().map_err(|e| e.for_file(path))?;
-        tortwin_outputs::files::write_atomically(path, svg.as_bytes())?;
+        tortwin_files::write_atomically(path, svg.as_bytes())?;
         Ok(())
     }
 

@@ -468,7 +468,11 @@ impl Decoder {
     }
 
     /// A `/train/passage` at `log_time_ns`; it becomes the next train.
-    pub(crate) fn passage(&mut self, msg: PassageMsg, log_time_ns: u64) -> Result<Passage, DecodeError> {
+    pub(crate) fn passage(
+        &mut self,
+        msg: PassageMsg,
+        log_time_ns: u64,
+    ) -> Result<Passage, DecodeError> {
         let rails = &self.section.rails;
         let speed_mps = within(
             &limits::SPEED_MPS,
