@@ -136,8 +136,8 @@ fn say(text: &str) -> Result<()> {
     let text = jobs::printable(text, true);
     match out.write_all(text.as_bytes()).and_then(|()| out.flush()) {
         Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => Ok(()),
-        Err(e) if tortwin_model::error::is_environment(&e) => Err(tortwin_study::Error::from(
-            tortwin_model::error::UsageError(format!(
+        Err(e) if tortwin_files::usage::is_environment(&e) => Err(tortwin_study::Error::from(
+            tortwin_files::usage::UsageError(format!(
                 "writing the summary to standard output: {e}"
             )),
         )

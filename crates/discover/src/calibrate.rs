@@ -75,8 +75,8 @@ use serde::Serialize;
 
 use super::fit::{Candidate, Evaluator, Stage};
 use super::fmt_param;
+use tortwin_files::usage::UsageError;
 use tortwin_model::config::ModelConfig;
-use tortwin_model::error::UsageError;
 use tortwin_model::product::{ProductKey, ProductParams};
 use tortwin_model::role::Role;
 use tortwin_model::tangent::{self, EffectParam};

@@ -30,12 +30,13 @@ use crate::sink::{
     MassBalance, MeasurementOutput, PulseEvent, RunSummary, SectionInfo, Sink, SinkError,
     SnapshotKind, TrackInfo, TrainEvent,
 };
+use tortwin_files::usage::UsageError;
 use tortwin_model::config::ModelConfig;
 use tortwin_model::contact::{
     self, HertzContact, HertzShape, KalkerCoefficients, PolachContact, PolachInput, Steel,
 };
 use tortwin_model::effects::{Named, TimeEffects};
-use tortwin_model::error::{ConfigError, UsageError};
+use tortwin_model::error::ConfigError;
 use tortwin_model::generic::Driver;
 use tortwin_model::product;
 use tortwin_model::tangent::{self, Tangent};
@@ -114,7 +115,7 @@ impl EngineError {
     /// it is bad input only where its causes hold one of the input errors
     /// (an output folder that cannot be made is a `UsageError` under the
     /// sink's file error) or an I/O error the user has to fix (a full disk,
-    /// a read-only folder: `tortwin_model::error::is_environment`).
+    /// a read-only folder: `tortwin_files::usage::is_environment`).
     pub fn is_input(&self) -> bool {
         match self {
             EngineError::Sink(e) => std::iter::successors(
@@ -126,7 +127,7 @@ impl EngineError {
                     || e.is::<ConfigError>()
                     || e.is::<UsageError>()
                     || e.downcast_ref::<std::io::Error>()
-                        .is_some_and(tortwin_model::error::is_environment)
+                        .is_some_and(tortwin_files::usage::is_environment)
             }),
             EngineError::MeasurementTooLate { .. }
             | EngineError::UndefinedFactor { .. }

@@ -50,8 +50,9 @@ use std::sync::{Mutex, MutexGuard};
 use std::time::{Duration, SystemTime};
 
 use tempfile::{NamedTempFile, TempDir, TempPath};
-use tortwin_model::error::UsageError;
-pub use tortwin_model::error::{caused_by_environment, is_environment};
+use usage::UsageError;
+pub mod usage;
+pub use usage::{caused_by_environment, is_environment};
 
 /// Why an output file could not be written; every variant names the path.
 #[derive(Debug, thiserror::Error)]

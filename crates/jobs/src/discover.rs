@@ -6,7 +6,7 @@ use std::path::PathBuf;
 use tortwin_outputs::provenance::Provenance;
 
 use tortwin_discover::{self as discover, data::Dataset, Discovery, Options, Progress, Silent};
-use tortwin_model::error::UsageError;
+use tortwin_files::usage::UsageError;
 use tortwin_study::{Error, Result};
 
 #[derive(Debug, Clone)]

@@ -110,7 +110,7 @@ pub(crate) fn with_threads<T: Send>(
 ) -> Result<T> {
     if let Some(n) = threads.filter(|n| !(1..=MAX_THREADS).contains(n)) {
         let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
-        return Err(tortwin_model::error::UsageError(format!(
+        return Err(tortwin_files::usage::UsageError(format!(
             "--threads {n}: give 1 to {MAX_THREADS} (a worker per core; this machine has {cores})"
         ))
         .into());

@@ -8,7 +8,7 @@ use tortwin_engine::sink::{
     SinkResult, SinkThread, TrainEvent, WheelContacts,
 };
 use tortwin_engine::{Engine, EngineOptions, EngineState};
-use tortwin_model::error::UsageError;
+use tortwin_files::usage::UsageError;
 use tortwin_outputs::mcap_out::{McapCompression, McapSink};
 use tortwin_outputs::provenance::Provenance;
 use tortwin_outputs::rerun_out::{RerunOptions, RerunSink};

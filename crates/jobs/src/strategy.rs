@@ -8,7 +8,7 @@ use tortwin_outputs::provenance::Provenance;
 
 use serde::Deserialize;
 
-use tortwin_model::error::UsageError;
+use tortwin_files::usage::UsageError;
 use tortwin_strategy::search::{Method, Space, SpaceConfig, Values};
 use tortwin_strategy::{self as strategy, Study, Target, Traffic};
 use tortwin_study::progress::{Progress, Silent};

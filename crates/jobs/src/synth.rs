@@ -7,8 +7,8 @@ use std::path::{Path, PathBuf};
 #[cfg(feature = "cli")]
 use clap::ArgAction;
 
+use tortwin_files::usage::UsageError;
 use tortwin_model::config::ModelConfig;
-use tortwin_model::error::UsageError;
 use tortwin_study::{Error, Result};
 use tortwin_synth::{self as synth, Preset, SynthParams, SynthReport};
 

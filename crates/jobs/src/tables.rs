@@ -6,7 +6,7 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 use tortwin_engine::sink::{RunSummary, Sink};
-use tortwin_model::error::UsageError;
+use tortwin_files::usage::UsageError;
 use tortwin_outputs::files::{make_folder, write_atomically};
 use tortwin_outputs::provenance::Provenance;
 use tortwin_outputs::tables::{Formats, TableOptions, TableSink};

@@ -26,8 +26,8 @@ use serde::Serialize;
 
 use tortwin_engine::sink::{Fanout, Sink};
 use tortwin_engine::{Engine, EngineError, EngineOptions, Grid};
+use tortwin_files::usage::UsageError;
 use tortwin_model::config::ModelConfig;
-use tortwin_model::error::UsageError;
 use tortwin_recording::error::InputError;
 use tortwin_recording::{Applicator, Direction, Event, EventKind, Pulse, Recording, Section};
 

@@ -13,8 +13,8 @@ use serde::{Deserialize, Serialize};
 use super::Traffic;
 use tortwin_engine::sink::{PulseEvent, RunSummary, Sink, TrainEvent, WheelContacts};
 use tortwin_engine::Grid;
+use tortwin_files::usage::UsageError;
 use tortwin_model::config::ModelConfig;
-use tortwin_model::error::UsageError;
 use tortwin_model::product::{self, ProductParams};
 use tortwin_recording::{Direction, Section};
 

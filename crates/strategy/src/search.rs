@@ -27,8 +27,8 @@ use serde::{Deserialize, Serialize};
 
 use super::metrics::{Figures, Target};
 use super::{evaluate, Plan, Strategy, Traffic};
+use tortwin_files::usage::UsageError;
 use tortwin_model::config::ModelConfig;
-use tortwin_model::error::UsageError;
 use tortwin_study::error::optimiser;
 use tortwin_study::{Error, Result};
 

@@ -10,7 +10,8 @@
 use std::path::PathBuf;
 
 use tortwin_engine::EngineError;
-use tortwin_model::error::{ConfigError, UsageError};
+use tortwin_files::usage::UsageError;
+use tortwin_model::error::ConfigError;
 use tortwin_outputs::files::FileError;
 use tortwin_outputs::mcap_out::McapError;
 use tortwin_outputs::rerun_out::RerunError;
@@ -165,7 +166,7 @@ impl Error {
             | Error::Import(_)
             | Error::Export(_)
             | Error::Recording { .. }
-            | Error::Io { .. } => tortwin_model::error::caused_by_environment(self),
+            | Error::Io { .. } => tortwin_files::usage::caused_by_environment(self),
             Error::Json { .. }
             | Error::Threads(_)
             | Error::Optimiser(_)

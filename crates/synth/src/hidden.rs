@@ -3,8 +3,8 @@
 
 use tortwin_study::ConfigSource;
 
+use tortwin_files::usage::UsageError;
 use tortwin_model::config::ModelConfig;
-use tortwin_model::error::UsageError;
 use tortwin_study::Result;
 
 /// Builds the truth configuration: the defaults, overlaid by `truth_config`

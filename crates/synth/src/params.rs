@@ -8,7 +8,7 @@ use std::str::FromStr;
 use serde::Serialize;
 
 use super::{round_dp, DAY_NS};
-use tortwin_model::error::UsageError;
+use tortwin_files::usage::UsageError;
 use tortwin_recording::{Applicator, Section, Site};
 
 /// The section layouts the generator knows.
