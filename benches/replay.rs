@@ -32,12 +32,13 @@ fn replay_with_outputs(c: &mut Criterion) {
             .join("tests/reference/recordings")
             .join(format!("{name}.mcap"));
         let a = args(recording, out.path());
-        let contacts = replay(&a, &mut [])
+        let contacts = replay(&a, None, &mut [], &tortwin_study::Silent)
             .expect("the reference recording replays")
+            .summary
             .contacts;
         group.throughput(Throughput::Elements(contacts));
         group.bench_function(format!("{name}_mcap_and_rrd_out"), |b| {
-            b.iter(|| replay(&a, &mut []).expect("replays"))
+            b.iter(|| replay(&a, None, &mut [], &tortwin_study::Silent).expect("replays"))
         });
     }
     // Issue 16's yardstick: 3 days on the 600 m curve, MCAP out.
@@ -62,10 +63,13 @@ fn replay_with_outputs(c: &mut Criterion) {
         out_mcap: Some(out.path().join("bench.mcap")),
         ..ReplayArgs::new(recording)
     };
-    let contacts = replay(&a, &mut []).expect("replays").contacts;
+    let contacts = replay(&a, None, &mut [], &tortwin_study::Silent)
+        .expect("replays")
+        .summary
+        .contacts;
     group.throughput(Throughput::Elements(contacts));
     group.bench_function("curve_3day_mcap_out", |b| {
-        b.iter(|| replay(&a, &mut []).expect("replays"))
+        b.iter(|| replay(&a, None, &mut [], &tortwin_study::Silent).expect("replays"))
     });
     group.finish();
 }

@@ -50,7 +50,7 @@ fn run(command: Command) -> Result<()> {
     match command {
         Command::Replay(args) => {
             let display = Display::new(args.quiet);
-            let result = replay::replay_with(&args, &mut [], &display);
+            let result = replay::replay(&args, None, &mut [], &display).map(|run| run.summary);
             display.finish();
             let run = result?;
             if !args.quiet {

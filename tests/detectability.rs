@@ -33,7 +33,7 @@ const CASES: &[(&str, &str)] = &[
 fn rmse_of_default_model(recording: &Path) -> f64 {
     let args = ReplayArgs::new(recording);
     let mut r = Recorder::default();
-    replay(&args, &mut [&mut r]).unwrap();
+    replay(&args, None, &mut [&mut r], &tortwin_study::Silent).unwrap();
     r.rmse()
 }
 

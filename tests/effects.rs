@@ -671,7 +671,7 @@ fn generic_terms_with_g_one_change_nothing_bit_for_bit() {
         let mut c = Recorder::default();
         let mut args = ReplayArgs::new(rec.clone());
         args.config = config.map(Into::into);
-        replay(&args, &mut [&mut c]).unwrap();
+        replay(&args, None, &mut [&mut c], &tortwin_study::Silent).unwrap();
         c.measurements
             .iter()
             .map(|r| r.simulated.to_bits())
@@ -698,7 +698,7 @@ fn replay_with(config: &str) -> Recorder {
         ..ReplayArgs::new(curve_2day())
     };
     let mut c = Recorder::default();
-    replay(&args, &mut [&mut c]).unwrap();
+    replay(&args, None, &mut [&mut c], &tortwin_study::Silent).unwrap();
     c
 }
 

@@ -26,7 +26,7 @@ fn outputs(recording: &Path) -> (String, String) {
         out_mcap: Some(out.clone()),
         ..ReplayArgs::new(recording)
     };
-    replay(&args, &mut []).unwrap();
+    replay(&args, None, &mut [], &tortwin_study::Silent).unwrap();
     let bytes = std::fs::read(&out).unwrap();
     let mut table =
         String::from("log_time_ns,site_id,rail,quantity,train_id,axle_index,measured,simulated\n");

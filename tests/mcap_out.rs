@@ -508,7 +508,13 @@ fn compressions_write_the_same_messages_in_different_sizes() {
     let small_path = dir.path().join("small.mcap");
     let mut fast = McapSink::create(&fast_path, None, McapCompression::Fast).unwrap();
     let mut small = McapSink::create(&small_path, None, McapCompression::Small).unwrap();
-    replay(&ReplayArgs::new(recording), &mut [&mut fast, &mut small]).unwrap();
+    replay(
+        &ReplayArgs::new(recording),
+        None,
+        &mut [&mut fast, &mut small],
+        &tortwin_study::Silent,
+    )
+    .unwrap();
     drop((fast, small));
     let (fast, small) = (
         std::fs::read(&fast_path).unwrap(),

@@ -23,7 +23,9 @@ fn check_with(name: &str, config: Option<&str>) {
     let mut collect = Recorder::default();
     let mut a = ReplayArgs::new(reference_dir().join(format!("{name}.mcap")));
     a.config = config.map(|c| reference_dir().join(c).into());
-    let summary = replay(&a, &mut [&mut collect]).unwrap();
+    let summary = replay(&a, None, &mut [&mut collect], &tortwin_study::Silent)
+        .unwrap()
+        .summary;
     let expected =
         std::fs::read_to_string(reference_dir().join(format!("{name}.expected.csv"))).unwrap();
     let rows: Vec<&str> = expected.lines().skip(1).filter(|l| !l.is_empty()).collect();

@@ -87,7 +87,7 @@ impl Outputs {
 /// Replays with `a`, recording everything it publishes.
 fn replay_outputs(a: &ReplayArgs) -> Outputs {
     let mut r = Recorder::with_fields();
-    replay(a, &mut [&mut r]).unwrap();
+    replay(a, None, &mut [&mut r], &tortwin_study::Silent).unwrap();
     Outputs::of(&r)
 }
 
@@ -222,7 +222,9 @@ fn split_and_compare(config: Option<&str>) {
 
 fn replay_err(a: &ReplayArgs) -> String {
     // The library's errors are typed: an input error is its own variant.
-    let err = replay(a, &mut []).unwrap_err();
+    let err = replay(a, None, &mut [], &tortwin_study::Silent)
+        .map(|run| run.summary)
+        .unwrap_err();
     let input = matches!(err, tortwin_study::Error::Input(_));
     // Printed with its causes, as the binary prints it.
     let err = anyhow::Error::from(err);
@@ -236,7 +238,7 @@ fn a_state_from_another_section_or_version_is_refused() {
     let state = dir.path().join("tangent.state.json");
     let mut a = args(&reference("tangent_day.mcap"));
     a.state_out = Some(state.clone());
-    replay(&a, &mut []).unwrap();
+    replay(&a, None, &mut [], &tortwin_study::Silent).unwrap();
 
     // Another section.
     let mut b = args(&reference("curve_2day.mcap"));
@@ -290,7 +292,7 @@ fn a_state_with_the_former_latest_pulses_is_still_read() {
     let state = dir.path().join("today.state.json");
     let mut a1 = args(&part1);
     a1.state_out = Some(state.clone());
-    replay(&a1, &mut []).unwrap();
+    replay(&a1, None, &mut [], &tortwin_study::Silent).unwrap();
     let mut doc: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&state).unwrap()).unwrap();
     assert!(doc.get("latest_pulse_kg").is_none(), "written again");

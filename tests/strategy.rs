@@ -985,13 +985,13 @@ fn carry_on_distance_of_figure_13() {
 /// product per rail; the product is the day's applied mass.
 #[test]
 fn per_train_figures_add_up_to_the_days() {
-    use tortwin_jobs::replay::{replay_run, ReplayArgs};
+    use tortwin_jobs::replay::{replay, ReplayArgs};
 
     let args = ReplayArgs {
         per_train: true,
         ..ReplayArgs::new(common::demo_day())
     };
-    let run = replay_run(&args, None, &mut [], &tortwin_study::Silent).unwrap();
+    let run = replay(&args, None, &mut [], &tortwin_study::Silent).unwrap();
     let rows = run.per_train.expect("per-train rows");
     let traffic = demo();
     let day = evaluate(

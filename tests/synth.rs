@@ -48,7 +48,9 @@ fn replay(recording: &Path, config: Option<&Path>) -> (RunSummary, Vec<Row>) {
     let mut args = ReplayArgs::new(recording);
     args.config = config.map(|p| p.to_path_buf().into());
     let mut rows = Recorder::default();
-    let summary = replay_job(&args, &mut [&mut rows]).unwrap();
+    let summary = replay_job(&args, None, &mut [&mut rows], &tortwin_study::Silent)
+        .unwrap()
+        .summary;
     (summary, rows.measurements)
 }
 

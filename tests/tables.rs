@@ -19,7 +19,7 @@ fn bundled(name: &str) -> PathBuf {
 fn measurements(recording: &Path) -> Vec<(u64, String, f64, f64)> {
     let mut sink = common::Recorder::default();
     let args = ReplayArgs::new(recording.to_path_buf());
-    replay(&args, &mut [&mut sink]).unwrap();
+    replay(&args, None, &mut [&mut sink], &tortwin_study::Silent).unwrap();
     sink.measurements
         .iter()
         .map(|m| {

@@ -36,7 +36,7 @@ use tortwin_discover::data::Dataset;
 use tortwin_discover::Discovery;
 use tortwin_engine::sink::Sink;
 use tortwin_engine::EngineState;
-use tortwin_jobs::replay::{replay_run, SavedState};
+use tortwin_jobs::replay::{self as job, SavedState};
 use tortwin_jobs::{self as jobs, Cli, Command, ConfigSource};
 use tortwin_outputs::tables::{Formats, MemoryTable, TableOptions, TableSink};
 use tortwin_strategy::TrainRail;
@@ -228,7 +228,7 @@ fn replay(
             name: "the state passed in".into(),
             file: None,
         });
-        let done = replay_run(&args, start, &mut [&mut tables as &mut dyn Sink], progress)?;
+        let done = job::replay(&args, start, &mut [&mut tables as &mut dyn Sink], progress)?;
         let summary = serde_json::to_string(&done.summary).map_err(|source| Error::Json {
             what: "the summary",
             source,

@@ -473,11 +473,7 @@ pub fn discover(
     progress: &dyn Progress,
 ) -> Result<Discovery> {
     let t0 = Instant::now();
-    tortwin_engine::generic::check_terms_against(
-        &start.effects.generic,
-        &data.section,
-        "--config",
-    )?;
+    tortwin_engine::terms::check_terms_against(&start.effects.generic, &data.section, "--config")?;
 
     progress.stage("replaying with the starting model");
     // Gross outliers first: nothing after this sees them.

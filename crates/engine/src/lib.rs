@@ -15,12 +15,12 @@
 //! Everything that simulates (replay, paper scenarios, synthetic truth runs,
 //! fits, strategies) drives this one engine with [`Engine::push`].
 
-pub mod generic;
 pub mod readout;
 mod roll;
 pub mod sink;
 mod sink_thread;
 mod state;
+pub mod terms;
 pub mod weather;
 
 use std::collections::VecDeque;
@@ -46,9 +46,9 @@ use tortwin_recording::{
     Passage, Quantity, Section, Weather,
 };
 
-use generic::{GenericSet, WheelDrivers};
 pub use readout::{Readout, ReadoutModel};
 pub use state::{EngineState, SavedTrack, StateError};
+use terms::{GenericSet, WheelDrivers};
 use weather::{WeatherState, WeatherTimeline};
 
 /// How many past trains keep their contacts at the measurement sites, for
@@ -83,7 +83,7 @@ pub enum EngineError {
         .factor.term, .factor.driver.name(), .factor.x, .factor.g
     )]
     UndefinedFactor {
-        factor: generic::UndefinedFactor,
+        factor: terms::UndefinedFactor,
         topic: &'static str,
         log_time_ns: u64,
         index_in_file: u64,
@@ -1186,7 +1186,7 @@ impl Engine {
         }
         let mut same = cfg.clone();
         same.effects.generic.truncate(own.len());
-        if same != self.cfg || generic::acts_from_s(extra, self.origin_ns) <= self.last_event_s {
+        if same != self.cfg || terms::acts_from_s(extra, self.origin_ns) <= self.last_event_s {
             return None;
         }
         let mut engine = self.clone();

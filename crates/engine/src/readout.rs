@@ -20,7 +20,7 @@ use tortwin_model::tangent::Tangent;
 use tortwin_model::Quantity;
 use tortwin_recording::{Section, Weather};
 
-use crate::generic::{GenericSet, WheelDrivers};
+use crate::terms::{GenericSet, WheelDrivers};
 
 /// What a measurement's value was read from.
 #[derive(Debug, Clone, Copy)]

@@ -4,7 +4,7 @@
 
 use std::sync::Arc;
 
-use super::generic::{GenericSet, When, Which};
+use super::terms::{GenericSet, When, Which};
 use super::weather::WeatherState;
 use super::weather::WeatherTimeline;
 use super::weather::SECONDS_PER_HOUR;

@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
 use clap::Parser;
-use tortwin_jobs::replay::{replay_run, ReplayArgs};
+use tortwin_jobs::replay::{replay, ReplayArgs};
 use tortwin_jobs::synth::{synth, SynthArgs};
 use tortwin_model::config::ModelConfig;
 use tortwin_study::Silent;
@@ -72,7 +72,7 @@ impl Seeds {
         };
         let day1 = day("day1.mcap", "2024-04-08T00:00:00Z")?;
         let day2 = day("day2.mcap", "2024-04-09T00:00:00Z")?;
-        let state = replay_run(&ReplayArgs::new(&day1), None, &mut [], &Silent)
+        let state = replay(&ReplayArgs::new(&day1), None, &mut [], &Silent)
             .context("replaying the seed day 1")?
             .state;
         let state1 = serde_json::to_vec_pretty(&state)?;

@@ -8,7 +8,7 @@ use std::sync::Arc;
 
 use anyhow::{Context, Result};
 use rand::Rng;
-use tortwin_jobs::replay::{replay_run, ReplayArgs, Replayed};
+use tortwin_jobs::replay::{self as job, ReplayArgs, Replayed};
 use tortwin_jobs::tables::{import, ImportArgs};
 use tortwin_jobs::ConfigSource;
 use tortwin_study::Silent;
@@ -368,7 +368,7 @@ impl Target {
 }
 
 fn replay(args: ReplayArgs) -> Outcome {
-    match replay_run(&args, None, &mut [], &Silent) {
+    match job::replay(&args, None, &mut [], &Silent) {
         Ok(run) => match not_finite(&run) {
             None => Outcome::Accepted,
             Some(what) => {

@@ -18,7 +18,7 @@ use tortwin_recording::RecordingReader;
 
 use super::load_config;
 use tortwin_strategy::{PerTrain, Target, TrainRail};
-use tortwin_study::progress::{Progress, Silent};
+use tortwin_study::progress::Progress;
 use tortwin_study::{Error, Result};
 
 #[derive(Debug, Clone)]
@@ -99,25 +99,14 @@ pub fn read_state(path: &Path) -> Result<EngineState, InputError> {
     Ok(state)
 }
 
-/// Replays `args.recording` through the engine into the outputs the
-/// arguments ask for, plus `extra` sinks. Returns the run's summary.
-pub fn replay(args: &ReplayArgs, extra: &mut [&mut dyn Sink]) -> Result<RunSummary> {
-    replay_with(args, extra, &Silent)
-}
-
-/// [`replay`], telling `progress` how far the recording has been read.
-pub fn replay_with(
-    args: &ReplayArgs,
-    extra: &mut [&mut dyn Sink],
-    progress: &dyn Progress,
-) -> Result<RunSummary> {
-    replay_run(args, None, extra, progress).map(|run| run.summary)
-}
-
-/// The whole command: starts from `start` (a state held in memory) or
-/// else from `args.state_in`, replays through [`replay_from`], writes
-/// `args.state_out`, and returns what the replay left.
-pub fn replay_run(
+/// The replay job, its one entry point: replays `args.recording` from
+/// `start` (a state held in memory) or else from `args.state_in` (or a
+/// fresh section), into the outputs the arguments ask for and the `extra`
+/// sinks, telling `progress` how far the recording has been read; writes
+/// `args.state_out` and returns what the replay left (its summary, the
+/// state, the per-train rows). Stops with [`Error::Cancelled`] when
+/// `progress` says so.
+pub fn replay(
     args: &ReplayArgs,
     start: Option<SavedState<'_>>,
     extra: &mut [&mut dyn Sink],
@@ -138,7 +127,7 @@ pub fn replay_run(
         }
         (None, None) => None,
     };
-    let run = replay_from(args, start, extra, progress)?;
+    let run = run(args, start, extra, progress)?;
     if let Some(path) = &args.state_out {
         let text = serde_json::to_string(&run.state).map_err(|source| Error::Json {
             what: "the state",
@@ -167,11 +156,9 @@ pub struct Replayed {
     pub per_train: Option<Vec<TrainRail>>,
 }
 
-/// Replays `args.recording` from `start` (or a fresh section), into the
-/// outputs the arguments ask for and `extra`; `args.state_in` and
-/// `args.state_out` are the caller's (see [`replay_run`]). Stops with
-/// [`Error::Cancelled`] when `progress` says so.
-pub fn replay_from(
+/// [`replay`] without the state files: from `start` (or a fresh section)
+/// into the outputs and `extra`.
+fn run(
     args: &ReplayArgs,
     start: Option<SavedState<'_>>,
     extra: &mut [&mut dyn Sink],
@@ -226,7 +213,7 @@ pub fn replay_from(
         || "built-in defaults".to_string(),
         super::ConfigSource::name,
     );
-    tortwin_engine::generic::check_terms_against(&cfg.effects.generic, &section, &source)?;
+    tortwin_engine::terms::check_terms_against(&cfg.effects.generic, &section, &source)?;
     let mut per_train = args
         .per_train
         .then(|| PerTrain::new(&section, &cfg, &Target::default()))

@@ -14,7 +14,7 @@ use tortwin_recording::tables::export::{export_dir, ExportSummary};
 use tortwin_recording::tables::format_time;
 use tortwin_recording::tables::import::{import_dir, ImportSummary};
 
-use super::replay::{replay_with, ReplayArgs};
+use super::replay::ReplayArgs;
 use tortwin_study::progress::Progress;
 use tortwin_study::{Error, Result};
 
@@ -167,7 +167,8 @@ pub fn export(args: &ExportArgs, progress: &dyn Progress) -> Result<Exported> {
         config: args.config.clone(),
         ..ReplayArgs::new(&args.recording)
     };
-    let run = replay_with(&replay, &mut [&mut sink as &mut dyn Sink], progress)?;
+    let run =
+        super::replay::replay(&replay, None, &mut [&mut sink as &mut dyn Sink], progress)?.summary;
 
     let mut inputs = vec![args.recording.as_path()];
     inputs.extend(args.config.as_ref().and_then(super::ConfigSource::path));

@@ -5,7 +5,7 @@
 //! This module is the vocabulary and the arithmetic: where a term acts
 //! ([`ActsOn`]), what drives it ([`Driver`]), its shape ([`Form`]) and
 //! [`Form::g`]. Which term applies to which contact, pulse or reading is
-//! the engine's business (`engine::generic`); how a term is written in a
+//! the engine's business (`engine::terms`); how a term is written in a
 //! configuration is `config::GenericTerm`'s.
 
 use serde::{Deserialize, Serialize};

@@ -107,7 +107,7 @@ impl ModelConfig {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::config::generic::GenericTerm;
+    use crate::config::terms::GenericTerm;
 
     #[test]
     fn the_state_part_forgets_exactly_the_read_outs() {

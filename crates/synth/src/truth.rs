@@ -37,7 +37,7 @@ pub fn generate(
     params.validate()?;
     let section = params.section();
     let origin_ns = params.start_ns as i64;
-    tortwin_engine::generic::check_terms_against(
+    tortwin_engine::terms::check_terms_against(
         &truth.effects.generic,
         &section,
         "truth configuration",

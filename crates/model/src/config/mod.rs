@@ -9,7 +9,7 @@
 //! Ranges are checked once, after merging, by [`ModelConfig::validate`], which
 //! names the dotted key of the first bad value.
 
-pub mod generic;
+pub mod terms;
 
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -21,7 +21,7 @@ use crate::effects::Named;
 use crate::error::ConfigError;
 use crate::product::{ProductKey, ProductParams};
 
-pub use generic::{format_utc, GenericTerm, TermEffect};
+pub use terms::{format_utc, GenericTerm, TermEffect};
 
 /// The text of `config/default.toml`, compiled in.
 pub(crate) const DEFAULT_TOML: &str = include_str!("../../config/default.toml");

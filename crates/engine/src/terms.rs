@@ -5,7 +5,7 @@
 //! on a quantity the answer is exactly 1 (effects.md: a term whose g is 1
 //! changes nothing, bit for bit).
 
-use tortwin_model::config::generic::{err, TermError};
+use tortwin_model::config::terms::{err, TermError};
 use tortwin_model::config::{GenericTerm, TermEffect};
 use tortwin_model::error::ConfigError;
 use tortwin_model::generic::{ActsOn, Driver, Form};

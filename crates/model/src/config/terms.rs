@@ -24,7 +24,7 @@ pub enum TermEffect {
 }
 
 /// One generic term, checked: the names in its scope are checked against a
-/// section by the engine (`tortwin_engine::generic::check_terms_against`).
+/// section by the engine (`tortwin_engine::terms::check_terms_against`).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(try_from = "RawTerm", into = "RawTerm")]
 pub struct GenericTerm {
