@@ -355,3 +355,49 @@ fn regex_free_parse(line: &str) -> (f64, String) {
         .unwrap_or_else(|| panic!("not a stage line: {line:?}"));
     (head.trim().parse().unwrap(), text.to_string())
 }
+
+/// The MCAP project's conformance files (crates/recording/tests/
+/// mcap-conformance): none is a tortwin recording.
+fn conformance_files() -> Vec<PathBuf> {
+    let data =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("crates/recording/tests/mcap-conformance/data");
+    let mut files = Vec::new();
+    for group in std::fs::read_dir(data).unwrap() {
+        for entry in std::fs::read_dir(group.unwrap().path()).unwrap() {
+            let path = entry.unwrap().path();
+            if path.extension().is_some_and(|e| e == "mcap") {
+                files.push(path);
+            }
+        }
+    }
+    files.sort();
+    files
+}
+
+#[test]
+fn tortwin_replay_refuses_every_conformance_file_clearly() {
+    let dir = tempfile::tempdir().unwrap();
+    for path in conformance_files() {
+        let out = tortwin()
+            .arg("replay")
+            .arg(&path)
+            .arg("--out-mcap")
+            .arg(dir.path().join("out.mcap"))
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{}: {stderr}", path.display());
+        assert!(
+            stderr.contains(&*path.to_string_lossy())
+                && stderr.contains("the recording has no /section message"),
+            "{}: {stderr}",
+            path.display()
+        );
+        assert!(!stderr.contains("panicked"), "{stderr}");
+    }
+    assert_eq!(
+        std::fs::read_dir(dir.path()).unwrap().count(),
+        0,
+        "nothing written"
+    );
+}

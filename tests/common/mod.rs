@@ -4,6 +4,9 @@
 //! the reader's section fixture. Each test file uses some of it.
 #![allow(dead_code)]
 
+/// The recordings builder lives beside the recording crate's own tests
+/// (crates/recording/tests/support), which use it too: one copy.
+#[path = "../../crates/recording/tests/support/recording.rs"]
 pub mod recording;
 
 use std::ffi::OsStr;

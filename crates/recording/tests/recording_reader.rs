@@ -3,6 +3,10 @@
 //! expected files), the replay order over chunk layouts, and one test per
 //! class of bad input.
 
+// A test asserts by panicking (clippy.toml allows it inside #[test] functions;
+// this file's helpers are test code too).
+#![allow(clippy::panic, clippy::expect_used, clippy::unwrap_used)]
+
 use std::path::Path;
 
 use proptest::prelude::*;
@@ -11,8 +15,19 @@ use tortwin_recording::error::InputError;
 use tortwin_recording::reader::{ReaderContext, RecordingReader};
 use tortwin_recording::{BogiePosition, Direction, Event, EventKind, Quantity};
 
-mod common;
-use common::recording::{axle, msg, section, write_recording, Layout, Msg, LAYOUTS};
+// Shared with the workspace's tests (tests/common), which use all of it.
+#[path = "support/recording.rs"]
+#[allow(dead_code, unreachable_pub)]
+mod recording;
+use recording::{axle, msg, section, write_recording, Layout, Msg, LAYOUTS};
+
+/// `tests/reference/recordings/NAME` at the workspace's root: recordings
+/// of the independent implementation (tests/reference/README.md).
+fn reference_recording(name: &str) -> std::path::PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../tests/reference/recordings")
+        .join(name)
+}
 
 const T0: u64 = 1_712_534_400_000_000_000;
 const SEC: u64 = 1_000_000_000;
@@ -512,7 +527,7 @@ fn an_unchunked_file_in_time_order_is_one_run() {
         ("curve_day_bands_rain.mcap", false, 2),
     ] {
         let original = Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("recordings")
+            .join("../../recordings")
             .join(name);
         let bytes = std::fs::read(&original).unwrap();
         let mut messages: Vec<_> = mcap::MessageStream::new(&bytes)
@@ -556,14 +571,14 @@ fn an_unchunked_file_in_time_order_is_one_run() {
 
 fn check_reference(name: &str) {
     let key: Value = serde_json::from_slice(
-        &std::fs::read(common::reference_recording(&format!("{name}.key.json"))).unwrap(),
+        &std::fs::read(reference_recording(&format!("{name}.key.json"))).unwrap(),
     )
     .unwrap();
     let counts = &key["counts"];
     let count = |field: &str| counts[field].as_u64().unwrap();
 
     let (reader, events) = read_all(
-        &common::reference_recording(&format!("{name}.mcap")),
+        &reference_recording(&format!("{name}.mcap")),
         ReaderContext::default(),
     )
     .unwrap_or_else(|e| panic!("{e}"));
@@ -630,8 +645,8 @@ fn check_reference(name: &str) {
         );
     }
 
-    let csv = std::fs::read_to_string(common::reference_recording(&format!("{name}.expected.csv")))
-        .unwrap();
+    let csv =
+        std::fs::read_to_string(reference_recording(&format!("{name}.expected.csv"))).unwrap();
     let mut rows = csv.lines();
     assert_eq!(
         rows.next().unwrap(),
