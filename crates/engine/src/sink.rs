@@ -219,13 +219,24 @@ pub trait Sink {
     }
 }
 
-/// Forwards every call to several sinks in turn.
-#[derive(Default)]
-pub struct Fanout<'s> {
-    pub sinks: Vec<&'s mut dyn Sink>,
+/// Forwards every call to several sinks in turn: borrowed
+/// (`Fanout<&mut dyn Sink>`, the engine's caller's) or owned
+/// (`Fanout<Box<dyn Sink + Send>>`, the output files on their thread).
+pub struct Fanout<S> {
+    pub sinks: Vec<S>,
 }
 
-impl Sink for Fanout<'_> {
+impl<S> Default for Fanout<S> {
+    fn default() -> Self {
+        Fanout { sinks: Vec::new() }
+    }
+}
+
+impl<S, T> Sink for Fanout<S>
+where
+    S: std::ops::DerefMut<Target = T>,
+    T: Sink + ?Sized,
+{
     fn begin(&mut self, info: &SectionInfo<'_>) -> SinkResult {
         self.sinks.iter_mut().try_for_each(|s| s.begin(info))
     }

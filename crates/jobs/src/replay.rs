@@ -3,13 +3,10 @@
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
 
-use tortwin_engine::sink::{
-    Fanout, FieldSnapshot, MeasurementOutput, PulseEvent, RunSummary, SectionInfo, Sink,
-    SinkResult, SinkThread, TrainEvent, WheelContacts,
-};
+use tortwin_engine::sink::{Fanout, RunSummary, Sink, SinkThread};
 use tortwin_engine::{Engine, EngineOptions, EngineState};
 use tortwin_files::usage::UsageError;
-use tortwin_outputs::mcap_out::{McapCompression, McapSink};
+use tortwin_outputs::mcap_out::McapSink;
 use tortwin_outputs::provenance::Provenance;
 use tortwin_outputs::rerun_out::{RerunOptions, RerunSink};
 use tortwin_recording::error::InputError;
@@ -227,10 +224,7 @@ fn run(
     let mcap = args
         .out_mcap
         .as_deref()
-        .map(|p| {
-            let compression = McapCompression::for_recording(reader.message_count());
-            McapSink::create(p, provenance.as_ref(), compression)
-        })
+        .map(|p| McapSink::for_replay(p, provenance.as_ref(), reader.message_count()))
         .transpose()?;
     let rrd = args
         .out_rrd
@@ -246,7 +240,13 @@ fn run(
     // The files are encoded and written on a thread of their own while the
     // engine steps (the same calls in the same order: the same files).
     let mut files = if mcap.is_some() || rrd.is_some() {
-        let files = FileOutputs { mcap, rrd };
+        let mut files: Fanout<Box<dyn Sink + Send>> = Fanout::default();
+        files
+            .sinks
+            .extend(mcap.map(|s| Box::new(s) as Box<dyn Sink + Send>));
+        files
+            .sinks
+            .extend(rrd.map(|s| Box::new(s) as Box<dyn Sink + Send>));
         let path = args.out_mcap.as_ref().or(args.out_rrd.as_ref());
         Some(
             SinkThread::spawn("tortwin-outputs", files).map_err(|source| Error::Io {
@@ -258,7 +258,7 @@ fn run(
     } else {
         None
     };
-    let mut fanout = Fanout::default();
+    let mut fanout: Fanout<&mut dyn Sink> = Fanout::default();
     if let Some(s) = per_train.as_mut() {
         fanout.sinks.push(s);
     }
@@ -303,48 +303,6 @@ fn run(
         state: engine.state(),
         per_train: per_train.map(|p| p.rows().to_vec()),
     })
-}
-
-/// The MCAP and rerun outputs as one sink, for their thread.
-struct FileOutputs {
-    mcap: Option<McapSink>,
-    rrd: Option<RerunSink>,
-}
-
-impl FileOutputs {
-    fn each(&mut self, mut call: impl FnMut(&mut dyn Sink) -> SinkResult) -> SinkResult {
-        if let Some(s) = self.mcap.as_mut() {
-            call(s)?;
-        }
-        if let Some(s) = self.rrd.as_mut() {
-            call(s)?;
-        }
-        Ok(())
-    }
-}
-
-impl Sink for FileOutputs {
-    fn begin(&mut self, info: &SectionInfo<'_>) -> SinkResult {
-        self.each(|s| s.begin(info))
-    }
-    fn train(&mut self, train: &TrainEvent<'_>) -> SinkResult {
-        self.each(|s| s.train(train))
-    }
-    fn pulse(&mut self, pulse: &PulseEvent<'_>) -> SinkResult {
-        self.each(|s| s.pulse(pulse))
-    }
-    fn measurement(&mut self, m: &MeasurementOutput<'_>) -> SinkResult {
-        self.each(|s| s.measurement(m))
-    }
-    fn field(&mut self, f: &FieldSnapshot<'_>) -> SinkResult {
-        self.each(|s| s.field(f))
-    }
-    fn wheel_contacts(&mut self, w: &WheelContacts<'_>) -> SinkResult {
-        self.each(|s| s.wheel_contacts(w))
-    }
-    fn finish(&mut self, summary: &RunSummary) -> SinkResult {
-        self.each(|s| s.finish(summary))
-    }
 }
 
 /// The lines that say where the outputs are and how to open them.

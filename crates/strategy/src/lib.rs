@@ -345,7 +345,7 @@ pub fn evaluate(
     };
     let mut engine = Engine::new(section.clone(), cfg.clone(), opts, traffic.origin_ns);
     let mut stats = metrics::Stats::new(&section, engine.grid(), cfg, target, detail)?;
-    let mut fanout = Fanout::default();
+    let mut fanout: Fanout<&mut dyn Sink> = Fanout::default();
     fanout.sinks.push(&mut stats);
     if let Some(extra) = extra {
         fanout.sinks.push(extra);

@@ -161,6 +161,22 @@ struct PulseTally {
 }
 
 impl McapSink {
+    /// The output of a replay of `input_messages` messages (the reader's
+    /// count, known from its layout pass before the first is stepped): the
+    /// sink chooses how hard it compresses
+    /// ([`McapCompression::for_recording`]), [`McapSink::create`] the rest.
+    pub fn for_replay(
+        path: &Path,
+        provenance: Option<&Provenance>,
+        input_messages: u64,
+    ) -> Result<McapSink, McapError> {
+        Self::create(
+            path,
+            provenance,
+            McapCompression::for_recording(input_messages),
+        )
+    }
+
     /// Opens `.NAME.partial-XXXXXX` next to `path` and registers every
     /// channel; with `provenance`, writes it as the metadata record
     /// `provenance` and the configuration as the attachment `model.toml`;
