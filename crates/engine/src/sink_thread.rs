@@ -4,8 +4,9 @@
 //! same calls in the same order as it would on the engine's thread, so it
 //! writes the same files.
 //!
-//! Calls cross in batches (a wake-up per measurement would cost the engine
-//! more than the encoding saves). An error of the sink stops its thread; the
+//! Calls cross in batches, through the workspace's one batched hand-over
+//! (`tortwin_handover`; a wake-up per measurement would cost the engine more
+//! than the encoding saves). An error of the sink stops its thread; the
 //! engine gets that error at its next call (or at `finish`), as it would
 //! have at the failing call itself, only a little later: nothing is renamed
 //! into place before `finish` succeeds. Dropping a [`SinkThread`] waits for
@@ -13,10 +14,10 @@
 //! the run returns.
 
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::mpsc::{sync_channel, Receiver, SyncSender};
 use std::sync::Arc;
 use std::thread::JoinHandle;
 
+use tortwin_handover::{Filler, Taker};
 use tortwin_recording::{Direction, Quantity, Section};
 
 use crate::sink::{
@@ -112,10 +113,7 @@ impl Call {
 
 /// A [`Sink`] that runs another on a thread of its own.
 pub struct SinkThread {
-    batch: Vec<Call>,
-    to_thread: Option<SyncSender<Vec<Call>>>,
-    /// Emptied batches coming back for reuse.
-    spare: Receiver<Vec<Call>>,
+    to_thread: Filler<Vec<Call>>,
     failed: Arc<AtomicBool>,
     thread: Option<JoinHandle<SinkResult>>,
     /// The train id of the latest calls, shared by them.
@@ -127,23 +125,20 @@ pub struct SinkThread {
 impl SinkThread {
     /// Starts `sink` on a thread named `name`.
     pub fn spawn<S: Sink + Send + 'static>(name: &str, sink: S) -> std::io::Result<Self> {
-        let (to_thread, calls) = sync_channel::<Vec<Call>>(QUEUE);
-        let (give_back, spare) = sync_channel::<Vec<Call>>(QUEUE + 2);
+        let (to_thread, calls) = tortwin_handover::channel::<Vec<Call>>(QUEUE);
         let failed = Arc::new(AtomicBool::new(false));
         let flag = Arc::clone(&failed);
         let thread = std::thread::Builder::new()
             .name(name.to_owned())
             .spawn(move || {
-                let result = run(sink, &calls, &give_back);
+                let result = run(sink, &calls);
                 if result.is_err() {
                     flag.store(true, Ordering::Release);
                 }
                 result
             })?;
         Ok(Self {
-            batch: Vec::with_capacity(BATCH),
-            to_thread: Some(to_thread),
-            spare,
+            to_thread,
             failed,
             thread: Some(thread),
             train_id: None,
@@ -156,31 +151,26 @@ impl SinkThread {
             return Err(self.join());
         }
         self.batch_bytes += call.array_bytes();
-        self.batch.push(call);
-        if self.batch.len() >= BATCH || self.batch_bytes >= BATCH_BYTES {
+        let batch = self.to_thread.batch();
+        batch.push(call);
+        if batch.len() >= BATCH || self.batch_bytes >= BATCH_BYTES {
             self.hand_over()?;
         }
         Ok(())
     }
 
     fn hand_over(&mut self) -> SinkResult {
-        let next = self
-            .spare
-            .try_recv()
-            .unwrap_or_else(|_| Vec::with_capacity(BATCH));
-        let batch = std::mem::replace(&mut self.batch, next);
         self.batch_bytes = 0;
-        let sent = self.to_thread.as_ref().map(|tx| tx.send(batch));
-        match sent {
-            Some(Ok(())) => Ok(()),
+        match self.to_thread.hand_over() {
+            Ok(()) => Ok(()),
             // The thread has ended: it failed.
-            _ => Err(self.join()),
+            Err(tortwin_handover::Gone) => Err(self.join()),
         }
     }
 
     /// Ends the thread and returns its error (or says it ended early).
     fn join(&mut self) -> SinkError {
-        self.to_thread = None;
+        self.to_thread.close();
         match self.thread.take().map(JoinHandle::join) {
             Some(Ok(Err(e))) => e,
             Some(Err(panic)) => std::panic::resume_unwind(panic),
@@ -204,7 +194,7 @@ impl Drop for SinkThread {
     fn drop(&mut self) {
         // Unfinished: the sink is dropped on its thread (its temporary files
         // removed) before the run returns.
-        self.to_thread = None;
+        self.to_thread.close();
         if let Some(thread) = self.thread.take() {
             let _ = thread.join();
         }
@@ -290,7 +280,7 @@ impl Sink for SinkThread {
     fn finish(&mut self, summary: &RunSummary) -> SinkResult {
         self.push(Call::Finish(summary.clone()))?;
         self.hand_over()?;
-        self.to_thread = None;
+        self.to_thread.close();
         match self.thread.take().map(JoinHandle::join) {
             Some(Ok(result)) => result,
             Some(Err(panic)) => std::panic::resume_unwind(panic),
@@ -300,16 +290,12 @@ impl Sink for SinkThread {
 }
 
 /// The thread: every call of every batch, in order, until the first error.
-fn run<S: Sink>(
-    mut sink: S,
-    calls: &Receiver<Vec<Call>>,
-    give_back: &SyncSender<Vec<Call>>,
-) -> SinkResult {
+fn run<S: Sink>(mut sink: S, calls: &Taker<Vec<Call>>) -> SinkResult {
     // What the borrowed structs point into.
     let mut section: Option<Section> = None;
     let mut grid_d_m: Vec<f64> = Vec::new();
     let mut tracks: Vec<TrackInfo> = Vec::new();
-    for mut batch in calls.iter() {
+    while let Some(mut batch) = calls.take() {
         for call in batch.drain(..) {
             match call {
                 Call::Begin {
@@ -434,8 +420,7 @@ fn run<S: Sink>(
                 Call::Finish(summary) => sink.finish(&summary)?,
             }
         }
-        // The engine's thread may have gone; then nobody needs it back.
-        let _ = give_back.try_send(batch);
+        calls.give_back(batch);
     }
     Ok(())
 }

@@ -2,17 +2,18 @@
 //! each message into a batch and hands the batch over when it is full;
 //! chunk compression (zstd at a high level, about a second per month of
 //! traffic) runs beside the engine instead of after every chunk's worth of
-//! it. Batches (about 64 kB of messages each) rather than single messages
-//! cross the channel: a hand-over wakes the other thread, and a wake-up per
-//! message cost the engine's thread a tenth of its time. The batches travel
-//! back for reuse, so the steady state allocates nothing. The writer sees
-//! the same messages in the same order either way: the file is the same.
+//! it. Batches (about 64 kB of messages each) cross through the workspace's
+//! one batched hand-over (`tortwin_handover`: a wake-up per message cost the
+//! engine's thread a tenth of its time; the batches travel back for reuse).
+//! The writer sees the same messages in the same order either way: the file
+//! is the same.
 
 use std::fs::File;
 use std::io::BufWriter;
 use std::path::{Path, PathBuf};
-use std::sync::mpsc::{sync_channel, Receiver, SyncSender};
 use std::thread::JoinHandle;
+
+use tortwin_handover::{Filler, Gone};
 
 use super::McapError;
 
@@ -33,18 +34,30 @@ struct Entry {
 }
 
 /// Messages for the writer thread, their bytes one after the other.
-#[derive(Default)]
 struct Batch {
     bytes: Vec<u8>,
     entries: Vec<Entry>,
 }
 
+impl tortwin_handover::Batch for Batch {
+    fn fresh() -> Self {
+        Batch {
+            bytes: Vec::with_capacity(BATCH_BYTES + (BATCH_BYTES >> 2)),
+            entries: Vec::new(),
+        }
+    }
+    fn is_empty(&self) -> bool {
+        self.entries.is_empty()
+    }
+    fn clear(&mut self) {
+        self.bytes.clear();
+        self.entries.clear();
+    }
+}
+
 /// The sending end; the writer comes back from [`WriterThread::close`].
 pub(super) struct WriterThread {
-    jobs: Option<SyncSender<Batch>>,
-    spare: Receiver<Batch>,
-    /// The batch being filled.
-    batch: Batch,
+    jobs: Filler<Batch>,
     thread: Option<JoinHandle<Result<Writer, McapError>>>,
     path: PathBuf,
 }
@@ -52,14 +65,13 @@ pub(super) struct WriterThread {
 impl WriterThread {
     /// Starts the thread that writes to `writer`; `path` names the output in errors.
     pub(super) fn start(writer: Writer, path: &Path) -> Result<WriterThread, McapError> {
-        let (jobs, incoming) = sync_channel::<Batch>(QUEUE);
-        let (give_back, spare) = sync_channel::<Batch>(QUEUE + 1);
+        let (jobs, incoming) = tortwin_handover::channel::<Batch>(QUEUE);
         let thread_path = path.to_path_buf();
         let thread = std::thread::Builder::new()
             .name("tortwin-mcap".to_owned())
             .spawn(move || {
                 let mut writer = writer;
-                for mut batch in incoming {
+                while let Some(batch) = incoming.take() {
                     for e in &batch.entries {
                         writer
                             .write_to_known_channel(&e.header, &batch.bytes[e.start..e.end])
@@ -69,10 +81,7 @@ impl WriterThread {
                                 source,
                             })?;
                     }
-                    batch.bytes.clear();
-                    batch.entries.clear();
-                    // The engine's side may have stopped taking them back.
-                    let _ = give_back.try_send(batch);
+                    incoming.give_back(batch);
                 }
                 Ok(writer)
             })
@@ -82,9 +91,7 @@ impl WriterThread {
                 source,
             })?;
         Ok(WriterThread {
-            jobs: Some(jobs),
-            spare,
-            batch: Batch::default(),
+            jobs,
             thread: Some(thread),
             path: path.to_path_buf(),
         })
@@ -100,23 +107,25 @@ impl WriterThread {
         topic: &'static str,
         serialize: impl FnOnce(&mut Vec<u8>) -> Result<(), McapError>,
     ) -> Result<(), McapError> {
-        if self.jobs.is_none() {
+        if self.jobs.is_closed() {
             return Err(McapError::Finished {
                 path: self.path.clone(),
             });
         }
-        let start = self.batch.bytes.len();
-        if let Err(e) = serialize(&mut self.batch.bytes) {
-            self.batch.bytes.truncate(start);
+        let batch = self.jobs.batch();
+        let start = batch.bytes.len();
+        if let Err(e) = serialize(&mut batch.bytes) {
+            batch.bytes.truncate(start);
             return Err(e);
         }
-        self.batch.entries.push(Entry {
+        let end = batch.bytes.len();
+        batch.entries.push(Entry {
             header,
             start,
-            end: self.batch.bytes.len(),
+            end,
             topic,
         });
-        if self.batch.bytes.len() >= BATCH_BYTES {
+        if end >= BATCH_BYTES {
             self.hand_over()?;
         }
         Ok(())
@@ -125,23 +134,13 @@ impl WriterThread {
     /// Sends the batch being filled (if it has messages) and takes a spare
     /// one; if the thread has stopped, its error.
     fn hand_over(&mut self) -> Result<(), McapError> {
-        if self.batch.entries.is_empty() {
-            return Ok(());
-        }
-        let next = self.spare.try_recv().unwrap_or_default();
-        let full = std::mem::replace(&mut self.batch, next);
-        let sent = match &self.jobs {
-            Some(jobs) => jobs.send(full),
-            None => {
-                return Err(McapError::Finished {
-                    path: self.path.clone(),
-                })
-            }
-        };
-        match sent {
+        match self.jobs.hand_over() {
             Ok(()) => Ok(()),
+            Err(Gone) if self.jobs.is_closed() => Err(McapError::Finished {
+                path: self.path.clone(),
+            }),
             // The thread stopped on an error: that error.
-            Err(_) => match self.join() {
+            Err(Gone) => match self.join() {
                 Err(e) => Err(e),
                 Ok(_) => Err(McapError::Finished {
                     path: self.path.clone(),
@@ -153,7 +152,7 @@ impl WriterThread {
     /// Hands over what is left, waits for the thread to write everything;
     /// the writer, or the thread's error.
     pub(super) fn close(&mut self) -> Result<Writer, McapError> {
-        if self.jobs.is_some() {
+        if !self.jobs.is_closed() {
             self.hand_over()?;
         }
         self.join()
@@ -161,7 +160,7 @@ impl WriterThread {
 
     /// Stops the thread after what it was given; the writer, or its error.
     fn join(&mut self) -> Result<Writer, McapError> {
-        drop(self.jobs.take());
+        self.jobs.close();
         let Some(thread) = self.thread.take() else {
             return Err(McapError::Finished {
                 path: self.path.clone(),

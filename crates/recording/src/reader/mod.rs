@@ -329,16 +329,12 @@ pub fn read_ahead<T>(
     consume: impl FnOnce(&mut ReadAhead) -> T,
 ) -> (T, RecordingReader) {
     type Batch = Vec<Result<Event, InputError>>;
-    let (batches, incoming) = std::sync::mpsc::sync_channel::<Batch>(READ_AHEAD_QUEUE);
-    let (give_back, spare) = std::sync::mpsc::sync_channel::<Batch>(READ_AHEAD_QUEUE + 2);
+    let (mut batches, incoming) = tortwin_handover::channel::<Batch>(READ_AHEAD_QUEUE);
     std::thread::scope(|scope| {
         let producer = scope.spawn(move || {
             let mut reader = reader;
             loop {
-                let mut batch = spare
-                    .try_recv()
-                    .unwrap_or_else(|_| Vec::with_capacity(READ_AHEAD_BATCH));
-                batch.clear();
+                let batch = batches.batch();
                 let mut ended = false;
                 let mut weight = 0;
                 while weight < READ_AHEAD_BATCH {
@@ -355,14 +351,14 @@ pub fn read_ahead<T>(
                 }
                 // The consumer pops from the end.
                 batch.reverse();
-                if (!batch.is_empty() && batches.send(batch).is_err()) || ended {
+                // An error: the consumer stopped early.
+                if batches.hand_over().is_err() || ended {
                     return reader;
                 }
             }
         });
         let mut events = ReadAhead {
             incoming,
-            give_back,
             current: Vec::new(),
         };
         let out = consume(&mut events);
@@ -376,8 +372,7 @@ pub fn read_ahead<T>(
 
 /// The events of [`read_ahead`], in replay order.
 pub struct ReadAhead {
-    incoming: std::sync::mpsc::Receiver<Vec<Result<Event, InputError>>>,
-    give_back: std::sync::mpsc::SyncSender<Vec<Result<Event, InputError>>>,
+    incoming: tortwin_handover::Taker<Vec<Result<Event, InputError>>>,
     /// The batch being taken, the next event last.
     current: Vec<Result<Event, InputError>>,
 }
@@ -390,9 +385,9 @@ impl Iterator for ReadAhead {
             if let Some(event) = self.current.pop() {
                 return Some(event);
             }
-            let next = self.incoming.recv().ok()?;
+            let next = self.incoming.take()?;
             let used = std::mem::replace(&mut self.current, next);
-            let _ = self.give_back.try_send(used);
+            self.incoming.give_back(used);
         }
     }
 }
