@@ -232,7 +232,12 @@ pub(super) struct ResponseCache {
     kept: Vec<Response>,
 }
 
+/// A direction to screen: acts_on, driver, applicator (pulses), a step's
+/// threshold.
 type DirectionKey = (ActsOn, Driver, Option<String>, Option<f64>);
+
+/// A candidate to fit and where its fit starts.
+type Proposed = (Candidate, Start);
 
 impl ResponseCache {
     fn has(&self, d: &DirectionKey) -> bool {
@@ -298,7 +303,11 @@ pub struct Screening {
 }
 
 /// The generic candidates worth fitting at this step, with where each fit
-/// starts, and what the screening saw.
+/// starts, and what the screening saw: the residual's change points in
+/// time and along the drivers, the directions they and the drivers give,
+/// each direction's response (one replay, or the first step's), every
+/// scope of it scored, and the candidates: steps, smooth factors on the
+/// strongest drivers, offsets.
 #[allow(clippy::too_many_arguments)]
 pub(super) fn propose(
     ev: &Evaluator<'_>,
@@ -310,7 +319,7 @@ pub(super) fn propose(
     forced: &[Driver],
     with_constants: bool,
     cache: &mut ResponseCache,
-) -> Result<(Vec<(Candidate, Start)>, Screening)> {
+) -> Result<(Vec<Proposed>, Screening)> {
     let data = ev.data;
     let residual: Vec<f64> = data
         .rows
@@ -321,9 +330,7 @@ pub(super) fn propose(
     let active = &ev.active;
     let runs_before = ev.runs();
 
-    // Time change points: over every row and per rail.
-    let times = drivers.values(Driver::Time);
-    let mut change_points: Vec<f64> = Vec::new();
+    // Splits of the residual, over every row and per rail.
     let mut masks: Vec<Vec<bool>> = vec![active.clone()];
     for rail in 0..data.section.rails.len() {
         masks.push(
@@ -338,23 +345,86 @@ pub(super) fn propose(
     // explains far more.
     let sigma2 = noise.map_or(0.0, |s| s * s);
     let n_active = active.iter().filter(|a| **a).count().max(2) as f64;
-    for mask in &masks {
-        if let Some((x0, gain)) = best_split(times, &residual, mask, MIN_SIDE) {
+    let split_worth = CHANGE_POINT_CHI2 * n_active.ln() * sigma2;
+    let change_points = change_points(drivers.values(Driver::Time), &residual, &masks, split_worth);
+    let driver_steps = driver_steps(drivers, &residual, &masks, split_worth);
+
+    let applicators: Vec<String> = data
+        .section
+        .applicators
+        .iter()
+        .map(|a| a.id.clone())
+        .collect();
+    let directions = directions(drivers, &change_points, &driver_steps, &applicators);
+    let responses = responses(ev, drivers, current, simulated, directions, cache)?;
+    let twins = constant_responses(ev, current, simulated, with_constants)?;
+    let screened = score(
+        data,
+        active,
+        &residual,
+        &responses,
+        &twins,
+        applicators.len() == 1,
+    );
+    // What cannot remove enough to pass the BIC even to first order is not
+    // fitted (the first-order reduction of a strong effect is smaller than
+    // its fitted one, hence the half).
+    let worth = |reduction: f64| reduction >= 0.5 * min_reduction;
+    let mut candidates = step_candidates(drivers, &screened, &worth);
+    let (smooth, beside_constant) = driver_candidates(drivers, &screened, forced, &worth);
+    candidates.extend(smooth);
+    let offsets = offsets(data, active, &residual);
+    for o in offsets.iter().filter(|o| worth(o.reduction)) {
+        let c = Candidate::Generic(GenericSlot::offset(o.scope.clone()));
+        let u = c.unit(0, o.estimate);
+        candidates.push((c, Start::Warm(vec![u])));
+    }
+
+    let screening = Screening {
+        engine_runs: ev.runs() - runs_before,
+        top: screened.into_iter().take(8).collect(),
+        offsets,
+        change_points_utc: change_points
+            .iter()
+            .map(|&t| tortwin_model::config::format_utc(t))
+            .collect(),
+        beside_constant,
+    };
+    Ok((candidates, screening))
+}
+
+/// Time change points: the best split in time of the residual over each
+/// of `masks` that explains more than `split_worth`, at most one.
+fn change_points(
+    times: &[f64],
+    residual: &[f64],
+    masks: &[Vec<bool>],
+    split_worth: f64,
+) -> Vec<f64> {
+    let mut change_points: Vec<f64> = Vec::new();
+    for mask in masks {
+        if let Some((x0, gain)) = best_split(times, residual, mask, MIN_SIDE) {
             let x0 = x0.round();
-            if gain > CHANGE_POINT_CHI2 * n_active.ln() * sigma2
-                && !change_points.iter().any(|&c| (c - x0).abs() < 60.0)
-            {
+            if gain > split_worth && !change_points.iter().any(|&c| (c - x0).abs() < 60.0) {
                 change_points.push(x0);
             }
         }
     }
     change_points.truncate(1);
+    change_points
+}
 
-    // Steps along the other drivers: a factor that jumps at a load, a
-    // speed or a humidity shows as a split of the residual along that
-    // driver, and the smooth forms' first-order screening (centred on
-    // x_ref) can miss it when it lifts nearly every contact. The strongest
-    // splits, each at a threshold people can read.
+/// Steps along the other drivers: a factor that jumps at a load, a
+/// speed or a humidity shows as a split of the residual along that
+/// driver, and the smooth forms' first-order screening (centred on
+/// x_ref) can miss it when it lifts nearly every contact. The strongest
+/// splits, each at a threshold people can read.
+fn driver_steps(
+    drivers: &Drivers,
+    residual: &[f64],
+    masks: &[Vec<bool>],
+    split_worth: f64,
+) -> Vec<(Driver, f64, f64)> {
     let mut driver_steps: Vec<(Driver, f64, f64)> = Vec::new();
     for driver in Driver::ALL {
         if driver == Driver::Time || !drivers.varies(driver) {
@@ -362,10 +432,10 @@ pub(super) fn propose(
         }
         let best = masks
             .iter()
-            .filter_map(|mask| best_split(drivers.values(driver), &residual, mask, MIN_SIDE))
+            .filter_map(|mask| best_split(drivers.values(driver), residual, mask, MIN_SIDE))
             .max_by(|a, b| a.1.total_cmp(&b.1));
         if let Some((x0, gain)) = best {
-            if gain > CHANGE_POINT_CHI2 * n_active.ln() * sigma2 {
+            if gain > split_worth {
                 driver_steps.push((driver, round_sig(x0, 3), gain));
             }
         }
@@ -374,8 +444,18 @@ pub(super) fn propose(
     let strongest = driver_steps.first().map_or(0.0, |s| s.2);
     driver_steps.retain(|s| s.2 >= SECOND_DRIVER * strongest);
     driver_steps.truncate(TOP_DIRECTIONS);
+    driver_steps
+}
 
-    // Directions: (acts_on, driver, applicator, x0).
+/// The directions to screen: (acts_on, driver, applicator, x0), every
+/// quantity on every driver that varies (pulses on the applicators for the
+/// drivers of the weather), steps at the change points and driver steps.
+fn directions(
+    drivers: &Drivers,
+    change_points: &[f64],
+    driver_steps: &[(Driver, f64, f64)],
+    applicators: &[String],
+) -> Vec<DirectionKey> {
     let physics = [
         ActsOn::Transfer,
         ActsOn::Consumption,
@@ -383,19 +463,13 @@ pub(super) fn propose(
         ActsOn::FrictionBoundary,
     ];
     let mut directions: Vec<(ActsOn, Driver, Option<String>, Option<f64>)> = Vec::new();
-    let applicators: Vec<String> = data
-        .section
-        .applicators
-        .iter()
-        .map(|a| a.id.clone())
-        .collect();
     for driver in Driver::ALL {
         if driver == Driver::Time {
-            for &x0 in &change_points {
+            for &x0 in change_points {
                 for acts_on in physics {
                     directions.push((acts_on, driver, None, Some(x0)));
                 }
-                for a in &applicators {
+                for a in applicators {
                     directions.push((ActsOn::PulseMass, driver, Some(a.clone()), Some(x0)));
                 }
             }
@@ -408,7 +482,7 @@ pub(super) fn propose(
             directions.push((acts_on, driver, None, None));
         }
         if !driver.is_wheel() {
-            for a in &applicators {
+            for a in applicators {
                 directions.push((ActsOn::PulseMass, driver, Some(a.clone()), None));
             }
         }
@@ -417,15 +491,28 @@ pub(super) fn propose(
                 directions.push((acts_on, driver, None, Some(x0)));
             }
             if !driver.is_wheel() {
-                for a in &applicators {
+                for a in applicators {
                     directions.push((ActsOn::PulseMass, driver, Some(a.clone()), Some(x0)));
                 }
             }
         }
     }
-    // The responses to the drivers change little as the model grows: the
-    // first step's serve the later ones; steps depend on x0 and are run
-    // anew.
+    directions
+}
+
+/// Each direction's response per measurement: one replay with a small
+/// factor (a small step at a threshold) against `simulated`. The responses
+/// to the drivers change little as the model grows: the first step's
+/// (kept in `cache`) serve the later ones; steps depend on x0 and are run
+/// anew.
+fn responses(
+    ev: &Evaluator<'_>,
+    drivers: &Drivers,
+    current: &ModelConfig,
+    simulated: &[f64],
+    directions: Vec<DirectionKey>,
+    cache: &mut ResponseCache,
+) -> Result<Vec<Response>> {
     let (reuse, to_run): (Vec<_>, Vec<_>) = directions
         .into_iter()
         .partition(|d| d.3.is_none() && cache.has(d));
@@ -493,45 +580,63 @@ pub(super) fn propose(
         }
     }
     responses.extend(reuse.iter().filter_map(|d| cache.get(d)));
-    // The responses to the site constants that scale a quantity (muD, muC,
-    // kt), while the constants are still to be found: a factor is 1 at its
-    // driver's reference point, so alone it cannot say that the site's
-    // level differs too, and a term whose driver explains the residual
-    // with a level beside it (muD 16 % high, falling linearly with the
-    // humidity) would rank below one that merely correlates.
-    let twins: Vec<(ProductKey, Vec<f64>)> = if with_constants {
-        [
-            ActsOn::FrictionDry,
-            ActsOn::FrictionBoundary,
-            ActsOn::Transfer,
-        ]
-        .into_par_iter()
-        .filter_map(super::twin_constant)
-        .map(|key| {
-            let mut cfg = current.clone();
-            key.set(
-                &mut cfg.product,
-                key.get(&current.product) * (1.0 + EPS_CONSTANT),
-            );
-            let perturbed = ev.simulate(&cfg)?;
-            Ok((
-                key,
-                perturbed
-                    .iter()
-                    .zip(simulated)
-                    .map(|(p, s)| p - s)
-                    .collect(),
-            ))
-        })
-        .collect::<Result<_>>()?
-    } else {
-        Vec::new()
-    };
+    Ok(responses)
+}
 
-    // Every scope of every direction, scored.
-    let single_applicator = applicators.len() == 1;
+/// The responses to the site constants that scale a quantity (muD, muC,
+/// kt), while the constants are still to be found: a factor is 1 at its
+/// driver's reference point, so alone it cannot say that the site's
+/// level differs too, and a term whose driver explains the residual
+/// with a level beside it (muD 16 % high, falling linearly with the
+/// humidity) would rank below one that merely correlates.
+fn constant_responses(
+    ev: &Evaluator<'_>,
+    current: &ModelConfig,
+    simulated: &[f64],
+    with_constants: bool,
+) -> Result<Vec<(ProductKey, Vec<f64>)>> {
+    if !with_constants {
+        return Ok(Vec::new());
+    }
+    [
+        ActsOn::FrictionDry,
+        ActsOn::FrictionBoundary,
+        ActsOn::Transfer,
+    ]
+    .into_par_iter()
+    .filter_map(super::twin_constant)
+    .map(|key| {
+        let mut cfg = current.clone();
+        key.set(
+            &mut cfg.product,
+            key.get(&current.product) * (1.0 + EPS_CONSTANT),
+        );
+        let perturbed = ev.simulate(&cfg)?;
+        Ok((
+            key,
+            perturbed
+                .iter()
+                .zip(simulated)
+                .map(|(p, s)| p - s)
+                .collect(),
+        ))
+    })
+    .collect()
+}
+
+/// Every scope of every direction, scored: what it could remove from the
+/// residual to first order (alone, or with its site constant beside it),
+/// best first.
+fn score(
+    data: &Dataset,
+    active: &[bool],
+    residual: &[f64],
+    responses: &[Response],
+    twins: &[(ProductKey, Vec<f64>)],
+    single_applicator: bool,
+) -> Vec<Screened> {
     let mut screened: Vec<Screened> = Vec::new();
-    for resp in &responses {
+    for resp in responses {
         let mut scopes: Vec<Scope> = Vec::new();
         let rails: Vec<Option<String>> = std::iter::once(None)
             .chain(data.section.rails.iter().cloned().map(Some))
@@ -575,7 +680,7 @@ pub(super) fn propose(
                 .and_then(|key| twins.iter().find(|t| t.0 == key))
                 .filter(|_| resp.x0.is_none() && scope.keys() == 0);
             if let Some((key, jc)) = twin {
-                if let Some((extra, both, a)) = beyond_constant(&residual, &resp.j, jc, active) {
+                if let Some((extra, both, a)) = beyond_constant(residual, &resp.j, jc, active) {
                     if extra > reduction {
                         (reduction, coefficient, beside) = (extra, a, Some(key.name()));
                         with_constant = both;
@@ -597,16 +702,19 @@ pub(super) fn propose(
         }
     }
     screened.sort_by(|a, b| b.reduction.total_cmp(&a.reduction));
-    // What cannot remove enough to pass the BIC even to first order is not
-    // fitted (the first-order reduction of a strong effect is smaller than
-    // its fitted one, hence the half).
-    let worth = |reduction: f64| reduction >= 0.5 * min_reduction;
+    screened
+}
 
-    // Every acts_on at each change point, in time or along a driver (the
-    // best scope of each): which one moved is what the fits tell apart; the
-    // screening's first-order response cannot (a clogged nozzle and a drop
-    // of transfer look alike until the product runs out).
-    let mut candidates: Vec<(Candidate, Start)> = Vec::new();
+/// Every acts_on at each change point, in time or along a driver (the
+/// best scope of each): which one moved is what the fits tell apart; the
+/// screening's first-order response cannot (a clogged nozzle and a drop
+/// of transfer look alike until the product runs out).
+fn step_candidates(
+    drivers: &Drivers,
+    screened: &[Screened],
+    worth: &dyn Fn(f64) -> bool,
+) -> Vec<Proposed> {
+    let mut candidates: Vec<Proposed> = Vec::new();
     let mut timed: Vec<&Screened> = Vec::new();
     // Steps compete with the smooth directions: tried when one could remove
     // a good part of what the best direction could.
@@ -635,12 +743,20 @@ pub(super) fn propose(
             candidates.push((c, Start::Warm(vec![u])));
         }
     }
+    candidates
+}
 
-    // The strongest drivers: every acts_on with each (its best scope), in
-    // the exp form. Which quantity a driver acts on is what the fits tell
-    // apart (to first order a pulse, a transfer and a consumption term look
-    // alike); the other forms follow for the best of them
-    // ([`other_forms`]).
+/// The strongest drivers: every acts_on with each (its best scope), in
+/// the exp form. Which quantity a driver acts on is what the fits tell
+/// apart (to first order a pulse, a transfer and a consumption term look
+/// alike); the other forms follow for the best of them
+/// ([`other_forms`]).
+fn driver_candidates(
+    drivers: &Drivers,
+    screened: &[Screened],
+    forced: &[Driver],
+    worth: &dyn Fn(f64) -> bool,
+) -> (Vec<Proposed>, Vec<(GenericSlot, f64)>) {
     let mut top_drivers: Vec<Driver> = Vec::new();
     let mut first = None;
     for s in screened
@@ -662,6 +778,7 @@ pub(super) fn propose(
             top_drivers.push(d);
         }
     }
+    let mut candidates: Vec<Proposed> = Vec::new();
     let mut taken: Vec<&Screened> = Vec::new();
     let mut beside_constant: Vec<(GenericSlot, f64)> = Vec::new();
     for s in screened.iter().filter(|s| {
@@ -691,8 +808,13 @@ pub(super) fn propose(
         let u = c.unit(0, s.estimate);
         candidates.push((c, Start::Warm(vec![u])));
     }
+    (candidates, beside_constant)
+}
 
-    // Offsets: every site scope, and each quantity everywhere.
+/// Offsets: every site scope, and each quantity everywhere, scored by the
+/// exact reduction `n mean²`; the strongest, each with the instrument
+/// inside it that carries most of it.
+fn offsets(data: &Dataset, active: &[bool], residual: &[f64]) -> Vec<Screened> {
     let mut offsets: Vec<(Scope, Vec<bool>, f64, f64)> = Vec::new();
     let quantities = [Quantity::Mu, Quantity::Adhesion, Quantity::RailMu];
     let mut scopes: Vec<Scope> = Vec::new();
@@ -784,7 +906,7 @@ pub(super) fn propose(
             }
         }
     }
-    let offsets: Vec<Screened> = chosen
+    chosen
         .into_iter()
         .map(|k| offsets[k].clone())
         .map(|(scope, _, reduction, mean)| Screened {
@@ -798,24 +920,7 @@ pub(super) fn propose(
             beside: None,
             with_constant: 0.0,
         })
-        .collect();
-    for o in offsets.iter().filter(|o| worth(o.reduction)) {
-        let c = Candidate::Generic(GenericSlot::offset(o.scope.clone()));
-        let u = c.unit(0, o.estimate);
-        candidates.push((c, Start::Warm(vec![u])));
-    }
-
-    let screening = Screening {
-        engine_runs: ev.runs() - runs_before,
-        top: screened.into_iter().take(8).collect(),
-        offsets,
-        change_points_utc: change_points
-            .iter()
-            .map(|&t| tortwin_model::config::format_utc(t))
-            .collect(),
-        beside_constant,
-    };
-    Ok((candidates, screening))
+        .collect()
 }
 
 /// What a response `j` removes from `residual` (over the `active` rows)
@@ -876,7 +981,7 @@ pub(super) fn other_forms(
     residual: &[f64],
     slot: &GenericSlot,
     beta: Option<f64>,
-) -> Vec<(Candidate, Start)> {
+) -> Vec<Proposed> {
     let Some(driver) = slot.driver else {
         return Vec::new();
     };
