@@ -358,20 +358,13 @@ fn regex_free_parse(line: &str) -> (f64, String) {
 
 /// The MCAP project's conformance files (crates/recording/tests/
 /// mcap-conformance): none is a tortwin recording.
+#[path = "../crates/recording/tests/support/conformance.rs"]
+mod conformance;
+
 fn conformance_files() -> Vec<PathBuf> {
-    let data =
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("crates/recording/tests/mcap-conformance/data");
-    let mut files = Vec::new();
-    for group in std::fs::read_dir(data).unwrap() {
-        for entry in std::fs::read_dir(group.unwrap().path()).unwrap() {
-            let path = entry.unwrap().path();
-            if path.extension().is_some_and(|e| e == "mcap") {
-                files.push(path);
-            }
-        }
-    }
-    files.sort();
-    files
+    conformance::conformance_files(
+        &Path::new(env!("CARGO_MANIFEST_DIR")).join("crates/recording/tests/mcap-conformance/data"),
+    )
 }
 
 #[test]

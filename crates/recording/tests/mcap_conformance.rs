@@ -16,18 +16,13 @@ fn data_dir() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/mcap-conformance/data")
 }
 
+// Shared with the workspace's tests/cli_replay.rs.
+#[path = "support/conformance.rs"]
+#[allow(unreachable_pub)]
+mod conformance;
+
 fn conformance_files() -> Vec<PathBuf> {
-    let mut files = Vec::new();
-    for group in std::fs::read_dir(data_dir()).unwrap() {
-        for entry in std::fs::read_dir(group.unwrap().path()).unwrap() {
-            let path = entry.unwrap().path();
-            if path.extension().is_some_and(|e| e == "mcap") {
-                files.push(path);
-            }
-        }
-    }
-    files.sort();
-    files
+    conformance::conformance_files(&data_dir())
 }
 
 /// A record's fields as a map (the JSON lists them as [name, value] pairs).
