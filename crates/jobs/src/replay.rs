@@ -161,7 +161,7 @@ fn run(
     extra: &mut [&mut dyn Sink],
     progress: &dyn Progress,
 ) -> Result<Replayed> {
-    let _inputs = tortwin_outputs::files::InputScope::enter();
+    // The inputs' scope is [`replay`]'s, which calls this.
     let cfg = load_config(args.config.as_ref())?;
     let outputs = [&args.out_mcap, &args.out_rrd, &args.state_out];
     for (k, a) in outputs.iter().enumerate() {
