@@ -42,7 +42,7 @@ struct Batch {
 impl tortwin_handover::Batch for Batch {
     fn fresh() -> Self {
         Batch {
-            bytes: Vec::with_capacity(BATCH_BYTES + (BATCH_BYTES >> 2)),
+            bytes: Vec::new(),
             entries: Vec::new(),
         }
     }
