@@ -234,3 +234,107 @@ fn effect_tangents_equal_central_differences_for_generic_terms() {
     // step), consumption (weather exp, wheel power).
     assert_eq!(check_effects(&rec, &cfg), 6);
 }
+
+/// A state term at its neutral value (`beta`, `n`, `gamma` 0, a step to
+/// 1) multiplies its quantity by 1.0: its replay is the replay without it,
+/// bit for bit, which is why the configuration's state part leaves it out
+/// (`ModelConfig::state_part`) and a fit's look at a term's neutral point
+/// is a read-out of the model it starts from, not a replay.
+#[test]
+fn a_state_term_at_its_neutral_value_changes_no_bit() {
+    let rec = root().join("tests/reference/recordings/generic_day.mcap");
+    let cfg = ModelConfig::from_file(&rec.with_extension("config.toml")).unwrap();
+    let data = Dataset::read(&rec).unwrap();
+    let on_mass = |t: &tortwin_model::config::GenericTerm| {
+        matches!(
+            t.acts_on,
+            ActsOn::PulseMass | ActsOn::Transfer | ActsOn::Consumption
+        )
+    };
+    let mut without = cfg.clone();
+    without.effects.generic.retain(|t| !on_mass(t));
+    let plain = data.simulate(&without).unwrap();
+    let mut checked = 0;
+    for term in cfg.effects.generic.iter().filter(|t| on_mass(t)) {
+        let TermEffect::Factor { driver, form } = term.effect else {
+            unreachable!("a term on the mass is a factor")
+        };
+        let neutral = match form {
+            Form::Exp { .. } => Form::Exp { beta: 0.0 },
+            Form::Power { .. } => Form::Power { n: 0.0 },
+            Form::Linear { .. } => Form::Linear { gamma: 0.0 },
+            Form::Step { x0, .. } => Form::Step { x0, f: 1.0 },
+        };
+        let mut with = without.clone();
+        let mut t = term.clone();
+        t.effect = TermEffect::Factor {
+            driver,
+            form: neutral,
+        };
+        with.effects.generic.push(t);
+        assert_eq!(with.state_part(), without.state_part());
+        let values = data.simulate(&with).unwrap();
+        assert!(
+            values
+                .iter()
+                .zip(&plain)
+                .all(|(a, b)| a.to_bits() == b.to_bits()),
+            "{term:?} at its neutral value changed a value"
+        );
+        checked += 1;
+    }
+    // Pulse mass (time step, linear), transfer (linear, step),
+    // consumption (exp, power): every form on every quantity of the mass.
+    assert_eq!(checked, 6);
+}
+
+/// The same for the named effects that can change nothing (wash-off's
+/// `k_per_mm`, `beta_per_k`, the speed's `n`, the reservoir's `alpha` 0),
+/// each beside every other effect of a day that has them all.
+#[test]
+fn a_named_effect_at_its_neutral_value_changes_no_bit() {
+    let mut checked = Vec::new();
+    for name in ["curve_day_all_effects", "curve_day_bands_rain"] {
+        let rec = root().join("recordings").join(format!("{name}.mcap"));
+        let cfg = truth_of(&rec);
+        let data = Dataset::read(&rec).unwrap();
+        for effect in Named::ALL {
+            let Some(params) = cfg.effects.get(effect) else {
+                continue;
+            };
+            let mut zero = params.to_vec();
+            if let Some(first) = zero.first_mut() {
+                *first = 0.0;
+            }
+            if !effect.is_neutral(&zero) {
+                continue;
+            }
+            let mut with = cfg.clone();
+            with.effects.set(effect, &zero);
+            let mut without = cfg.clone();
+            without.effects.unset(effect);
+            assert_eq!(with.state_part(), without.state_part());
+            let (a, b) = (
+                data.simulate(&with).unwrap(),
+                data.simulate(&without).unwrap(),
+            );
+            assert!(
+                a.iter().zip(&b).all(|(x, y)| x.to_bits() == y.to_bits()),
+                "{name}: {} at its neutral value changed a value",
+                effect.name()
+            );
+            checked.push(effect.name());
+        }
+    }
+    for effect in [
+        "rain_washoff",
+        "temperature_consumption",
+        "speed_transfer",
+        "wheel_edge_reservoir",
+    ] {
+        assert!(
+            checked.contains(&effect),
+            "{effect} was not checked: {checked:?}"
+        );
+    }
+}

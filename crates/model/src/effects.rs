@@ -348,6 +348,20 @@ impl Named {
     pub fn name(self) -> &'static str {
         self.spec().name
     }
+
+    /// Whether the effect with `params` changes nothing: its factor is 1.0
+    /// at every step (wash-off `k_per_mm`, `beta_per_k`, the speed's `n`
+    /// 0) or nothing is ever parked (the reservoir's `alpha` 0). Ageing
+    /// (neutral only at an infinite `tau_s`) and the bands never are.
+    pub fn is_neutral(self, params: &[f64]) -> bool {
+        match self {
+            Named::RainWashoff
+            | Named::TemperatureConsumption
+            | Named::SpeedTransfer
+            | Named::WheelEdgeReservoir => params.first() == Some(&0.0),
+            Named::RailAgeing | Named::BogieBands => false,
+        }
+    }
 }
 
 #[cfg(test)]

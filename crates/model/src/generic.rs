@@ -246,6 +246,16 @@ impl Form {
         }
     }
 
+    /// Whether `g(x)` is exactly 1 for every finite `x`: `beta`, `n` or
+    /// `gamma` 0, a step to `f` = 1. Such a term multiplies its quantity by
+    /// 1.0 and changes no bit of a replay.
+    pub fn is_neutral(self) -> bool {
+        match self {
+            Form::Exp { beta: q } | Form::Power { n: q } | Form::Linear { gamma: q } => q == 0.0,
+            Form::Step { f, .. } => f == 1.0,
+        }
+    }
+
     /// `g(x)` (effects.md, "Its shape"). `x_ref` is the driver's; a step
     /// ignores it.
     #[inline]

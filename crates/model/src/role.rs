@@ -87,9 +87,13 @@ fn default_product() -> &'static ProductParams {
 
 impl ModelConfig {
     /// The part of this configuration the product masses depend on: the
-    /// read-out constants set to the built-in defaults and the read-out
-    /// generic terms left out. Replaying it gives the masses (and so the
-    /// read-out inputs) of every configuration with the same state part.
+    /// read-out constants set to the built-in defaults, the read-out
+    /// generic terms left out, and so the effects and state terms that
+    /// change nothing ([`Named::is_neutral`],
+    /// [`crate::generic::Form::is_neutral`]: a candidate at its neutral
+    /// value shares its replay with the model without it).
+    /// Replaying it gives the masses (and so the read-out inputs) of every
+    /// configuration with the same state part.
     pub fn state_part(&self) -> ModelConfig {
         let mut cfg = self.clone();
         for key in ProductKey::ALL {
@@ -97,9 +101,18 @@ impl ModelConfig {
                 key.set(&mut cfg.product, key.get(default_product()));
             }
         }
+        for effect in Named::ALL {
+            if cfg
+                .effects
+                .get(effect)
+                .is_some_and(|p| effect.is_neutral(p))
+            {
+                cfg.effects.unset(effect);
+            }
+        }
         cfg.effects
             .generic
-            .retain(|t| t.acts_on.role() == Role::State);
+            .retain(|t| t.acts_on.role() == Role::State && !t.is_neutral());
         cfg
     }
 }
@@ -153,5 +166,32 @@ mod tests {
         other.product.kt = 0.4;
         assert_ne!(other.state_part(), state);
         assert!(state.validate("state part").is_ok());
+    }
+
+    #[test]
+    fn a_state_term_that_changes_nothing_is_not_part_of_the_state() {
+        let with = |beta: f64, f: f64| {
+            let text = format!(
+                r#"
+                [[effects.generic]]
+                acts_on = "consumption"
+                driver = "air_temperature_c"
+                form = "exp"
+                beta = {beta:?}
+                [[effects.generic]]
+                acts_on = "transfer"
+                driver = "wheel_load_kN"
+                form = "step"
+                x0 = 100.0
+                f = {f:?}
+                "#
+            );
+            ModelConfig::from_overlay_str(&text, "test").unwrap()
+        };
+        let without = ModelConfig::default().state_part();
+        assert_eq!(with(0.0, 1.0).state_part(), without);
+        assert_eq!(with(-0.0, 1.0).state_part(), without);
+        assert_eq!(with(0.0, 1.0 + 1e-15).state_part().effects.generic.len(), 1);
+        assert_eq!(with(1e-300, 1.0).state_part().effects.generic.len(), 1);
     }
 }

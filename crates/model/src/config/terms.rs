@@ -109,6 +109,15 @@ pub fn format_utc(unix_s: f64) -> String {
 }
 
 impl GenericTerm {
+    /// Whether the term changes nothing: a factor whose form is neutral
+    /// ([`crate::generic::Form::is_neutral`]) or an offset of 0.
+    pub fn is_neutral(&self) -> bool {
+        match self.effect {
+            TermEffect::Factor { form, .. } => form.is_neutral(),
+            TermEffect::Offset { offset } => offset == 0.0,
+        }
+    }
+
     /// Parses one `[[effects.generic]]` table; the error names the key.
     pub(crate) fn from_toml(value: toml::Value) -> Result<Self, TermError> {
         let raw = RawTerm::deserialize(value).map_err(|e| {
