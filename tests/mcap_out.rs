@@ -81,12 +81,12 @@ fn measurement<'a>(
     MeasurementOutput {
         log_time_ns,
         index_in_file: log_time_ns % 1000,
-        site_id: "M1",
+        site_id: "M1".into(),
         site: 0,
-        rail_name: "high",
+        rail_name: "high".into(),
         rail: 0,
         quantity,
-        train_id: axle_index.map(|_| "F-1234"),
+        train_id: axle_index.map(|_| "F-1234".into()),
         axle_index,
         measured,
         simulated,
@@ -124,16 +124,16 @@ fn snapshot<'a>(
     FieldSnapshot {
         kind,
         log_time_ns,
-        train_id: "F-1234",
+        train_id: "F-1234".into(),
         track,
-        rail_name: ["high", "low"][track],
-        band: "top",
+        rail_name: (["high", "low"][track]).into(),
+        band: "top".into(),
         wheel_pass: 24,
-        d_m,
-        mu: &field.mu,
-        adhesion: &field.adhesion,
-        rail_mass_kg: &field.rail_mass_kg,
-        wheel_mass_kg: &field.wheel_mass_kg,
+        d_m: d_m.into(),
+        mu: (&field.mu).into(),
+        adhesion: (&field.adhesion).into(),
+        rail_mass_kg: (&field.rail_mass_kg).into(),
+        wheel_mass_kg: (&field.wheel_mass_kg).into(),
     }
 }
 
@@ -144,27 +144,27 @@ fn write_synthetic(sink: &mut McapSink) -> tortwin_engine::sink::SinkResult {
     let grid = grid_d_m();
     let tracks = tracks();
     sink.begin(&SectionInfo {
-        section: &section,
-        grid_d_m: &grid,
-        tracks: &tracks,
-        applicator_points: &[2],
-        site_points: &[7],
+        section: std::borrow::Cow::Borrowed(&section),
+        grid_d_m: (&grid).into(),
+        tracks: (&tracks).into(),
+        applicator_points: (&[2][..]).into(),
+        site_points: (&[7][..]).into(),
         origin_ns: ORIGIN_NS as i64,
     })?;
     for (k, rail_name) in ["high", "low"].into_iter().enumerate() {
         sink.pulse(&PulseEvent {
             log_time_ns: ORIGIN_NS + 1_000 + k as u64,
             applicator: 0,
-            applicator_id: "A1",
+            applicator_id: "A1".into(),
             rail: k,
-            rail_name,
+            rail_name: rail_name.into(),
             mass_kg: 1e-4,
         })?;
     }
     sink.train(&TrainEvent {
         log_time_ns: TRAIN_NS,
         end_ns: TRAIN_END_NS,
-        train_id: "F-1234",
+        train_id: "F-1234".into(),
         direction: Direction::Down,
         speed_mps: 18.0,
         axles: 12,

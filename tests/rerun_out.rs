@@ -103,11 +103,11 @@ fn feed(sink: &mut dyn Sink, trains: u64) -> Result<Logged, tortwin_engine::sink
     let tracks = tracks();
     let grid_d_m: Vec<f64> = (0..GRID_POINTS).map(|i| i as f64 * SPACING_M).collect();
     sink.begin(&SectionInfo {
-        section: &section,
-        grid_d_m: &grid_d_m,
-        tracks: &tracks,
-        applicator_points: &[20],
-        site_points: &[120],
+        section: std::borrow::Cow::Borrowed(&section),
+        grid_d_m: (&grid_d_m).into(),
+        tracks: (&tracks).into(),
+        applicator_points: (&[20][..]).into(),
+        site_points: (&[120][..]).into(),
         origin_ns: ORIGIN_NS as i64,
     })?;
 
@@ -119,9 +119,9 @@ fn feed(sink: &mut dyn Sink, trains: u64) -> Result<Logged, tortwin_engine::sink
             let pulse = PulseEvent {
                 log_time_ns: start_ns - 60_000_000_000,
                 applicator: 0,
-                applicator_id: "A1",
+                applicator_id: "A1".into(),
                 rail,
-                rail_name: &section.rails[rail],
+                rail_name: (&section.rails[rail]).into(),
                 mass_kg: 0.0019 + 0.0001 * train as f64,
             };
             sink.pulse(&pulse)?;
@@ -139,7 +139,7 @@ fn feed(sink: &mut dyn Sink, trains: u64) -> Result<Logged, tortwin_engine::sink
         sink.train(&TrainEvent {
             log_time_ns: start_ns,
             end_ns,
-            train_id: &train_id,
+            train_id: (&train_id).into(),
             direction: if train % 2 == 0 {
                 Direction::Down
             } else {
@@ -166,16 +166,16 @@ fn feed(sink: &mut dyn Sink, trains: u64) -> Result<Logged, tortwin_engine::sink
                 sink.field(&FieldSnapshot {
                     kind,
                     log_time_ns: start_ns + (wheel_pass - first_wheel + 1) * 1_000_000_000,
-                    train_id: &train_id,
+                    train_id: (&train_id).into(),
                     track: index,
-                    rail_name: &track.rail_name,
-                    band: &track.band,
+                    rail_name: (&track.rail_name).into(),
+                    band: (&track.band).into(),
                     wheel_pass,
-                    d_m: &grid_d_m,
-                    mu: &f.mu,
-                    adhesion: &f.adhesion,
-                    rail_mass_kg: &f.rail_mass_kg,
-                    wheel_mass_kg: &f.wheel_mass_kg,
+                    d_m: (&grid_d_m).into(),
+                    mu: (&f.mu).into(),
+                    adhesion: (&f.adhesion).into(),
+                    rail_mass_kg: (&f.rail_mass_kg).into(),
+                    wheel_mass_kg: (&f.wheel_mass_kg).into(),
                 })?;
             }
         }
@@ -183,12 +183,12 @@ fn feed(sink: &mut dyn Sink, trains: u64) -> Result<Logged, tortwin_engine::sink
             let m = MeasurementOutput {
                 log_time_ns: end_ns + 5_000_000_000,
                 index_in_file: train * 10 + rail as u64,
-                site_id: "S1",
+                site_id: "S1".into(),
                 site: 0,
-                rail_name: &section.rails[rail],
+                rail_name: (&section.rails[rail]).into(),
                 rail,
                 quantity,
-                train_id: (quantity == Quantity::Mu).then_some(train_id.as_str()),
+                train_id: (quantity == Quantity::Mu).then(|| train_id.as_str().into()),
                 axle_index: (quantity == Quantity::Mu).then_some(3),
                 measured: 0.25 + 0.01 * train as f64,
                 simulated: 0.24 + 0.012 * train as f64,
@@ -387,12 +387,12 @@ fn a_long_run_comes_back_whole() {
         let m = MeasurementOutput {
             log_time_ns: first_ns + i * 1_000_000_000,
             index_in_file: 10_000 + i,
-            site_id: "S1",
+            site_id: "S1".into(),
             site: 0,
-            rail_name: "high",
+            rail_name: "high".into(),
             rail: 0,
             quantity: Quantity::Mu,
-            train_id: Some("T1"),
+            train_id: Some("T1".into()),
             axle_index: Some(0),
             measured: 0.3 + 1e-6 * i as f64,
             simulated: 0.31 - 1e-6 * i as f64,
@@ -464,16 +464,16 @@ fn a_snapshot_off_the_grid_is_an_error() {
         .field(&FieldSnapshot {
             kind: SnapshotKind::Train,
             log_time_ns: ORIGIN_NS,
-            train_id: "T9",
+            train_id: "T9".into(),
             track: 0,
-            rail_name: "high",
-            band: "gauge_corner",
+            rail_name: "high".into(),
+            band: "gauge_corner".into(),
             wheel_pass: 100,
-            d_m: &short,
-            mu: &short,
-            adhesion: &short,
-            rail_mass_kg: &short,
-            wheel_mass_kg: &short,
+            d_m: (&short).into(),
+            mu: (&short).into(),
+            adhesion: (&short).into(),
+            rail_mass_kg: (&short).into(),
+            wheel_mass_kg: (&short).into(),
         })
         .expect_err("a snapshot with fewer points than the grid");
     assert!(err.to_string().contains("T9"), "{err:#}");

@@ -219,7 +219,7 @@ impl Sink for Recorder {
             site: m.site_id.to_string(),
             rail: m.rail_name.to_string(),
             quantity: m.quantity,
-            train_id: m.train_id.map(str::to_string),
+            train_id: m.train_id.as_deref().map(str::to_string),
             axle_index: m.axle_index,
             measured: m.measured,
             simulated: m.simulated,

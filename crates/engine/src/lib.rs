@@ -546,11 +546,11 @@ impl Engine {
             self.begun = true;
             self.on_rail_start_kg = self.rail_mass_total_kg();
             sink.begin(&SectionInfo {
-                section: &self.section,
-                grid_d_m: &self.grid.d_m,
-                tracks: &self.track_info,
-                applicator_points: &self.applicator_points,
-                site_points: &self.site_points,
+                section: std::borrow::Cow::Borrowed(&self.section),
+                grid_d_m: self.grid.d_m.as_slice().into(),
+                tracks: self.track_info.as_slice().into(),
+                applicator_points: self.applicator_points.as_slice().into(),
+                site_points: self.site_points.as_slice().into(),
                 origin_ns: self.origin_ns,
             })?;
         }
@@ -859,7 +859,7 @@ impl Engine {
         sink.train(&TrainEvent {
             log_time_ns,
             end_ns,
-            train_id: &record.passage.train_id,
+            train_id: record.passage.train_id.as_str().into(),
             direction: record.passage.direction,
             speed_mps: record.passage.speed_mps,
             axles: record.passage.axles.len(),
@@ -1111,9 +1111,12 @@ impl Engine {
         sink.pulse(&PulseEvent {
             log_time_ns,
             applicator: pulse.applicator,
-            applicator_id: &self.section.applicators[pulse.applicator].id,
+            applicator_id: self.section.applicators[pulse.applicator]
+                .id
+                .as_str()
+                .into(),
             rail: pulse.rail,
-            rail_name: &self.section.rails[pulse.rail],
+            rail_name: self.section.rails[pulse.rail].as_str().into(),
             mass_kg: pulse.mass_kg,
         })?;
         Ok(())
@@ -1155,12 +1158,12 @@ impl Engine {
         sink.measurement(&MeasurementOutput {
             log_time_ns: event.log_time_ns,
             index_in_file: event.index_in_file,
-            site_id: &self.section.sites[m.site].id,
+            site_id: self.section.sites[m.site].id.as_str().into(),
             site: m.site,
-            rail_name: &self.section.rails[m.rail],
+            rail_name: self.section.rails[m.rail].as_str().into(),
             rail: m.rail,
             quantity: m.quantity(),
-            train_id: m.axle().map(|a| a.train_id.as_str()),
+            train_id: m.axle().map(|a| a.train_id.as_str().into()),
             axle_index: m.axle().map(|a| a.axle_index),
             measured: m.value,
             simulated,

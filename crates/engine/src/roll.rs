@@ -1009,8 +1009,8 @@ impl Engine {
             direction: record.passage.direction,
             train_seq: record.passage.train_seq,
             axle: a,
-            seen_mass_kg: seen,
-            mu: with_terms.then_some(mu.as_slice()),
+            seen_mass_kg: seen.into(),
+            mu: with_terms.then_some(mu.as_slice().into()),
         });
         self.snapshot.contact_mu = mu;
         Ok(result?)
@@ -1867,16 +1867,16 @@ impl Engine {
         let result = sink.field(&FieldSnapshot {
             kind,
             log_time_ns,
-            train_id: &record.passage.train_id,
+            train_id: record.passage.train_id.as_str().into(),
             track,
-            rail_name: &info.rail_name,
-            band: &info.band,
+            rail_name: info.rail_name.as_str().into(),
+            band: info.band.as_str().into(),
             wheel_pass: self.tracks[track].wheel_pass,
-            d_m: &self.grid.d_m,
-            mu: &buf.mu,
-            adhesion: &buf.adhesion,
-            rail_mass_kg: &self.tracks[track].rail_mass_kg,
-            wheel_mass_kg: &buf.wheel_mass_kg,
+            d_m: self.grid.d_m.as_slice().into(),
+            mu: buf.mu.as_slice().into(),
+            adhesion: buf.adhesion.as_slice().into(),
+            rail_mass_kg: self.tracks[track].rail_mass_kg.as_slice().into(),
+            wheel_mass_kg: buf.wheel_mass_kg.as_slice().into(),
         });
         self.snapshot = buf;
         Ok(result?)

@@ -6,6 +6,14 @@
 //!
 //! Output files are written under a temporary name and renamed only by
 //! [`Sink::finish`], so a failed run never leaves a file that looks complete.
+//!
+//! Each call's data is one struct, borrowed from the engine while it steps
+//! (`Cow::Borrowed`, no copy) and owned where a call must outlive the step:
+//! [`Event`] is every call as one value, [`Event::into_owned`] what
+//! [`SinkThread`] hands to the output thread, [`Event::send_to`] the call
+//! made again there.
+
+use std::borrow::Cow;
 
 use tortwin_recording::{Direction, Quantity, Section};
 
@@ -14,16 +22,16 @@ pub use crate::sink_thread::SinkThread;
 /// What a sink learns before the first event.
 #[derive(Debug, Clone)]
 pub struct SectionInfo<'a> {
-    pub section: &'a Section,
+    pub section: Cow<'a, Section>,
     /// The calculation grid `d_i = i * C` in m.
-    pub grid_d_m: &'a [f64],
+    pub grid_d_m: Cow<'a, [f64]>,
     /// Every surface the engine keeps: one per rail, two on the rail named
     /// `high` when the `bogie_bands` effect is on.
-    pub tracks: &'a [TrackInfo],
+    pub tracks: Cow<'a, [TrackInfo]>,
     /// Grid index of every applicator (as in `section.applicators`).
-    pub applicator_points: &'a [usize],
+    pub applicator_points: Cow<'a, [usize]>,
     /// Grid index of every measurement site (as in `section.sites`).
-    pub site_points: &'a [usize],
+    pub site_points: Cow<'a, [usize]>,
     /// log_time of the first recording's `/section`: time_s = 0.
     pub origin_ns: i64,
 }
@@ -44,7 +52,7 @@ pub struct TrainEvent<'a> {
     pub log_time_ns: u64,
     /// When the last axle left the section.
     pub end_ns: u64,
-    pub train_id: &'a str,
+    pub train_id: Cow<'a, str>,
     pub direction: Direction,
     pub speed_mps: f64,
     pub axles: usize,
@@ -56,9 +64,9 @@ pub struct PulseEvent<'a> {
     pub log_time_ns: u64,
     /// Index in `section.applicators`.
     pub applicator: usize,
-    pub applicator_id: &'a str,
+    pub applicator_id: Cow<'a, str>,
     pub rail: usize,
-    pub rail_name: &'a str,
+    pub rail_name: Cow<'a, str>,
     pub mass_kg: f64,
 }
 
@@ -67,13 +75,13 @@ pub struct PulseEvent<'a> {
 pub struct MeasurementOutput<'a> {
     pub log_time_ns: u64,
     pub index_in_file: u64,
-    pub site_id: &'a str,
+    pub site_id: Cow<'a, str>,
     pub site: usize,
-    pub rail_name: &'a str,
+    pub rail_name: Cow<'a, str>,
     pub rail: usize,
     pub quantity: Quantity,
     /// `None` for `rail_mu`.
-    pub train_id: Option<&'a str>,
+    pub train_id: Option<Cow<'a, str>>,
     pub axle_index: Option<usize>,
     pub measured: f64,
     pub simulated: f64,
@@ -97,26 +105,26 @@ pub struct FieldSnapshot<'a> {
     pub kind: SnapshotKind,
     /// Time the snapshot's last wheel left the section.
     pub log_time_ns: u64,
-    pub train_id: &'a str,
+    pub train_id: Cow<'a, str>,
     pub track: usize,
-    pub rail_name: &'a str,
-    pub band: &'a str,
+    pub rail_name: Cow<'a, str>,
+    pub band: Cow<'a, str>,
     /// Wheels that have rolled over this track so far.
     pub wheel_pass: u64,
-    pub d_m: &'a [f64],
+    pub d_m: Cow<'a, [f64]>,
     /// Seen by the last wheel, at step 2 of each contact.
-    pub mu: &'a [f64],
-    pub adhesion: &'a [f64],
+    pub mu: Cow<'a, [f64]>,
+    pub adhesion: Cow<'a, [f64]>,
     /// Rail mass after the wheel passed.
-    pub rail_mass_kg: &'a [f64],
+    pub rail_mass_kg: Cow<'a, [f64]>,
     /// The last wheel's mass after each contact.
-    pub wheel_mass_kg: &'a [f64],
+    pub wheel_mass_kg: Cow<'a, [f64]>,
 }
 
 /// What one wheel saw at every grid point of its track, given to
 /// [`Sink::wheel_contacts`] after the wheel has rolled (only when
 /// `EngineOptions::every_wheel_contacts` is set).
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone)]
 pub struct WheelContacts<'a> {
     pub track: usize,
     pub rail: usize,
@@ -126,10 +134,10 @@ pub struct WheelContacts<'a> {
     pub axle: usize,
     /// The total mass `m = m_w + m_r` of step 2 at each grid point, in grid
     /// order (d ascending): mu of the contact is eq. (4) of it.
-    pub seen_mass_kg: &'a [f64],
+    pub seen_mass_kg: Cow<'a, [f64]>,
     /// mu of each contact, given where generic friction terms make it more
     /// than eq. (4) of the mass (`None`: eq. (4) of `seen_mass_kg`).
-    pub mu: Option<&'a [f64]>,
+    pub mu: Option<Cow<'a, [f64]>>,
 }
 
 /// The end-of-run figures.
@@ -187,6 +195,123 @@ pub type SinkError = Box<dyn std::error::Error + Send + Sync + 'static>;
 
 /// What every [`Sink`] method returns.
 pub type SinkResult = Result<(), SinkError>;
+
+/// One call to a [`Sink`], its data borrowed or owned.
+#[derive(Debug, Clone)]
+pub enum Event<'a> {
+    Begin(SectionInfo<'a>),
+    Train(TrainEvent<'a>),
+    Pulse(PulseEvent<'a>),
+    Measurement(MeasurementOutput<'a>),
+    Field(FieldSnapshot<'a>),
+    WheelContacts(WheelContacts<'a>),
+    Finish(RunSummary),
+}
+
+/// `Cow::Owned` of a borrowed value (an owned one is kept).
+fn owned<T: ToOwned + ?Sized>(c: Cow<'_, T>) -> Cow<'static, T> {
+    Cow::Owned(c.into_owned())
+}
+
+impl Event<'_> {
+    /// The same call owning its data, to outlive the engine's step.
+    pub fn into_owned(self) -> Event<'static> {
+        match self {
+            Event::Begin(i) => Event::Begin(SectionInfo {
+                section: owned(i.section),
+                grid_d_m: owned(i.grid_d_m),
+                tracks: owned(i.tracks),
+                applicator_points: owned(i.applicator_points),
+                site_points: owned(i.site_points),
+                origin_ns: i.origin_ns,
+            }),
+            Event::Train(t) => Event::Train(TrainEvent {
+                log_time_ns: t.log_time_ns,
+                end_ns: t.end_ns,
+                train_id: owned(t.train_id),
+                direction: t.direction,
+                speed_mps: t.speed_mps,
+                axles: t.axles,
+            }),
+            Event::Pulse(p) => Event::Pulse(PulseEvent {
+                log_time_ns: p.log_time_ns,
+                applicator: p.applicator,
+                applicator_id: owned(p.applicator_id),
+                rail: p.rail,
+                rail_name: owned(p.rail_name),
+                mass_kg: p.mass_kg,
+            }),
+            Event::Measurement(m) => Event::Measurement(MeasurementOutput {
+                log_time_ns: m.log_time_ns,
+                index_in_file: m.index_in_file,
+                site_id: owned(m.site_id),
+                site: m.site,
+                rail_name: owned(m.rail_name),
+                rail: m.rail,
+                quantity: m.quantity,
+                train_id: m.train_id.map(owned),
+                axle_index: m.axle_index,
+                measured: m.measured,
+                simulated: m.simulated,
+                readout: m.readout,
+            }),
+            Event::Field(f) => Event::Field(FieldSnapshot {
+                kind: f.kind,
+                log_time_ns: f.log_time_ns,
+                train_id: owned(f.train_id),
+                track: f.track,
+                rail_name: owned(f.rail_name),
+                band: owned(f.band),
+                wheel_pass: f.wheel_pass,
+                d_m: owned(f.d_m),
+                mu: owned(f.mu),
+                adhesion: owned(f.adhesion),
+                rail_mass_kg: owned(f.rail_mass_kg),
+                wheel_mass_kg: owned(f.wheel_mass_kg),
+            }),
+            Event::WheelContacts(w) => Event::WheelContacts(WheelContacts {
+                track: w.track,
+                rail: w.rail,
+                direction: w.direction,
+                train_seq: w.train_seq,
+                axle: w.axle,
+                seen_mass_kg: owned(w.seen_mass_kg),
+                mu: w.mu.map(owned),
+            }),
+            Event::Finish(summary) => Event::Finish(summary),
+        }
+    }
+
+    /// Makes the call on `sink`.
+    pub fn send_to<S: Sink + ?Sized>(&self, sink: &mut S) -> SinkResult {
+        match self {
+            Event::Begin(i) => sink.begin(i),
+            Event::Train(t) => sink.train(t),
+            Event::Pulse(p) => sink.pulse(p),
+            Event::Measurement(m) => sink.measurement(m),
+            Event::Field(f) => sink.field(f),
+            Event::WheelContacts(w) => sink.wheel_contacts(w),
+            Event::Finish(summary) => sink.finish(summary),
+        }
+    }
+
+    /// The bytes of the arrays the call holds (what grows with the grid).
+    pub fn array_bytes(&self) -> usize {
+        let f64s = match self {
+            Event::Begin(i) => i.grid_d_m.len(),
+            Event::Field(f) => {
+                f.d_m.len()
+                    + f.mu.len()
+                    + f.adhesion.len()
+                    + f.rail_mass_kg.len()
+                    + f.wheel_mass_kg.len()
+            }
+            Event::WheelContacts(w) => w.seen_mass_kg.len() + w.mu.as_ref().map_or(0, |m| m.len()),
+            Event::Train(_) | Event::Pulse(_) | Event::Measurement(_) | Event::Finish(_) => 0,
+        };
+        f64s * std::mem::size_of::<f64>()
+    }
+}
 
 /// A listener of the engine.
 pub trait Sink {

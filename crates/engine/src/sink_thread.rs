@@ -18,11 +18,10 @@ use std::sync::Arc;
 use std::thread::JoinHandle;
 
 use tortwin_handover::{Filler, Taker};
-use tortwin_recording::{Direction, Quantity, Section};
 
 use crate::sink::{
-    FieldSnapshot, MeasurementOutput, PulseEvent, RunSummary, SectionInfo, Sink, SinkError,
-    SinkResult, SnapshotKind, TrackInfo, TrainEvent, WheelContacts,
+    Event, FieldSnapshot, MeasurementOutput, PulseEvent, RunSummary, SectionInfo, Sink, SinkError,
+    SinkResult, TrainEvent, WheelContacts,
 };
 
 /// Calls in one hand-over.
@@ -37,95 +36,19 @@ const BATCH_BYTES: usize = 8 << 20;
 /// 132 MB at the grid limit, whatever the recording's length.
 const QUEUE: usize = 8;
 
-/// One call to the sink, owning its data.
-enum Call {
-    Begin {
-        section: Section,
-        grid_d_m: Vec<f64>,
-        tracks: Vec<TrackInfo>,
-        applicator_points: Vec<usize>,
-        site_points: Vec<usize>,
-        origin_ns: i64,
-    },
-    Train {
-        log_time_ns: u64,
-        end_ns: u64,
-        train_id: Arc<str>,
-        direction: Direction,
-        speed_mps: f64,
-        axles: usize,
-    },
-    Pulse {
-        log_time_ns: u64,
-        applicator: usize,
-        rail: usize,
-        mass_kg: f64,
-    },
-    Measurement {
-        log_time_ns: u64,
-        index_in_file: u64,
-        site: usize,
-        rail: usize,
-        quantity: Quantity,
-        train_id: Option<Arc<str>>,
-        axle_index: Option<usize>,
-        measured: f64,
-        simulated: f64,
-    },
-    Field {
-        kind: SnapshotKind,
-        log_time_ns: u64,
-        train_id: Arc<str>,
-        track: usize,
-        wheel_pass: u64,
-        /// mu, adhesion, rail mass, wheel mass, one after the other.
-        values: Vec<f64>,
-    },
-    WheelContacts {
-        track: usize,
-        rail: usize,
-        direction: Direction,
-        train_seq: usize,
-        axle: usize,
-        seen_mass_kg: Vec<f64>,
-        mu: Option<Vec<f64>>,
-    },
-    Finish(RunSummary),
-}
-
-impl Call {
-    /// The bytes of the arrays the call owns (what grows with the grid).
-    fn array_bytes(&self) -> usize {
-        let f64s = match self {
-            Call::Begin { grid_d_m, .. } => grid_d_m.len(),
-            Call::Field { values, .. } => values.len(),
-            Call::WheelContacts {
-                seen_mass_kg, mu, ..
-            } => seen_mass_kg.len() + mu.as_ref().map_or(0, Vec::len),
-            Call::Train { .. }
-            | Call::Pulse { .. }
-            | Call::Measurement { .. }
-            | Call::Finish(_) => 0,
-        };
-        f64s * std::mem::size_of::<f64>()
-    }
-}
-
 /// A [`Sink`] that runs another on a thread of its own.
 pub struct SinkThread {
-    to_thread: Filler<Vec<Call>>,
+    to_thread: Filler<Vec<Event<'static>>>,
     failed: Arc<AtomicBool>,
     thread: Option<JoinHandle<SinkResult>>,
-    /// The train id of the latest calls, shared by them.
-    train_id: Option<Arc<str>>,
-    /// The bytes the arrays of `batch`'s calls hold.
+    /// The bytes the arrays of the batch's calls hold.
     batch_bytes: usize,
 }
 
 impl SinkThread {
     /// Starts `sink` on a thread named `name`.
     pub fn spawn<S: Sink + Send + 'static>(name: &str, sink: S) -> std::io::Result<Self> {
-        let (to_thread, calls) = tortwin_handover::channel::<Vec<Call>>(QUEUE);
+        let (to_thread, calls) = tortwin_handover::channel::<Vec<Event<'static>>>(QUEUE);
         let failed = Arc::new(AtomicBool::new(false));
         let flag = Arc::clone(&failed);
         let thread = std::thread::Builder::new()
@@ -141,15 +64,16 @@ impl SinkThread {
             to_thread,
             failed,
             thread: Some(thread),
-            train_id: None,
             batch_bytes: 0,
         })
     }
 
-    fn push(&mut self, call: Call) -> SinkResult {
+    /// Hands `event`, owned, to the thread (in a batch).
+    fn push(&mut self, event: Event<'_>) -> SinkResult {
         if self.failed.load(Ordering::Acquire) {
             return Err(self.join());
         }
+        let call = event.into_owned();
         self.batch_bytes += call.array_bytes();
         let batch = self.to_thread.batch();
         batch.push(call);
@@ -177,17 +101,6 @@ impl SinkThread {
             _ => "the output thread ended before the run".into(),
         }
     }
-
-    fn train_id(&mut self, id: &str) -> Arc<str> {
-        match &self.train_id {
-            Some(known) if **known == *id => Arc::clone(known),
-            _ => {
-                let new: Arc<str> = Arc::from(id);
-                self.train_id = Some(Arc::clone(&new));
-                new
-            }
-        }
-    }
 }
 
 impl Drop for SinkThread {
@@ -203,82 +116,31 @@ impl Drop for SinkThread {
 
 impl Sink for SinkThread {
     fn begin(&mut self, info: &SectionInfo<'_>) -> SinkResult {
-        self.push(Call::Begin {
-            section: info.section.clone(),
-            grid_d_m: info.grid_d_m.to_vec(),
-            tracks: info.tracks.to_vec(),
-            applicator_points: info.applicator_points.to_vec(),
-            site_points: info.site_points.to_vec(),
-            origin_ns: info.origin_ns,
-        })
+        self.push(Event::Begin(info.clone()))
     }
 
     fn train(&mut self, t: &TrainEvent<'_>) -> SinkResult {
-        let train_id = self.train_id(t.train_id);
-        self.push(Call::Train {
-            log_time_ns: t.log_time_ns,
-            end_ns: t.end_ns,
-            train_id,
-            direction: t.direction,
-            speed_mps: t.speed_mps,
-            axles: t.axles,
-        })
+        self.push(Event::Train(t.clone()))
     }
 
     fn pulse(&mut self, p: &PulseEvent<'_>) -> SinkResult {
-        self.push(Call::Pulse {
-            log_time_ns: p.log_time_ns,
-            applicator: p.applicator,
-            rail: p.rail,
-            mass_kg: p.mass_kg,
-        })
+        self.push(Event::Pulse(p.clone()))
     }
 
     fn measurement(&mut self, m: &MeasurementOutput<'_>) -> SinkResult {
-        let train_id = m.train_id.map(|id| self.train_id(id));
-        self.push(Call::Measurement {
-            log_time_ns: m.log_time_ns,
-            index_in_file: m.index_in_file,
-            site: m.site,
-            rail: m.rail,
-            quantity: m.quantity,
-            train_id,
-            axle_index: m.axle_index,
-            measured: m.measured,
-            simulated: m.simulated,
-        })
+        self.push(Event::Measurement(m.clone()))
     }
 
     fn field(&mut self, f: &FieldSnapshot<'_>) -> SinkResult {
-        let train_id = self.train_id(f.train_id);
-        let mut values = Vec::with_capacity(4 * f.mu.len());
-        for v in [f.mu, f.adhesion, f.rail_mass_kg, f.wheel_mass_kg] {
-            values.extend_from_slice(v);
-        }
-        self.push(Call::Field {
-            kind: f.kind,
-            log_time_ns: f.log_time_ns,
-            train_id,
-            track: f.track,
-            wheel_pass: f.wheel_pass,
-            values,
-        })
+        self.push(Event::Field(f.clone()))
     }
 
     fn wheel_contacts(&mut self, w: &WheelContacts<'_>) -> SinkResult {
-        self.push(Call::WheelContacts {
-            track: w.track,
-            rail: w.rail,
-            direction: w.direction,
-            train_seq: w.train_seq,
-            axle: w.axle,
-            seen_mass_kg: w.seen_mass_kg.to_vec(),
-            mu: w.mu.map(<[f64]>::to_vec),
-        })
+        self.push(Event::WheelContacts(w.clone()))
     }
 
     fn finish(&mut self, summary: &RunSummary) -> SinkResult {
-        self.push(Call::Finish(summary.clone()))?;
+        self.push(Event::Finish(summary.clone()))?;
         self.hand_over()?;
         self.to_thread.close();
         match self.thread.take().map(JoinHandle::join) {
@@ -290,152 +152,24 @@ impl Sink for SinkThread {
 }
 
 /// The thread: every call of every batch, in order, until the first error.
-fn run<S: Sink>(mut sink: S, calls: &Taker<Vec<Call>>) -> SinkResult {
-    // What the borrowed structs point into.
-    let mut section: Option<Section> = None;
-    let mut grid_d_m: Vec<f64> = Vec::new();
-    let mut tracks: Vec<TrackInfo> = Vec::new();
+fn run<S: Sink>(mut sink: S, calls: &Taker<Vec<Event<'static>>>) -> SinkResult {
     while let Some(mut batch) = calls.take() {
         for call in batch.drain(..) {
-            match call {
-                Call::Begin {
-                    section: s,
-                    grid_d_m: grid,
-                    tracks: t,
-                    applicator_points,
-                    site_points,
-                    origin_ns,
-                } => {
-                    let s = section.insert(s);
-                    (grid_d_m, tracks) = (grid, t);
-                    sink.begin(&SectionInfo {
-                        section: s,
-                        grid_d_m: &grid_d_m,
-                        tracks: &tracks,
-                        applicator_points: &applicator_points,
-                        site_points: &site_points,
-                        origin_ns,
-                    })?;
-                }
-                Call::Train {
-                    log_time_ns,
-                    end_ns,
-                    train_id,
-                    direction,
-                    speed_mps,
-                    axles,
-                } => sink.train(&TrainEvent {
-                    log_time_ns,
-                    end_ns,
-                    train_id: &train_id,
-                    direction,
-                    speed_mps,
-                    axles,
-                })?,
-                Call::Pulse {
-                    log_time_ns,
-                    applicator,
-                    rail,
-                    mass_kg,
-                } => {
-                    let s = begun(&section)?;
-                    sink.pulse(&PulseEvent {
-                        log_time_ns,
-                        applicator_id: &s.applicators[applicator].id,
-                        applicator,
-                        rail,
-                        rail_name: &s.rails[rail],
-                        mass_kg,
-                    })?;
-                }
-                Call::Measurement {
-                    log_time_ns,
-                    index_in_file,
-                    site,
-                    rail,
-                    quantity,
-                    train_id,
-                    axle_index,
-                    measured,
-                    simulated,
-                } => {
-                    let s = begun(&section)?;
-                    sink.measurement(&MeasurementOutput {
-                        log_time_ns,
-                        index_in_file,
-                        site_id: &s.sites[site].id,
-                        site,
-                        rail_name: &s.rails[rail],
-                        rail,
-                        quantity,
-                        train_id: train_id.as_deref(),
-                        axle_index,
-                        measured,
-                        simulated,
-                        readout: None,
-                    })?;
-                }
-                Call::Field {
-                    kind,
-                    log_time_ns,
-                    train_id,
-                    track,
-                    wheel_pass,
-                    values,
-                } => {
-                    let n = grid_d_m.len();
-                    let info = tracks.get(track).ok_or("a field before the section")?;
-                    sink.field(&FieldSnapshot {
-                        kind,
-                        log_time_ns,
-                        train_id: &train_id,
-                        track,
-                        rail_name: &info.rail_name,
-                        band: &info.band,
-                        wheel_pass,
-                        d_m: &grid_d_m,
-                        mu: &values[..n],
-                        adhesion: &values[n..2 * n],
-                        rail_mass_kg: &values[2 * n..3 * n],
-                        wheel_mass_kg: &values[3 * n..],
-                    })?;
-                }
-                Call::WheelContacts {
-                    track,
-                    rail,
-                    direction,
-                    train_seq,
-                    axle,
-                    seen_mass_kg,
-                    mu,
-                } => sink.wheel_contacts(&WheelContacts {
-                    track,
-                    rail,
-                    direction,
-                    train_seq,
-                    axle,
-                    seen_mass_kg: &seen_mass_kg,
-                    mu: mu.as_deref(),
-                })?,
-                Call::Finish(summary) => sink.finish(&summary)?,
-            }
+            call.send_to(&mut sink)?;
         }
         calls.give_back(batch);
     }
     Ok(())
 }
 
-fn begun(section: &Option<Section>) -> Result<&Section, SinkError> {
-    section
-        .as_ref()
-        .ok_or_else(|| "an event before the section".into())
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::sink::{SnapshotKind, TrackInfo};
+    use std::borrow::Cow;
     use std::sync::Mutex;
     use tortwin_recording::Applicator;
+    use tortwin_recording::{Direction, Quantity, Section};
 
     /// Writes every call it gets as a line; fails at call `fail_at`.
     struct Log {
@@ -531,11 +265,11 @@ mod tests {
         ];
         let d_m = [0.0, 2.9, 5.8];
         sink.begin(&SectionInfo {
-            section: &section,
-            grid_d_m: &d_m,
-            tracks: &tracks,
-            applicator_points: &[0],
-            site_points: &[1],
+            section: Cow::Borrowed(&section),
+            grid_d_m: (&d_m[..]).into(),
+            tracks: (&tracks).into(),
+            applicator_points: (&[0][..]).into(),
+            site_points: (&[1][..]).into(),
             origin_ns: 0,
         })?;
         for k in 0..trains {
@@ -544,7 +278,7 @@ mod tests {
             sink.train(&TrainEvent {
                 log_time_ns: k as u64,
                 end_ns: k as u64 + 1,
-                train_id: &id,
+                train_id: (&id).into(),
                 direction: Direction::Up,
                 speed_mps: 20.0,
                 axles: 4,
@@ -552,21 +286,21 @@ mod tests {
             sink.pulse(&PulseEvent {
                 log_time_ns: k as u64,
                 applicator: 0,
-                applicator_id: "A1",
+                applicator_id: "A1".into(),
                 rail: k % 2,
-                rail_name: &section.rails[k % 2],
+                rail_name: (&section.rails[k % 2]).into(),
                 mass_kg: x,
             })?;
             for j in 0..3 {
                 sink.measurement(&MeasurementOutput {
                     log_time_ns: k as u64,
                     index_in_file: (3 * k + j) as u64,
-                    site_id: "S1",
+                    site_id: "S1".into(),
                     site: 0,
-                    rail_name: &section.rails[j % 2],
+                    rail_name: (&section.rails[j % 2]).into(),
                     rail: j % 2,
                     quantity: Quantity::Mu,
-                    train_id: (j < 2).then_some(id.as_str()),
+                    train_id: (j < 2).then(|| id.as_str().into()),
                     axle_index: Some(j),
                     measured: 0.3,
                     simulated: 0.3 + x,
@@ -579,22 +313,22 @@ mod tests {
                 direction: Direction::Up,
                 train_seq: k,
                 axle: 0,
-                seen_mass_kg: &[x, 2.0 * x, 3.0 * x],
-                mu: (k % 3 == 0).then_some(&[0.1, 0.2, 0.3][..]),
+                seen_mass_kg: vec![x, 2.0 * x, 3.0 * x].into(),
+                mu: (k % 3 == 0).then(|| (&[0.1, 0.2, 0.3][..]).into()),
             })?;
             sink.field(&FieldSnapshot {
                 kind: SnapshotKind::Train,
                 log_time_ns: k as u64,
-                train_id: &id,
+                train_id: (&id).into(),
                 track: k % 2,
-                rail_name: &tracks[k % 2].rail_name,
-                band: &tracks[k % 2].band,
+                rail_name: (&tracks[k % 2].rail_name).into(),
+                band: (&tracks[k % 2].band).into(),
                 wheel_pass: k as u64,
-                d_m: &d_m,
-                mu: &[x, 1.0, 2.0],
-                adhesion: &[3.0, x, 4.0],
-                rail_mass_kg: &[5.0, 6.0, x],
-                wheel_mass_kg: &[7.0, 8.0, 9.0 + x],
+                d_m: (&d_m[..]).into(),
+                mu: vec![x, 1.0, 2.0].into(),
+                adhesion: vec![3.0, x, 4.0].into(),
+                rail_mass_kg: vec![5.0, 6.0, x].into(),
+                wheel_mass_kg: vec![7.0, 8.0, 9.0 + x].into(),
             })?;
         }
         sink.finish(&RunSummary {
@@ -644,7 +378,7 @@ mod tests {
             .train(&TrainEvent {
                 log_time_ns: 0,
                 end_ns: 1,
-                train_id: "T",
+                train_id: "T".into(),
                 direction: Direction::Down,
                 speed_mps: 1.0,
                 axles: 1,

@@ -273,7 +273,7 @@ fn rolled_bits(
                     .extend([w.track as u64, w.rail as u64, w.axle as u64]);
                 self.0.extend(w.seen_mass_kg.iter().map(|x| x.to_bits()));
                 self.0
-                    .extend(w.mu.into_iter().flatten().map(|x| x.to_bits()));
+                    .extend(w.mu.iter().flat_map(|m| m.iter()).map(|x| x.to_bits()));
                 Ok(())
             }
         }

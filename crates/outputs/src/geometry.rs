@@ -35,7 +35,7 @@ pub struct Plan {
 
 impl Plan {
     pub fn new(info: &SectionInfo<'_>) -> Plan {
-        let section = info.section;
+        let section = &*info.section;
         let gauge_m = drawn_gauge_m(section.length_m);
         let rails = section.rails.len();
         // Order from the left (outside of a curve): `high` first and `low`

@@ -433,10 +433,10 @@ impl Sink for TableSink {
         self.measurements.push(&[
             Value::Time(m.log_time_ns),
             Value::Count(m.index_in_file),
-            Value::Text(Some(m.site_id)),
-            Value::Text(Some(m.rail_name)),
+            Value::Text(Some(&m.site_id)),
+            Value::Text(Some(&m.rail_name)),
             Value::Text(Some(m.quantity.as_str())),
-            Value::Text(m.train_id),
+            Value::Text(m.train_id.as_deref()),
             Value::Index(m.axle_index.and_then(|a| u32::try_from(a).ok())),
             Value::Float(m.measured),
             Value::Float(m.simulated),
@@ -452,10 +452,10 @@ impl Sink for TableSink {
         if let Some(table) = &mut self.field {
             for i in 0..f.d_m.len() {
                 table.push(&[
-                    Value::Text(Some(f.train_id)),
+                    Value::Text(Some(&f.train_id)),
                     Value::Time(f.log_time_ns),
-                    Value::Text(Some(f.rail_name)),
-                    Value::Text(Some(f.band)),
+                    Value::Text(Some(&f.rail_name)),
+                    Value::Text(Some(&f.band)),
                     Value::Count(f.wheel_pass),
                     Value::Float(f.d_m[i]),
                     Value::Float(f.mu[i]),
@@ -472,7 +472,7 @@ impl Sink for TableSink {
         let n = f.mu.len().max(1) as f64;
         let (mut min, mut max, mut sum) = (f64::INFINITY, f64::NEG_INFINITY, 0.0);
         let (mut inside, mut below) = (0usize, 0usize);
-        for &mu in f.mu {
+        for &mu in f.mu.iter() {
             min = min.min(mu);
             max = max.max(mu);
             sum += mu;
@@ -496,8 +496,8 @@ impl Sink for TableSink {
             })),
             Value::Float(train.speed_mps),
             Value::Count(train.axles as u64),
-            Value::Text(Some(f.rail_name)),
-            Value::Text(Some(f.band)),
+            Value::Text(Some(&f.rail_name)),
+            Value::Text(Some(&f.band)),
             Value::Count(f.wheel_pass),
             Value::Float(min),
             Value::Float(sum / n),

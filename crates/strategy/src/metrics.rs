@@ -486,7 +486,7 @@ impl Sink for Stats {
         let dir = usize::from(w.direction == Direction::Down);
         let c = &mut self.counts[w.rail][dir];
         c.wheels += 1;
-        if let Some(mu) = w.mu {
+        if let Some(mu) = w.mu.as_deref() {
             // Generic friction terms: mu is given, compared with the band.
             let band = self.target.band;
             for ((&mu, inside), below) in
@@ -515,7 +515,7 @@ impl Sink for Stats {
             *inside += u32::from(!is_below && m >= band.above_below_kg);
         }
         if let Some(sum) = &mut self.mu_sum {
-            for (s, &m) in sum[w.rail].iter_mut().zip(w.seen_mass_kg) {
+            for (s, &m) in sum[w.rail].iter_mut().zip(w.seen_mass_kg.iter()) {
                 *s += product::friction(&self.params, m);
             }
         }

@@ -410,7 +410,7 @@ impl Sink for McapSink {
                 format!("origin {} ns is before the Unix epoch", info.origin_ns),
             )
         })?;
-        let section = info.section;
+        let section = &*info.section;
         let check = |field, value| finite(topic, field, log_time_ns, value);
         check("length_m", section.length_m)?;
         if let Some(radius_m) = section.curve_radius_m {
@@ -418,7 +418,7 @@ impl Sink for McapSink {
         }
         check("rail_head_radius_m", section.rail_head_radius_m)?;
         check("nominal_wheel_diameter_m", section.nominal_wheel_diameter_m)?;
-        finite_all(topic, "grid_d_m", log_time_ns, info.grid_d_m, 1.0)?;
+        finite_all(topic, "grid_d_m", log_time_ns, &info.grid_d_m, 1.0)?;
 
         let rail_name = |rail: usize| {
             section.rails.get(rail).map(String::as_str).ok_or_else(|| {
@@ -450,7 +450,11 @@ impl Sink for McapSink {
         }
 
         let mut applicators = Vec::with_capacity(section.applicators.len());
-        for (applicator, &grid_index) in section.applicators.iter().zip(info.applicator_points) {
+        for (applicator, &grid_index) in section
+            .applicators
+            .iter()
+            .zip(info.applicator_points.iter())
+        {
             check("applicators.position_m", applicator.position_m)?;
             let nominal_pulse_g = applicator.nominal_pulse_kg * G_PER_KG;
             check("applicators.nominal_pulse_g", nominal_pulse_g)?;
@@ -468,7 +472,7 @@ impl Sink for McapSink {
             });
         }
         let mut sites = Vec::with_capacity(section.sites.len());
-        for (site, &grid_index) in section.sites.iter().zip(info.site_points) {
+        for (site, &grid_index) in section.sites.iter().zip(info.site_points.iter()) {
             check("sites.position_m", site.position_m)?;
             sites.push(SiteMsg {
                 id: &site.id,
@@ -494,7 +498,7 @@ impl Sink for McapSink {
             curve_radius_m: section.curve_radius_m,
             rail_head_radius_m: section.rail_head_radius_m,
             nominal_wheel_diameter_m: section.nominal_wheel_diameter_m,
-            grid_d_m: info.grid_d_m,
+            grid_d_m: &info.grid_d_m,
             tracks,
             applicators,
             sites,
@@ -518,7 +522,7 @@ impl Sink for McapSink {
             .iter()
             .map(|t| (t.rail_name.clone(), t.band.clone()))
             .collect();
-        self.scene = Some(TrackScene::new(&plan, info.grid_d_m, &tracks, &labels));
+        self.scene = Some(TrackScene::new(&plan, &info.grid_d_m, &tracks, &labels));
         self.scene_dirty = vec![false; tracks.len()];
         self.grid_d_m = info.grid_d_m.to_vec();
         let single_band = |rail: usize| info.tracks.iter().filter(|t| t.rail == rail).count() == 1;
@@ -540,7 +544,7 @@ impl Sink for McapSink {
         let topic = Topic::Train;
         finite(topic, "speed_mps", train.log_time_ns, train.speed_mps)?;
         let message = TrainMsg {
-            train_id: train.train_id,
+            train_id: &train.train_id,
             direction: match train.direction {
                 Direction::Up => "up",
                 Direction::Down => "down",
@@ -594,8 +598,8 @@ impl Sink for McapSink {
                 };
             }
             None => self.pulses.push(PulseTally {
-                applicator_id: pulse.applicator_id.to_owned(),
-                rail: pulse.rail_name.to_owned(),
+                applicator_id: pulse.applicator_id.to_string(),
+                rail: pulse.rail_name.to_string(),
                 pulses: 1,
                 mass_g,
                 first_ns: t,
@@ -610,10 +614,10 @@ impl Sink for McapSink {
         finite(topic, "measured", m.log_time_ns, m.measured)?;
         finite(topic, "simulated", m.log_time_ns, m.simulated)?;
         let message = MeasurementMsg {
-            site_id: m.site_id,
-            rail: m.rail_name,
+            site_id: &m.site_id,
+            rail: &m.rail_name,
             quantity: m.quantity.as_str(),
-            train_id: m.train_id,
+            train_id: m.train_id.as_deref(),
             axle_index: m.axle_index,
             measured: m.measured,
             simulated: m.simulated,
@@ -644,19 +648,19 @@ impl Sink for McapSink {
                 return Err(self.inconsistent(topic, problem).into());
             }
         }
-        finite_all(topic, "mu", t, f.mu, 1.0)?;
-        finite_all(topic, "adhesion", t, f.adhesion, 1.0)?;
-        finite_all(topic, "rail_mass_mg", t, f.rail_mass_kg, MG_PER_KG)?;
-        finite_all(topic, "wheel_mass_mg", t, f.wheel_mass_kg, MG_PER_KG)?;
+        finite_all(topic, "mu", t, &f.mu, 1.0)?;
+        finite_all(topic, "adhesion", t, &f.adhesion, 1.0)?;
+        finite_all(topic, "rail_mass_mg", t, &f.rail_mass_kg, MG_PER_KG)?;
+        finite_all(topic, "wheel_mass_mg", t, &f.wheel_mass_kg, MG_PER_KG)?;
         let message = FieldMsg {
-            train_id: f.train_id,
-            rail: f.rail_name,
-            band: f.band,
+            train_id: &f.train_id,
+            rail: &f.rail_name,
+            band: &f.band,
             wheel_pass: f.wheel_pass,
-            mu: Rounded(f.mu, Precision::Decimals(MU_DECIMALS)),
-            adhesion: Rounded(f.adhesion, Precision::Decimals(MU_DECIMALS)),
-            rail_mass_mg: Rounded(f.rail_mass_kg, Precision::MASS_MG),
-            wheel_mass_mg: Rounded(f.wheel_mass_kg, Precision::MASS_MG),
+            mu: Rounded(&f.mu, Precision::Decimals(MU_DECIMALS)),
+            adhesion: Rounded(&f.adhesion, Precision::Decimals(MU_DECIMALS)),
+            rail_mass_mg: Rounded(&f.rail_mass_kg, Precision::MASS_MG),
+            wheel_mass_mg: Rounded(&f.wheel_mass_kg, Precision::MASS_MG),
         };
         // The scene of the train before this one is complete.
         let dirty = self.scene_dirty.get(f.track).copied().unwrap_or(false);
@@ -666,7 +670,7 @@ impl Sink for McapSink {
         self.flush_pulses(t)?;
         self.write(topic, t, &message)?;
         if let Some(scene) = self.scene.as_mut() {
-            scene.set(f.track, f.mu, f.train_id, f.wheel_pass);
+            scene.set(f.track, &f.mu, &f.train_id, f.wheel_pass);
             if let Some(d) = self.scene_dirty.get_mut(f.track) {
                 *d = true;
             }
@@ -675,9 +679,9 @@ impl Sink for McapSink {
         let label = self
             .track_labels
             .get(f.track)
-            .map_or(f.rail_name, String::as_str);
+            .map_or(&*f.rail_name, String::as_str);
         if let Some(warning) =
-            below_band_warning(label, f.train_id, &self.grid_d_m, f.mu, TARGET_BAND[0])
+            below_band_warning(label, &f.train_id, &self.grid_d_m, &f.mu, TARGET_BAND[0])
         {
             self.log(t, LogLevel::Warning, "friction", &warning)?;
         }

@@ -48,7 +48,7 @@ impl Frames {
             plan: Plan::new(info),
             profile_height: length_m * PROFILE_HEIGHT_PER_LENGTH,
             length_m,
-            spacing_m: match info.grid_d_m {
+            spacing_m: match *info.grid_d_m {
                 [a, b, ..] => b - a,
                 _ => 1.0,
             },
@@ -174,7 +174,7 @@ pub(super) fn log_static(
     frames: &Frames,
     tracks: &[TrackState],
 ) -> Result<(), RecordingStreamError> {
-    let section = info.section;
+    let section = &*info.section;
     let plan = &frames.plan;
     let gauge = plan.gauge_m;
     let xy = |d: f64, o: f64| {

@@ -22,7 +22,7 @@ pub(super) fn log_description(
 
 /// The section as a markdown page.
 fn describe(info: &SectionInfo<'_>) -> String {
-    let section = info.section;
+    let section = &*info.section;
     let mut md = String::new();
     // Writing to a String cannot fail.
     let _ = writeln!(md, "# Section {}\n", section.section_id);
@@ -41,7 +41,7 @@ fn describe(info: &SectionInfo<'_>) -> String {
         "- rail head radius: {:.3} m, nominal wheel diameter: {:.3} m",
         section.rail_head_radius_m, section.nominal_wheel_diameter_m
     );
-    let spacing = match info.grid_d_m {
+    let spacing = match *info.grid_d_m {
         [first, second, ..] => format!(", spacing C = {:.3} m", second - first),
         _ => String::new(),
     };

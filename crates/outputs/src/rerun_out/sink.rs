@@ -251,7 +251,7 @@ impl RerunSink {
     /// The first measurement of its site, rail and quantity: the entity,
     /// its style, and the blueprint's note that it was measured.
     fn first_measurement(&mut self, m: &MeasurementOutput<'_>) -> Result<EntityPath, RerunError> {
-        let path = entity(&["sites", m.site_id, m.rail_name, m.quantity.as_str()]);
+        let path = entity(&["sites", &m.site_id, &m.rail_name, m.quantity.as_str()]);
         let color = rail_color(m.rail);
         let pale = lighten(color, 0.45);
         // Measured and simulated share a row (and its time): the measured
@@ -407,7 +407,7 @@ impl Sink for RerunSink {
             .tracks
             .iter()
             .enumerate()
-            .map(|(i, t)| TrackState::new(i, TrackEntities::new(t, info.tracks)))
+            .map(|(i, t)| TrackState::new(i, TrackEntities::new(t, &info.tracks)))
             .collect();
         let rec = self.rec()?;
         log_description(rec, info).map_err(sdk_error(self.path(), || "section".to_owned()))?;
@@ -443,7 +443,7 @@ impl Sink for RerunSink {
     }
 
     fn pulse(&mut self, pulse: &PulseEvent<'_>) -> SinkResult {
-        let path = entity(&["applicator", pulse.applicator_id, pulse.rail_name]);
+        let path = entity(&["applicator", &pulse.applicator_id, &pulse.rail_name]);
         if !self.pulsed.contains(&path) {
             let name = format!(
                 "{} on {} rail: g per train",
@@ -491,7 +491,7 @@ impl Sink for RerunSink {
         if let Some(&(field, len)) = lengths.iter().find(|(_, len)| *len != grid_len) {
             return Err(RerunError::SnapshotLength {
                 path: self.path().to_path_buf(),
-                train_id: f.train_id.to_owned(),
+                train_id: f.train_id.to_string(),
                 track: format!("{}/{}", f.rail_name, f.band),
                 field,
                 len,
@@ -539,7 +539,7 @@ impl Sink for RerunSink {
         scratch.clear();
         scratch.extend(f.rail_mass_kg.iter().map(|&m| m * MG_PER_KG));
         curve::classes(
-            f.mu,
+            &f.mu,
             scratch.iter().copied(),
             &mut pending.mu_ids,
             &mut pending.mass_ids,
@@ -561,15 +561,15 @@ impl Sink for RerunSink {
                 .collect()
         };
         let from_decades = |v: f64| product_y(10f64.powf(v));
-        pending.strips[0].push(line(f.mu, MU_TOLERANCE, &mu_y));
-        pending.strips[1].push(line(f.adhesion, MU_TOLERANCE, &mu_y));
+        pending.strips[0].push(line(&f.mu, MU_TOLERANCE, &mu_y));
+        pending.strips[1].push(line(&f.adhesion, MU_TOLERANCE, &mu_y));
         pending.strips[2].push(line(
-            &decades(f.rail_mass_kg),
+            &decades(&f.rail_mass_kg),
             DECADE_TOLERANCE,
             &from_decades,
         ));
         pending.strips[3].push(line(
-            &decades(f.wheel_mass_kg),
+            &decades(&f.wheel_mass_kg),
             DECADE_TOLERANCE,
             &from_decades,
         ));
