@@ -13,7 +13,9 @@ use anyhow::Result;
 use clap::Parser as _;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
-use tortwin_jobs::{self as jobs, discover, paper, replay, strategy, summary, synth, tables};
+use tortwin_jobs::{
+    self as jobs, discover, paper, recordings, replay, strategy, summary, synth, tables,
+};
 use tortwin_jobs::{Cli, Command};
 use tortwin_study::Progress;
 
@@ -65,6 +67,24 @@ fn run(command: Command) -> Result<()> {
             let imported = result?;
             if !args.quiet {
                 say(&tables::render_import(&args, &imported))?;
+            }
+        }
+        Command::Split(args) => {
+            let display = Display::new(args.quiet);
+            let result = recordings::split(&args, &display);
+            display.finish();
+            let days = result?;
+            if !args.quiet {
+                say(&recordings::render_split(&days))?;
+            }
+        }
+        Command::Merge(args) => {
+            let display = Display::new(args.quiet);
+            let result = recordings::merge(&args, &display);
+            display.finish();
+            let messages = result?;
+            if !args.quiet {
+                say(&recordings::render_merge(&args, messages))?;
             }
         }
         Command::Export(args) => {

@@ -235,8 +235,8 @@ fn effect_tangents_equal_central_differences_for_generic_terms() {
     assert_eq!(check_effects(&rec, &cfg), 6);
 }
 
-/// A state term at its neutral value (`beta`, `n`, `gamma` 0, a step to
-/// 1) multiplies its quantity by 1.0: its replay is the replay without it,
+/// A state term at its neutral value (`beta`, `n` or `gamma` 0, a step's
+/// `f` 1) multiplies its quantity by 1.0: its replay is the replay without it,
 /// bit for bit, which is why the configuration's state part leaves it out
 /// (`ModelConfig::state_part`) and a fit's look at a term's neutral point
 /// is a read-out of the model it starts from, not a replay.

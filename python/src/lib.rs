@@ -488,6 +488,31 @@ fn strategy(
     })
 }
 
+/// `tortwin split ARGV`: the days written, as (date, path) pairs in time
+/// order.
+#[pyfunction]
+fn split(py: Python<'_>, argv: Vec<String>) -> PyResult<Vec<(String, String)>> {
+    let Command::Split(args) = parse(argv)? else {
+        return Err(PyRuntimeError::new_err("not a split command"));
+    };
+    run_job(py, move |progress| {
+        let days = jobs::recordings::split(&args, progress)?;
+        Ok(days
+            .into_iter()
+            .map(|d| (d.date, d.path.display().to_string()))
+            .collect())
+    })
+}
+
+/// `tortwin merge ARGV`: the messages written.
+#[pyfunction]
+fn merge(py: Python<'_>, argv: Vec<String>) -> PyResult<u64> {
+    let Command::Merge(args) = parse(argv)? else {
+        return Err(PyRuntimeError::new_err("not a merge command"));
+    };
+    run_job(py, move |progress| jobs::recordings::merge(&args, progress))
+}
+
 /// The version of the library crates the module was built from.
 #[pyfunction]
 fn version() -> &'static str {
@@ -503,6 +528,8 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(discover, m)?)?;
     m.add_function(wrap_pyfunction!(calibrate, m)?)?;
     m.add_function(wrap_pyfunction!(strategy, m)?)?;
+    m.add_function(wrap_pyfunction!(split, m)?)?;
+    m.add_function(wrap_pyfunction!(merge, m)?)?;
     m.add_function(wrap_pyfunction!(version, m)?)?;
     Ok(())
 }

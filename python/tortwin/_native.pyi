@@ -42,5 +42,12 @@ def calibrate(argv: list[str], config: Config | None = None) -> tuple[str, bytes
 def strategy(argv: list[str], config: Config | None = None) -> str:
     """``tortwin strategy ARGV``: the path of strategy.json."""
 
+def split(argv: list[str]) -> list[tuple[str, str]]:
+    """``tortwin split ARGV``: the days written, ``(YYYY-MM-DD, path)`` in
+    time order."""
+
+def merge(argv: list[str]) -> int:
+    """``tortwin merge ARGV``: the messages written."""
+
 def version() -> str:
     """The version of the library crates the module was built from."""

@@ -8,6 +8,7 @@
 pub mod discover;
 pub mod paper;
 mod printable;
+pub mod recordings;
 pub mod replay;
 pub mod strategy;
 pub mod summary;
@@ -73,6 +74,12 @@ pub enum Command {
     /// day; search, Pareto front, recommendation; writes strategy.json,
     /// report.md with plots and recommended.rrd.
     Strategy(crate::strategy::StrategyArgs),
+    /// Cut a recording of several days into one recording per service day
+    /// (from a day's first train to the next day's first), each opening
+    /// with the /section message.
+    Split(crate::recordings::SplitArgs),
+    /// Merge consecutive days of one section into one recording.
+    Merge(crate::recordings::MergeArgs),
 }
 
 /// Makes the calling thread one of the threads of rayon's global pool (if

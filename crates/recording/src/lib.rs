@@ -24,6 +24,7 @@
 //! Nothing after the reader handles raw JSON or re-checks a field: an
 //! [`Event`] that exists is valid.
 
+pub mod cut;
 mod decode;
 pub mod error;
 pub mod event;

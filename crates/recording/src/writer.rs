@@ -102,8 +102,7 @@ impl<W: Write + Seek> RecordingWriter<W> {
         log_time_ns: u64,
         json: &[u8],
     ) -> Result<(), WriteError> {
-        let channel_id = self.channels[topic as usize];
-        self.write_to_channel(channel_id, log_time_ns, json)
+        self.write_to_channel(self.channel_of(topic), log_time_ns, json)
     }
 
     /// A channel outside the format's five: an unknown topic, or a known
@@ -117,11 +116,27 @@ impl<W: Write + Seek> RecordingWriter<W> {
             })
     }
 
+    /// The channel of a topic of the format.
+    pub fn channel_of(&self, topic: Topic) -> u16 {
+        self.channels[topic as usize]
+    }
+
     /// Writes `data` on a channel of this writer.
     pub fn write_to_channel(
         &mut self,
         channel_id: u16,
         log_time_ns: u64,
+        data: &[u8],
+    ) -> Result<(), WriteError> {
+        self.write_message(channel_id, log_time_ns, log_time_ns, data)
+    }
+
+    /// Writes `data` on a channel of this writer with its own publish_time.
+    pub fn write_message(
+        &mut self,
+        channel_id: u16,
+        log_time_ns: u64,
+        publish_time_ns: u64,
         data: &[u8],
     ) -> Result<(), WriteError> {
         let sequence = self.sequences.entry(channel_id).or_insert(0);
@@ -130,7 +145,7 @@ impl<W: Write + Seek> RecordingWriter<W> {
             channel_id,
             sequence: *sequence,
             log_time: log_time_ns,
-            publish_time: log_time_ns,
+            publish_time: publish_time_ns,
         };
         self.mcap
             .write_to_known_channel(&header, data)

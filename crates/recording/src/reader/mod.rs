@@ -394,7 +394,9 @@ impl Iterator for ReadAhead {
 
 /// Every message of an MCAP file as written (any topic, any encoding), in
 /// replay order: the reader's layout pass and merge without the format's
-/// rules. What the MCAP conformance tests read (crates/recording/tests/mcap_conformance.rs).
+/// rules. What the MCAP conformance tests read
+/// (crates/recording/tests/mcap_conformance.rs), and what cutting a
+/// recording into days and merging days copy ([`crate::cut`]).
 pub struct RawMessages {
     queue: ReplayQueue,
     finished: bool,
