@@ -17,7 +17,7 @@ def merge_recordings(paths: Iterable[str | os.PathLike], out: str | os.PathLike)
     """One recording of several consecutive days of one section: the first
     day's /section message, then every other message of every day (each
     later day's /section must be the first one's)."""
-    _native.merge([*(os.fspath(p) for p in paths), "--out", os.fspath(out), "--quiet"])
+    _native.merge(["merge", *(os.fspath(p) for p in paths), "--out", os.fspath(out), "--quiet"])
 
 
 def split_by_day(recording: str | os.PathLike, folder: str | os.PathLike) -> dict[str, Path]:
@@ -26,5 +26,5 @@ def split_by_day(recording: str | os.PathLike, folder: str | os.PathLike) -> dic
     train's passage (UTC date) to the next day's first train, so that no
     train is in the section at a cut; each file opens with the /section
     message (logged at the day's first passage). Returns the files by date."""
-    days = _native.split([os.fspath(recording), "--out", os.fspath(folder), "--quiet"])
+    days = _native.split(["split", os.fspath(recording), "--out", os.fspath(folder), "--quiet"])
     return {date: Path(path) for date, path in days}
