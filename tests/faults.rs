@@ -249,6 +249,29 @@ fn a_full_disk_is_exit_2_naming_the_file_with_nothing_left() {
             ".csv",
         ),
         (
+            "split",
+            vec![
+                "split".into(),
+                demo.display().to_string(),
+                "--quiet".into(),
+                "--out".into(),
+                "OUT/days".into(),
+            ],
+            ".mcap",
+        ),
+        (
+            "merge",
+            vec![
+                "merge".into(),
+                demo.display().to_string(),
+                demo.display().to_string(),
+                "--quiet".into(),
+                "--out".into(),
+                "OUT/merged.mcap".into(),
+            ],
+            "merged.mcap",
+        ),
+        (
             "synth",
             vec![
                 "synth".into(),
