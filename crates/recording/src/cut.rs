@@ -21,35 +21,11 @@ use std::path::{Path, PathBuf};
 use chrono::DateTime;
 
 use crate::decode;
-use crate::error::{InputError, MessageLocation, WriteError};
+use crate::error::{ConvertError, InputError, MessageLocation, WriteError};
 use crate::reader::{RawMessage, RawMessages};
 use crate::topic::Topic;
 use crate::wire::SectionMsg;
 use crate::writer::RecordingWriter;
-
-/// Why a cut or a merge failed.
-#[derive(Debug, thiserror::Error)]
-pub enum CutError {
-    /// An input recording that cannot be read, or cannot be cut or merged.
-    #[error(transparent)]
-    Input(#[from] InputError),
-    #[error("writing {}: {source}", .path.display())]
-    Write {
-        path: PathBuf,
-        #[source]
-        source: WriteError,
-    },
-    #[error("{what} {}: {source}", .path.display())]
-    Io {
-        what: &'static str,
-        path: PathBuf,
-        #[source]
-        source: std::io::Error,
-    },
-    /// An output that cannot be.
-    #[error(transparent)]
-    File(#[from] tortwin_files::FileError),
-}
 
 /// One service day of a cut.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -64,7 +40,7 @@ pub struct Day {
 /// `folder/YYYY-MM-DD.mcap` (the folder is made if missing; files of
 /// those names in it are replaced). Two passes over the input: the first
 /// finds each day's first passage, the second copies.
-pub fn split_by_day(input: &Path, folder: &Path) -> Result<Vec<Day>, CutError> {
+pub fn split_by_day(input: &Path, folder: &Path) -> Result<Vec<Day>, ConvertError> {
     let starts = first_passages(input)?;
     let staged = tortwin_files::StagedFolder::beside(folder)?;
     let mut raw = RawMessages::open(input)?;
@@ -102,7 +78,7 @@ pub fn split_by_day(input: &Path, folder: &Path) -> Result<Vec<Day>, CutError> {
 
 /// Merges `inputs` (consecutive days of one section, in order) into one
 /// recording at `out`; returns the messages written.
-pub fn merge(inputs: &[PathBuf], out: &Path) -> Result<u64, CutError> {
+pub fn merge(inputs: &[PathBuf], out: &Path) -> Result<u64, ConvertError> {
     let mut temp = tortwin_files::PartialFile::beside(out)?;
     let mut o = Output::create(temp.temp_path().to_path_buf(), 0, String::new())?;
     let mut first: Option<(PathBuf, SectionMsg)> = None;
@@ -140,7 +116,7 @@ pub fn merge(inputs: &[PathBuf], out: &Path) -> Result<u64, CutError> {
 }
 
 /// The UTC date and log_time of each day's first passage, in time order.
-fn first_passages(input: &Path) -> Result<Vec<(String, u64)>, CutError> {
+fn first_passages(input: &Path) -> Result<Vec<(String, u64)>, ConvertError> {
     let mut raw = RawMessages::open(input)?;
     opening_section(input, &mut raw)?;
     let mut starts: Vec<(String, u64)> = Vec::new();
@@ -159,7 +135,7 @@ fn first_passages(input: &Path) -> Result<Vec<(String, u64)>, CutError> {
 }
 
 /// The first message, which must be the `/section`.
-fn opening_section(input: &Path, raw: &mut RawMessages) -> Result<RawMessage, CutError> {
+fn opening_section(input: &Path, raw: &mut RawMessages) -> Result<RawMessage, ConvertError> {
     match raw.next().transpose()? {
         Some(m) if m.topic == Topic::Section.name() => Ok(m),
         Some(m) => Err(InputError::at(
@@ -199,8 +175,8 @@ struct Output {
 }
 
 impl Output {
-    fn create(path: PathBuf, day: usize, date: String) -> Result<Self, CutError> {
-        let file = File::create(&path).map_err(|source| CutError::Io {
+    fn create(path: PathBuf, day: usize, date: String) -> Result<Self, ConvertError> {
+        let file = File::create(&path).map_err(|source| ConvertError::Io {
             what: "creating",
             path: path.clone(),
             source,
@@ -210,7 +186,7 @@ impl Output {
             .chunk_size(Some(1 << 20));
         let writer =
             RecordingWriter::new(BufWriter::new(file), options, None).map_err(|source| {
-                CutError::Write {
+                ConvertError::Write {
                     path: path.clone(),
                     source,
                 }
@@ -225,7 +201,7 @@ impl Output {
     }
 
     /// Writes `m` as it is, at `at` (log and publish time) if given.
-    fn copy(&mut self, m: &RawMessage, at: Option<u64>) -> Result<(), CutError> {
+    fn copy(&mut self, m: &RawMessage, at: Option<u64>) -> Result<(), ConvertError> {
         let known = Topic::from_name(&m.topic).filter(|_| m.message_encoding == "json");
         let channel = match known {
             Some(topic) => self.writer.channel_of(topic),
@@ -251,24 +227,24 @@ impl Output {
             .map_err(|source| self.write_error(source))
     }
 
-    fn write_error(&self, source: WriteError) -> CutError {
-        CutError::Write {
+    fn write_error(&self, source: WriteError) -> ConvertError {
+        ConvertError::Write {
             path: self.path.clone(),
             source,
         }
     }
 
-    fn finish(self) -> Result<Day, CutError> {
+    fn finish(self) -> Result<Day, ConvertError> {
         let Output {
             path, date, writer, ..
         } = self;
         let messages = writer.messages();
         let mut file = match writer.finish() {
             Ok(file) => file,
-            Err(source) => return Err(CutError::Write { path, source }),
+            Err(source) => return Err(ConvertError::Write { path, source }),
         };
         if let Err(source) = file.flush() {
-            return Err(CutError::Io {
+            return Err(ConvertError::Io {
                 what: "writing",
                 path,
                 source,

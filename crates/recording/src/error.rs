@@ -108,3 +108,32 @@ pub enum WriteError {
         source: serde_json::Error,
     },
 }
+
+/// Why a recording or its tables could not be converted: `tortwin import`
+/// (tables to a recording), `export` (a recording's inputs to tables),
+/// `split` and `merge` (a recording to its days and back).
+#[derive(Debug, thiserror::Error)]
+pub enum ConvertError {
+    /// An input that breaks its format (the user's to fix: exit status 2).
+    #[error(transparent)]
+    Input(#[from] InputError),
+    /// A recording that could not be written.
+    #[error("writing {}: {source}", .path.display())]
+    Write {
+        path: PathBuf,
+        #[source]
+        source: WriteError,
+    },
+    /// The file system refused `what` ("creating", "writing", ...) on `path`.
+    #[error("{what} {}: {source}", .path.display())]
+    Io {
+        what: &'static str,
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    /// An output that cannot be (an input of its name, a pipe, a folder
+    /// that cannot be made).
+    #[error(transparent)]
+    File(#[from] tortwin_files::FileError),
+}

@@ -18,7 +18,8 @@ mod recording;
 use std::path::{Path, PathBuf};
 
 use recording::{copy_recording, read_messages, write_recording, Layout, Msg};
-use tortwin_recording::cut::{merge, split_by_day, CutError};
+use tortwin_recording::cut::{merge, split_by_day};
+use tortwin_recording::error::ConvertError;
 use tortwin_recording::{ReaderContext, RecordingReader};
 
 fn two_days() -> PathBuf {
@@ -144,7 +145,7 @@ fn a_day_of_another_section_is_not_merged() {
     let out = dir.path().join("merged.mcap");
     let err = merge(&[two_days(), other.clone()], &out).expect_err("two sections");
     let text = err.to_string();
-    assert!(matches!(err, CutError::Input(_)), "{text}");
+    assert!(matches!(err, ConvertError::Input(_)), "{text}");
     assert!(
         text.contains("other.mcap") && text.contains("/section"),
         "{text}"

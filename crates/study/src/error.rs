@@ -17,10 +17,7 @@ use tortwin_outputs::mcap_out::McapError;
 use tortwin_outputs::rerun_out::RerunError;
 use tortwin_outputs::tables::TableError;
 use tortwin_plot::PlotError;
-use tortwin_recording::cut::CutError;
-use tortwin_recording::error::{InputError, WriteError};
-use tortwin_recording::tables::export::ExportError;
-use tortwin_recording::tables::import::ImportError;
+use tortwin_recording::error::{ConvertError, InputError, WriteError};
 
 /// What the studies and jobs return.
 pub type Result<T, E = Error> = std::result::Result<T, E>;
@@ -59,15 +56,10 @@ pub enum Error {
     Plot(#[from] PlotError),
     #[error(transparent)]
     Table(#[from] TableError),
-    /// CSV tables that could not become a recording.
+    /// Tables that could not become a recording, a recording's inputs not
+    /// written as tables, a recording not cut into days or days not merged.
     #[error(transparent)]
-    Import(#[from] ImportError),
-    /// A recording that could not be cut into days, or days not merged.
-    #[error(transparent)]
-    Cut(#[from] CutError),
-    /// A recording's inputs that could not be written as tables.
-    #[error(transparent)]
-    Export(#[from] ExportError),
+    Convert(#[from] ConvertError),
     /// A synthetic recording could not be written: `what` of `path`.
     #[error("{what} {}", path.display())]
     Recording {
@@ -159,21 +151,14 @@ impl Error {
             Error::Rerun(e) => e.is_input(),
             Error::Plot(e) => e.is_input(),
             Error::Table(TableError::File(e)) => e.is_input(),
-            Error::Import(ImportError::Input(_))
-            | Error::Export(ExportError::Input(_))
-            | Error::Cut(CutError::Input(_)) => true,
-            Error::Import(ImportError::File(e))
-            | Error::Export(ExportError::File(e))
-            | Error::Cut(CutError::File(e)) => e.is_input(),
+            Error::Convert(ConvertError::Input(_)) => true,
+            Error::Convert(ConvertError::File(e)) => e.is_input(),
             Error::Context { source, .. } => source.is_input(),
             // Outputs (and inputs) the machine refuses: a full disk, a
             // read-only folder, a missing file.
-            Error::Table(_)
-            | Error::Import(_)
-            | Error::Cut(_)
-            | Error::Export(_)
-            | Error::Recording { .. }
-            | Error::Io { .. } => tortwin_files::usage::caused_by_environment(self),
+            Error::Table(_) | Error::Convert(_) | Error::Recording { .. } | Error::Io { .. } => {
+                tortwin_files::usage::caused_by_environment(self)
+            }
             Error::Json { .. }
             | Error::Threads(_)
             | Error::Optimiser(_)

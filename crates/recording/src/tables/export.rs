@@ -17,28 +17,9 @@ use super::{
     PASSAGES_FILE, PASSAGE_COLUMNS, PULSES_FILE, PULSE_COLUMNS, SECTION_FILE, TIME_UTC,
     WEATHER_COLUMNS, WEATHER_FILE,
 };
-use crate::error::InputError;
+use crate::error::ConvertError;
 use crate::event::{BogiePosition, Direction};
 use crate::reader::{ReaderContext, RecordingReader, Wire};
-
-/// Why an export failed.
-#[derive(Debug, thiserror::Error)]
-pub enum ExportError {
-    /// The recording breaks its format (exit status 2).
-    #[error(transparent)]
-    Input(#[from] InputError),
-    #[error("{what} {}: {source}", .path.display())]
-    Io {
-        what: &'static str,
-        path: PathBuf,
-        #[source]
-        source: std::io::Error,
-    },
-    /// An output that cannot be (an input of its name in the folder, a
-    /// pipe, a folder that cannot be made).
-    #[error(transparent)]
-    File(#[from] tortwin_files::FileError),
-}
 
 /// Rows written per table.
 #[derive(Debug, Clone, Default, PartialEq, Eq, serde::Serialize)]
@@ -58,10 +39,10 @@ struct Out {
 }
 
 impl Out {
-    fn create(dir: &Path, name: &str, header: &[String]) -> Result<Self, ExportError> {
+    fn create(dir: &Path, name: &str, header: &[String]) -> Result<Self, ConvertError> {
         let path = dir.join(name);
         let temp = tortwin_files::PartialFile::beside(&path)?;
-        let file = std::fs::File::create(temp.temp_path()).map_err(|source| ExportError::Io {
+        let file = std::fs::File::create(temp.temp_path()).map_err(|source| ConvertError::Io {
             what: "opening",
             path: temp.temp_path().to_path_buf(),
             source,
@@ -78,26 +59,26 @@ impl Out {
         Ok(out)
     }
 
-    fn row(&mut self, fields: &[String]) -> Result<(), ExportError> {
-        self.csv.write_record(fields).map_err(|e| ExportError::Io {
+    fn row(&mut self, fields: &[String]) -> Result<(), ConvertError> {
+        self.csv.write_record(fields).map_err(|e| ConvertError::Io {
             what: "writing",
             path: self.path.clone(),
             source: std::io::Error::other(e),
         })
     }
 
-    fn finish(self) -> Result<(), ExportError> {
+    fn finish(self) -> Result<(), ConvertError> {
         let Self {
             path,
             mut temp,
             csv,
         } = self;
-        let mut file = csv.into_inner().map_err(|e| ExportError::Io {
+        let mut file = csv.into_inner().map_err(|e| ConvertError::Io {
             what: "writing",
             path: path.clone(),
             source: std::io::Error::other(e.to_string()),
         })?;
-        file.flush().map_err(|source| ExportError::Io {
+        file.flush().map_err(|source| ConvertError::Io {
             what: "writing",
             path: path.clone(),
             source,
@@ -110,8 +91,8 @@ impl Out {
 
 /// Writes the inputs of `recording` as tables into `dir` (created if
 /// missing).
-pub fn export_dir(recording: &Path, dir: &Path) -> Result<ExportSummary, ExportError> {
-    std::fs::create_dir_all(dir).map_err(|source| ExportError::Io {
+pub fn export_dir(recording: &Path, dir: &Path) -> Result<ExportSummary, ConvertError> {
+    std::fs::create_dir_all(dir).map_err(|source| ConvertError::Io {
         what: "creating the folder",
         path: dir.to_path_buf(),
         source,

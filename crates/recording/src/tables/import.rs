@@ -22,7 +22,7 @@ use super::{
     WEATHER_COLUMNS, WEATHER_FILE,
 };
 use crate::decode::{self, DecodeError, Decoder};
-use crate::error::{InputError, WriteError};
+use crate::error::{ConvertError, InputError};
 use crate::event::{BogiePosition, Direction, Quantity};
 use crate::topic::Topic;
 use crate::wire::{
@@ -30,31 +30,6 @@ use crate::wire::{
     SiteMsg, WeatherMsg,
 };
 use crate::RecordingWriter;
-
-/// Why an import failed.
-#[derive(Debug, thiserror::Error)]
-pub enum ImportError {
-    /// A table breaks its format (the user's to fix: exit status 2).
-    #[error(transparent)]
-    Input(#[from] InputError),
-    #[error("writing {}: {source}", .path.display())]
-    Write {
-        path: PathBuf,
-        #[source]
-        source: WriteError,
-    },
-    #[error("{what} {}: {source}", .path.display())]
-    Io {
-        what: &'static str,
-        path: PathBuf,
-        #[source]
-        source: std::io::Error,
-    },
-    /// An output that cannot be (one of the tables, a pipe, a folder that
-    /// cannot be made).
-    #[error(transparent)]
-    File(#[from] tortwin_files::FileError),
-}
 
 /// What an import wrote.
 #[derive(Debug, Clone, Default, PartialEq, Eq, serde::Serialize)]
@@ -70,7 +45,7 @@ pub struct ImportSummary {
 
 /// Reads the tables in `dir` and writes the recording `out` (under a
 /// temporary name beside it, renamed when complete).
-pub fn import_dir(dir: &Path, out: &Path) -> Result<ImportSummary, ImportError> {
+pub fn import_dir(dir: &Path, out: &Path) -> Result<ImportSummary, ConvertError> {
     let section_path = dir.join(SECTION_FILE);
     let section = read_section(&section_path)?;
     let rails = section.msg.rails.clone();
@@ -147,14 +122,14 @@ fn write(
     section_ns: u64,
     section: &SectionMsg,
     items: &[Item],
-) -> Result<(), ImportError> {
+) -> Result<(), ConvertError> {
     let io = |what: &'static str, path: &Path| {
         let path = path.to_path_buf();
-        move |source| ImportError::Io { what, path, source }
+        move |source| ConvertError::Io { what, path, source }
     };
     let mut temp = tortwin_files::PartialFile::beside(out)?;
     let temp_file = File::create(temp.temp_path()).map_err(io("opening", temp.temp_path()))?;
-    let write_error = |source| ImportError::Write {
+    let write_error = |source| ConvertError::Write {
         path: out.to_path_buf(),
         source,
     };
