@@ -777,14 +777,133 @@ struct Search<'a> {
 }
 
 impl Search<'_> {
-    /// Step `step` of the forward selection: screening, the candidates'
-    /// fits, their judgement and the best one taken (or none, and the
-    /// search ends: `false`).
+    /// Step `step` of the forward selection: its candidates
+    /// ([`Search::candidates`]), their fits, their judgement and the best
+    /// one taken (or none, and the search ends: `false`).
+    /// The candidates of step `step`: the named effects not in the model
+    /// (warm where an earlier step fitted them; one whose earlier optimum no
+    /// longer lowers the SSE left out), those the residual's signature
+    /// brings back, and the generic terms the screening proposes; with the
+    /// screening's record.
+    fn candidates(&mut self, step: usize) -> Result<(Vec<(Candidate, Start)>, Screening)> {
+        let (data, ev, drivers, options, progress) = (
+            self.data,
+            self.ev,
+            self.drivers,
+            self.options,
+            self.progress,
+        );
+        let (current, simulated_current, accepted) =
+            (&self.current, &self.simulated_current, &self.accepted);
+        let (noise_now, sse) = (self.noise_now, self.sse);
+        let constants_beside = self.calibration_start.is_some() && !self.constants_in;
+        let (hopeless, warm, responses) = (&mut self.hopeless, &mut self.warm, &mut self.responses);
+        let has_high_rail = data.section.rails.iter().any(|r| r == "high");
+        let ln_n = (self.n as f64).ln();
+        // What the residual follows now: a covariate that is a catalogue
+        // effect's signature (effects.md, "What each effect leaves in the
+        // residuals") or a driver brings that effect and every term on
+        // that driver back into this step, whatever they did before (a
+        // strong term accepted first can hide a weaker effect until then).
+        let mut forced: Vec<Driver> = Vec::new();
+        if step > 1 {
+            let residual_now = residual_of(data, simulated_current);
+            let ranked = diagnose::rank(data, &screened(&residual_now, &ev.active));
+            let top = ranked.first().map_or(0.0, |c| c.eta2_adjusted);
+            for cov in ranked
+                .iter()
+                .take(2)
+                .filter(|c| c.eta2_adjusted >= SIGNATURE_ETA2 && c.eta2_adjusted >= 0.5 * top)
+            {
+                let (named, driver) = signature_of(&cov.name);
+                for n in named {
+                    let c = Candidate::Named(n);
+                    if hopeless.contains(&c) {
+                        hopeless.retain(|h| *h != c);
+                        warm.remove(&c);
+                    }
+                }
+                forced.extend(driver);
+            }
+        }
+        let mut candidates: Vec<(Candidate, Start)> = Candidate::all()
+            .into_iter()
+            .filter(|c| !accepted.contains(c))
+            // Without a rail named `high` the effect does nothing.
+            .filter(|c| *c != Candidate::Named(Named::BogieBands) || has_high_rail)
+            .filter(|c| !hopeless.contains(c))
+            .map(|c| {
+                let start = warm
+                    .get(&c)
+                    .map_or(Start::Fresh, |u| Start::Warm(u.clone()));
+                (c, start)
+            })
+            .collect();
+        // The candidates of this step are built on the current model: a
+        // time step continues from its state before the step.
+        ev.pin_base(current)?;
+        progress.stage(&format!("step {step}: screening the generic terms"));
+        let screening_stage = ev.cost.enter(fit::Stage::Screening);
+        let (generic, screening) = screen::propose(
+            ev,
+            drivers,
+            current,
+            simulated_current,
+            noise_now,
+            // ΔBIC < threshold needs n ln(SSE1/SSE0) < threshold − k ln n,
+            // about a reduction of (|threshold| + k ln n) σ² for k = 1.
+            noise_now.map_or(0.0, |s| (options.bic_threshold.abs() + ln_n) * s * s),
+            &forced,
+            constants_beside,
+            responses,
+        )?;
+        drop(screening_stage);
+        // A term on a direction already in the model (whatever its form
+        // or range) would only stack on it.
+        let in_model = |c: &Candidate| {
+            let Candidate::Generic(g) = c else {
+                return false;
+            };
+            accepted
+                .iter()
+                .any(|a| matches!(a, Candidate::Generic(h) if h.same_direction(g)))
+        };
+        let generic: Vec<(Candidate, Start)> = generic
+            .into_iter()
+            .filter(|(c, _)| !accepted.contains(c) && !hopeless.contains(c) && !in_model(c))
+            .collect();
+        // After a step: a named effect whose earlier optimum no longer
+        // lowers the SSE at all was standing in for what was just added
+        // (unless a generic term of its own family is a candidate: then it
+        // is the better name for what that term finds).
+        let families: Vec<Candidate> = generic
+            .iter()
+            .filter_map(|(c, _)| named_family(c))
+            .collect();
+        let stale: Vec<bool> = candidates
+            .par_iter()
+            .map(|(c, start)| match start {
+                Start::Warm(u) if !c.is_generic() && !families.contains(c) => {
+                    let space = Space {
+                        base: current.clone(),
+                        slots: vec![c.clone()],
+                    };
+                    Ok(ev.evaluate(&space.config(u))?.sse >= sse)
+                }
+                _ => Ok(false),
+            })
+            .collect::<Result<_>>()?;
+        let mut stale = stale.into_iter();
+        candidates.retain(|_| !stale.next().unwrap_or(false));
+        candidates.extend(generic);
+        Ok((candidates, screening))
+    }
+
     fn step(&mut self, step: usize) -> Result<bool> {
+        let (candidates, screening) = self.candidates(step)?;
         let (data, start, options, progress) = (self.data, self.start, self.options, self.progress);
         let (ev, drivers, n) = (self.ev, self.drivers, self.n);
         let starting = self.starting;
-        let has_high_rail = data.section.rails.iter().any(|r| r == "high");
         let ln_n = (n as f64).ln();
         let mut current = std::mem::take(&mut self.current);
         let mut sse = self.sse;
@@ -797,107 +916,10 @@ impl Search<'_> {
         let mut constants_in = self.constants_in;
         let mut constant_keys = std::mem::take(&mut self.constant_keys);
         let warm = &mut self.warm;
-        let responses = &mut self.responses;
         let hopeless = &mut self.hopeless;
         let steps = &mut self.steps;
         let go_on = 'step: {
-            // What the residual follows now: a covariate that is a catalogue
-            // effect's signature (effects.md, "What each effect leaves in the
-            // residuals") or a driver brings that effect and every term on
-            // that driver back into this step, whatever they did before (a
-            // strong term accepted first can hide a weaker effect until then).
-            let mut forced: Vec<Driver> = Vec::new();
-            if step > 1 {
-                let residual_now = residual_of(data, &simulated_current);
-                let ranked = diagnose::rank(data, &screened(&residual_now, &ev.active));
-                let top = ranked.first().map_or(0.0, |c| c.eta2_adjusted);
-                for cov in ranked
-                    .iter()
-                    .take(2)
-                    .filter(|c| c.eta2_adjusted >= SIGNATURE_ETA2 && c.eta2_adjusted >= 0.5 * top)
-                {
-                    let (named, driver) = signature_of(&cov.name);
-                    for n in named {
-                        let c = Candidate::Named(n);
-                        if hopeless.contains(&c) {
-                            hopeless.retain(|h| *h != c);
-                            warm.remove(&c);
-                        }
-                    }
-                    forced.extend(driver);
-                }
-            }
-            let mut candidates: Vec<(Candidate, Start)> = Candidate::all()
-                .into_iter()
-                .filter(|c| !accepted.contains(c))
-                // Without a rail named `high` the effect does nothing.
-                .filter(|c| *c != Candidate::Named(Named::BogieBands) || has_high_rail)
-                .filter(|c| !hopeless.contains(c))
-                .map(|c| {
-                    let start = warm
-                        .get(&c)
-                        .map_or(Start::Fresh, |u| Start::Warm(u.clone()));
-                    (c, start)
-                })
-                .collect();
-            // The candidates of this step are built on the current model: a
-            // time step continues from its state before the step.
-            ev.pin_base(&current)?;
-            progress.stage(&format!("step {step}: screening the generic terms"));
-            let screening_stage = ev.cost.enter(fit::Stage::Screening);
-            let (generic, screening) = screen::propose(
-                ev,
-                drivers,
-                &current,
-                &simulated_current,
-                noise_now,
-                // ΔBIC < threshold needs n ln(SSE1/SSE0) < threshold − k ln n,
-                // about a reduction of (|threshold| + k ln n) σ² for k = 1.
-                noise_now.map_or(0.0, |s| (options.bic_threshold.abs() + ln_n) * s * s),
-                &forced,
-                calibration_start.is_some() && !constants_in,
-                responses,
-            )?;
-            drop(screening_stage);
             let screened_beside = screening.beside_constant.clone();
-            // A term on a direction already in the model (whatever its form
-            // or range) would only stack on it.
-            let in_model = |c: &Candidate| {
-                let Candidate::Generic(g) = c else {
-                    return false;
-                };
-                accepted
-                    .iter()
-                    .any(|a| matches!(a, Candidate::Generic(h) if h.same_direction(g)))
-            };
-            let generic: Vec<(Candidate, Start)> = generic
-                .into_iter()
-                .filter(|(c, _)| !accepted.contains(c) && !hopeless.contains(c) && !in_model(c))
-                .collect();
-            // After a step: a named effect whose earlier optimum no longer
-            // lowers the SSE at all was standing in for what was just added
-            // (unless a generic term of its own family is a candidate: then it
-            // is the better name for what that term finds).
-            let families: Vec<Candidate> = generic
-                .iter()
-                .filter_map(|(c, _)| named_family(c))
-                .collect();
-            let stale: Vec<bool> = candidates
-                .par_iter()
-                .map(|(c, start)| match start {
-                    Start::Warm(u) if !c.is_generic() && !families.contains(c) => {
-                        let space = Space {
-                            base: current.clone(),
-                            slots: vec![c.clone()],
-                        };
-                        Ok(ev.evaluate(&space.config(u))?.sse >= sse)
-                    }
-                    _ => Ok(false),
-                })
-                .collect::<Result<_>>()?;
-            let mut stale = stale.into_iter();
-            candidates.retain(|_| !stale.next().unwrap_or(false));
-            candidates.extend(generic);
             if candidates.is_empty() {
                 break 'step false;
             }
