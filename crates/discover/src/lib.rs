@@ -580,74 +580,15 @@ pub fn discover(
             break;
         }
     }
+    let calibration = search.calibrate_with_effects()?;
     let Search {
-        mut current,
+        current,
         noise_now,
-        mut accepted,
-        mut rmse_by_step,
+        rmse_by_step,
         calibration_start,
         steps,
         ..
     } = search;
-
-    // The constants once more, with the effects found fitted jointly: what
-    // the recording determines may differ now that the effects are in.
-    let mut calibration = None;
-    if options.calibrate {
-        progress.stage("calibrating the site's constants with the effects found");
-        let free: Vec<Candidate> = accepted
-            .iter()
-            .filter(|c| c.get(&current.effects).is_some())
-            .cloned()
-            .collect();
-        match &calibration_start {
-            // Nothing was added: step 0's calibration is the final one.
-            Some(c0) if free.is_empty() && (c0.model == current || current == *start) => {
-                current = c0.model.clone();
-                calibration = Some(c0.clone());
-            }
-            _ => {
-                let mut c = calibrate::calibrate(&ev, &current, &start.product, &free, noise_now)?;
-                current = c.model.clone();
-                // An effect the calibrated constants make unnecessary (it
-                // made up for constants held where an earlier step had put
-                // them) is taken out, and the constants calibrated again.
-                let dropped = drop_unneeded(
-                    &ev,
-                    &mut accepted,
-                    starting,
-                    &mut current,
-                    &start.product,
-                    noise_now,
-                    options,
-                )?;
-                if !dropped.is_empty() {
-                    for d in &dropped {
-                        progress.stage(&format!(
-                            "{} is not needed with the site's constants",
-                            d.label()
-                        ));
-                    }
-                    let free: Vec<Candidate> =
-                        free.into_iter().filter(|f| !dropped.contains(f)).collect();
-                    c = calibrate::calibrate(&ev, &current, &start.product, &free, noise_now)?;
-                    current = c.model.clone();
-                    rmse_by_step.push((
-                        format!(
-                            "- {} (not needed with the site's constants)",
-                            dropped
-                                .iter()
-                                .map(Candidate::label)
-                                .collect::<Vec<_>>()
-                                .join(", ")
-                        ),
-                        rmse(ev.evaluate(&current)?.sse, n),
-                    ));
-                }
-                calibration = Some(c);
-            }
-        }
-    }
 
     progress.stage("replaying with the final model");
     let (residual_after, eval_after) = ev.residuals(&current)?;
@@ -780,6 +721,71 @@ impl Search<'_> {
     /// Step `step` of the forward selection: its candidates
     /// ([`Search::candidates`]), their fits, their judgement and the best
     /// one taken (or none, and the search ends: `false`).
+    /// The constants once more, with the effects found fitted jointly: what
+    /// the recording determines may differ now that the effects are in. An
+    /// effect the calibrated constants make unnecessary (it made up for
+    /// constants held where an earlier step had put them) is taken out, and
+    /// the constants calibrated again. `None` without calibration.
+    fn calibrate_with_effects(&mut self) -> Result<Option<Calibration>> {
+        let (ev, start, options, progress) = (self.ev, self.start, self.options, self.progress);
+        if !options.calibrate {
+            return Ok(None);
+        }
+        progress.stage("calibrating the site's constants with the effects found");
+        let noise_now = self.noise_now;
+        let free: Vec<Candidate> = self
+            .accepted
+            .iter()
+            .filter(|c| c.get(&self.current.effects).is_some())
+            .cloned()
+            .collect();
+        match &self.calibration_start {
+            // Nothing was added: step 0's calibration is the final one.
+            Some(c0) if free.is_empty() && (c0.model == self.current || self.current == *start) => {
+                self.current = c0.model.clone();
+                Ok(Some(c0.clone()))
+            }
+            _ => {
+                let mut c =
+                    calibrate::calibrate(ev, &self.current, &start.product, &free, noise_now)?;
+                self.current = c.model.clone();
+                let dropped = drop_unneeded(
+                    ev,
+                    &mut self.accepted,
+                    self.starting,
+                    &mut self.current,
+                    &start.product,
+                    noise_now,
+                    options,
+                )?;
+                if !dropped.is_empty() {
+                    for d in &dropped {
+                        progress.stage(&format!(
+                            "{} is not needed with the site's constants",
+                            d.label()
+                        ));
+                    }
+                    let free: Vec<Candidate> =
+                        free.into_iter().filter(|f| !dropped.contains(f)).collect();
+                    c = calibrate::calibrate(ev, &self.current, &start.product, &free, noise_now)?;
+                    self.current = c.model.clone();
+                    self.rmse_by_step.push((
+                        format!(
+                            "- {} (not needed with the site's constants)",
+                            dropped
+                                .iter()
+                                .map(Candidate::label)
+                                .collect::<Vec<_>>()
+                                .join(", ")
+                        ),
+                        rmse(ev.evaluate(&self.current)?.sse, self.n),
+                    ));
+                }
+                Ok(Some(c))
+            }
+        }
+    }
+
     /// The candidates of step `step`: the named effects not in the model
     /// (warm where an earlier step fitted them; one whose earlier optimum no
     /// longer lowers the SSE left out), those the residual's signature
