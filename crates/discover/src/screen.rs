@@ -604,7 +604,7 @@ fn constant_responses(
         ActsOn::Transfer,
     ]
     .into_par_iter()
-    .filter_map(super::twin_constant)
+    .filter_map(super::search::twin_constant)
     .map(|key| {
         let mut cfg = current.clone();
         key.set(
@@ -676,7 +676,7 @@ fn score(
             let mut label = label_of(resp.acts_on, resp.driver, &scope, resp.x0);
             let (mut reduction, mut coefficient, mut beside) = (rj * rj / jj, rj / jj, None);
             let mut with_constant = 0.0;
-            let twin = super::twin_constant(resp.acts_on)
+            let twin = super::search::twin_constant(resp.acts_on)
                 .and_then(|key| twins.iter().find(|t| t.0 == key))
                 .filter(|_| resp.x0.is_none() && scope.keys() == 0);
             if let Some((key, jc)) = twin {
