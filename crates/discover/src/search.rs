@@ -373,6 +373,14 @@ impl<'a> Search<'a> {
             judge_share(sse, eval_sse, n, self.noise_now, self.options);
     }
 
+    /// `r` replaced by its refit, `space` at `u` with SSE `eval_sse`,
+    /// judged again.
+    fn refitted(&self, r: &mut Ranked, space: Space, u: Vec<f64>, eval_sse: f64) {
+        self.update(&mut r.0, &space, &u, eval_sse);
+        r.1 = space;
+        r.2 = u;
+    }
+
     /// The candidates fitted, then the best directions (acts_on × driver
     /// × scope), whichever form found them, in every other form: a factor
     /// clamped at 0 shows first as a step, a power first as an exp. Each
@@ -491,7 +499,7 @@ impl<'a> Search<'a> {
                 }
             }
         }
-        results.sort_by(|a, b| a.0.delta_bic.total_cmp(&b.0.delta_bic));
+        by_bic(&mut results);
         Ok((results, more))
     }
 
@@ -542,12 +550,10 @@ impl<'a> Search<'a> {
                 &results[k].2,
             )?;
             if let Some((space, u, eval)) = refined {
-                self.update(&mut results[k].0, &space, &u, eval.sse);
-                results[k].1 = space;
-                results[k].2 = u;
+                self.refitted(&mut results[k], space, u, eval.sse);
             }
         }
-        results.sort_by(|a, b| a.0.delta_bic.total_cmp(&b.0.delta_bic));
+        by_bic(results);
         Ok(())
     }
 
@@ -589,16 +595,14 @@ impl<'a> Search<'a> {
                             u,
                         )? {
                             if eval_sse < results[k].0.sse {
-                                self.update(&mut results[k].0, &space, &u, eval_sse);
-                                results[k].1 = space;
-                                results[k].2 = u;
+                                self.refitted(&mut results[k], space, u, eval_sse);
                             }
                         }
                     }
                 }
             }
         }
-        results.sort_by(|a, b| a.0.delta_bic.total_cmp(&b.0.delta_bic));
+        by_bic(results);
         Ok(())
     }
 
@@ -636,12 +640,10 @@ impl<'a> Search<'a> {
             )?;
             for (i, space, u, pair_sse) in pairs {
                 if pair_sse < results[i].0.sse {
-                    self.update(&mut results[i].0, &space, &u, pair_sse);
-                    results[i].1 = space;
-                    results[i].2 = u;
+                    self.refitted(&mut results[i], space, u, pair_sse);
                 }
             }
-            results.sort_by(|a, b| a.0.delta_bic.total_cmp(&b.0.delta_bic));
+            by_bic(results);
         }
         Ok(())
     }
@@ -731,24 +733,23 @@ impl<'a> Search<'a> {
                 if bic < results[i].0.delta_bic {
                     let alone = results[i].0.delta_bic;
                     results[i].0.k = k;
-                    self.update(&mut results[i].0, &space, &u, pair_sse);
+                    let value = key.get(&space.base.product);
+                    self.refitted(&mut results[i], space, u, pair_sse);
                     results[i].0.label = format!(
                         "{} with {} {} beside it",
                         c.label(),
                         key.name(),
-                        fmt_param(key.get(&space.base.product))
+                        fmt_param(value)
                     );
                     results[i].0.beside = Some(ConstantBeside {
                         constant: key.name().to_string(),
-                        value: key.get(&space.base.product),
+                        value,
                         delta_bic_alone: alone,
                     });
-                    results[i].1 = space;
-                    results[i].2 = u;
                 }
             }
         }
-        results.sort_by(|a, b| a.0.delta_bic.total_cmp(&b.0.delta_bic));
+        by_bic(results);
         Ok(())
     }
 
@@ -978,7 +979,7 @@ impl<'a> Search<'a> {
                 r.0.engine_runs += f.runs;
                 r.0.fit_stopped = None;
             }
-            results.sort_by(|a, b| a.0.delta_bic.total_cmp(&b.0.delta_bic));
+            by_bic(results);
             prefer(results, n, options);
             (chosen, take_constants) = (None, false);
         }
@@ -1210,25 +1211,11 @@ impl<'a> Search<'a> {
             ) else {
                 break;
             };
-            let c = self.accepted.remove(i);
-            progress.stage(&format!(
-                "step {step}: {} is no longer needed with the site's constants",
-                c.label()
-            ));
-            self.current = cfg;
-            self.sse = w;
-            removed.push(c.label());
-            self.hopeless.push(c);
+            removed.push(self.take_out(i, cfg, w, |c| {
+                format!("step {step}: {c} is no longer needed with the site's constants")
+            }));
         }
-        if let Some(twin) = swap_time_twins(
-            ev,
-            self.data,
-            &mut self.accepted,
-            &mut self.current,
-            &mut self.sse,
-            (&start.product, &self.constant_keys, self.noise_now),
-            (options, progress, step),
-        )? {
+        if let Some(twin) = self.swap_time_twins(step)? {
             removed.push(format!("a step in time, for {twin}"));
         }
         if !removed.is_empty() {
@@ -1368,15 +1355,7 @@ impl<'a> Search<'a> {
                 self.hopeless.push(c);
             }
         }
-        swap_time_twins(
-            ev,
-            self.data,
-            &mut self.accepted,
-            &mut self.current,
-            &mut self.sse,
-            (&start.product, &self.constant_keys, self.noise_now),
-            (options, progress, step),
-        )?;
+        self.swap_time_twins(step)?;
         Ok(())
     }
 
@@ -1392,7 +1371,7 @@ impl<'a> Search<'a> {
         record: &mut Step,
         keys: Vec<ProductKey>,
     ) -> Result<()> {
-        let (ev, start, progress) = (self.ev, self.start, self.progress);
+        let (ev, start) = (self.ev, self.start);
         let (sse, n) = (self.sse, self.n);
         let ln_n = (n as f64).ln();
         let last = self.accepted.len().saturating_sub(1);
@@ -1416,26 +1395,54 @@ impl<'a> Search<'a> {
             .filter(|(_, bic, _, _)| *bic <= 0.0)
             .min_by(|a, b| a.1.total_cmp(&b.1));
         if let Some((i, _, w, cfg)) = best {
-            let c = self.accepted.remove(i);
-            progress.stage(&format!(
-                "step {step}: the site's constants explain {} as well",
-                c.label()
-            ));
-            self.current = cfg;
-            self.sse = w;
+            let c = self.take_out(i, cfg, w, |c| {
+                format!("step {step}: the site's constants explain {c} as well")
+            });
             self.constants_in = true;
             self.constant_keys = keys;
             record.removed = Some(match record.removed.take() {
-                Some(r) => format!("{r}; {}", c.label()),
-                None => c.label(),
+                Some(r) => format!("{r}; {c}"),
+                None => c.clone(),
             });
             self.rmse_by_step.push((
-                format!("site constants calibrated for {}", c.label()),
+                format!("site constants calibrated for {c}"),
                 rmse(self.sse, n),
             ));
-            self.hopeless.push(c);
         }
         Ok(())
+    }
+
+    /// Two changes in time that are one another's twin swapped where the
+    /// other describes the data better ([`swap_time_twins`]): what was
+    /// taken out, if anything.
+    fn swap_time_twins(&mut self, step: usize) -> Result<Option<String>> {
+        swap_time_twins(
+            self.ev,
+            self.data,
+            &mut self.accepted,
+            &mut self.current,
+            &mut self.sse,
+            (&self.start.product, &self.constant_keys, self.noise_now),
+            (self.options, self.progress, step),
+        )
+    }
+
+    /// The effect `i` taken out of the model, which becomes `model` with
+    /// SSE `sse`, and not tried again; `say` what happened. Its label.
+    fn take_out(
+        &mut self,
+        i: usize,
+        model: ModelConfig,
+        sse: f64,
+        say: impl FnOnce(&str) -> String,
+    ) -> String {
+        let c = self.accepted.remove(i);
+        let label = c.label();
+        self.progress.stage(&say(&label));
+        self.current = model;
+        self.sse = sse;
+        self.hopeless.push(c);
+        label
     }
 
     /// The step closed: the model it leaves simulated for the next step's
@@ -1460,6 +1467,11 @@ type Starts = Vec<(Candidate, Start)>;
 /// The site's constants as a step's candidate: its result, the model with
 /// them calibrated and the constants that moved.
 type Constants = (CandidateResult, ModelConfig, Vec<ProductKey>);
+
+/// A step's results sorted by their BIC drop, the best first.
+fn by_bic(results: &mut [Ranked]) {
+    results.sort_by(|a, b| a.0.delta_bic.total_cmp(&b.0.delta_bic));
+}
 
 /// The order in which a step's sorted results are walked: a named effect
 /// that describes the data (nearly) as well as the best generic term is
