@@ -373,7 +373,12 @@ pub(super) struct CostMeter {
 
 #[derive(Debug, Default)]
 struct Stages {
-    now: Option<Stage>,
+    /// The stages entered and not yet left, the innermost last, each with
+    /// how many guards hold it: calls on parallel threads enter the same
+    /// stage side by side, and it is left when the last of them leaves
+    /// (one guard restoring "the stage before me" would leave a sibling's
+    /// stage set, or unset it while the sibling still runs).
+    entered: Vec<(Stage, usize)>,
     spent: Vec<(Stage, Cost)>,
 }
 
@@ -403,15 +408,21 @@ pub struct StageCost {
     pub cost: Cost,
 }
 
-/// Restores the stage that ran before (see [`CostMeter::enter`]).
+/// Leaves its stage when dropped (see [`CostMeter::enter`]).
 pub(super) struct StageGuard<'m> {
     meter: &'m CostMeter,
-    before: Option<Stage>,
+    stage: Stage,
 }
 
 impl Drop for StageGuard<'_> {
     fn drop(&mut self) {
-        self.meter.lock().now = self.before;
+        let mut lock = self.meter.lock();
+        if let Some(i) = lock.entered.iter().rposition(|(s, _)| *s == self.stage) {
+            lock.entered[i].1 -= 1;
+            if lock.entered[i].1 == 0 {
+                lock.entered.remove(i);
+            }
+        }
     }
 }
 
@@ -456,20 +467,20 @@ impl CostMeter {
 
     /// From now until the guard drops, evaluations count to `stage` (the
     /// stage a nested call enters wins: a calibration inside a refit is
-    /// the calibration's).
+    /// the calibration's; parallel calls share it, [`Stages::entered`]).
     pub(super) fn enter(&self, stage: Stage) -> StageGuard<'_> {
         let mut lock = self.lock();
-        let before = lock.now.replace(stage);
-        StageGuard {
-            meter: self,
-            before,
+        match lock.entered.last_mut() {
+            Some((s, holders)) if *s == stage => *holders += 1,
+            _ => lock.entered.push((stage, 1)),
         }
+        StageGuard { meter: self, stage }
     }
 
     /// Adds one evaluation to the stage now running.
     fn add_to_stage(&self, spent: Spent) {
         let mut lock = self.lock();
-        let stage = lock.now.unwrap_or(Stage::Fits);
+        let stage = lock.entered.last().map_or(Stage::Fits, |(s, _)| *s);
         let slot = match lock.spent.iter().position(|(s, _)| *s == stage) {
             Some(k) => k,
             None => {
@@ -1864,6 +1875,52 @@ pub(super) fn cross_validate(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Calibrations inside a refit on two threads whose guards leave in
+    /// the other order than they entered: the one still running counts to
+    /// the calibration, and after both the refit runs again. (A guard that
+    /// restored "the stage before me" counted the second thread's run to
+    /// the refit and left the calibration set after both: what a stage
+    /// cost depended on the threads' timing.)
+    #[test]
+    fn parallel_calls_of_one_stage_count_to_it_and_leave_it_together() {
+        use std::sync::Barrier;
+        let meter = CostMeter::default();
+        let refit = meter.enter(Stage::Refits);
+        let (entered, first_left) = (Barrier::new(2), Barrier::new(2));
+        std::thread::scope(|scope| {
+            scope.spawn(|| {
+                let calibration = meter.enter(Stage::Calibration);
+                entered.wait();
+                meter.add(Spent::Replay(1));
+                drop(calibration);
+                first_left.wait();
+            });
+            scope.spawn(|| {
+                entered.wait();
+                let calibration = meter.enter(Stage::Calibration);
+                first_left.wait();
+                meter.add(Spent::Replay(1));
+                drop(calibration);
+            });
+        });
+        for _ in 0..3 {
+            meter.add(Spent::Replay(1));
+        }
+        drop(refit);
+        meter.add(Spent::Replay(1));
+        let runs = |stage| {
+            meter
+                .by_stage()
+                .iter()
+                .find(|c| c.stage == stage)
+                .map_or(0, |c| c.cost.engine_runs)
+        };
+        assert_eq!(runs(Stage::Calibration), 2);
+        assert_eq!(runs(Stage::Refits), 3);
+        assert_eq!(runs(Stage::Fits), 1);
+        assert!(meter.lock().entered.is_empty());
+    }
 
     /// A bundled recording (recordings/NAME.mcap) and its truth
     /// (NAME.key.json's `truth_config_toml`).
