@@ -373,12 +373,13 @@ pub(super) struct CostMeter {
 
 #[derive(Debug, Default)]
 struct Stages {
-    /// The stages entered and not yet left, the innermost last, each with
-    /// how many guards hold it: calls on parallel threads enter the same
-    /// stage side by side, and it is left when the last of them leaves
-    /// (one guard restoring "the stage before me" would leave a sibling's
-    /// stage set, or unset it while the sibling still runs).
-    entered: Vec<(Stage, usize)>,
+    /// The stage now running and how many guards hold it. A stage entered
+    /// while another runs is part of that one (a calibration inside a
+    /// refit is the refit's): the work inside a stage runs on parallel
+    /// threads, where "the innermost stage" would depend on their timing
+    /// (one thread's evaluation after its calibration, beside a sibling's
+    /// still in its own, was counted to either).
+    entered: Option<(Stage, usize)>,
     spent: Vec<(Stage, Cost)>,
 }
 
@@ -411,18 +412,15 @@ pub struct StageCost {
 /// Leaves its stage when dropped (see [`CostMeter::enter`]).
 pub(super) struct StageGuard<'m> {
     meter: &'m CostMeter,
-    stage: Stage,
 }
 
 impl Drop for StageGuard<'_> {
     fn drop(&mut self) {
         let mut lock = self.meter.lock();
-        if let Some(i) = lock.entered.iter().rposition(|(s, _)| *s == self.stage) {
-            lock.entered[i].1 -= 1;
-            if lock.entered[i].1 == 0 {
-                lock.entered.remove(i);
-            }
-        }
+        lock.entered = match lock.entered {
+            Some((stage, holders)) if holders > 1 => Some((stage, holders - 1)),
+            _ => None,
+        };
     }
 }
 
@@ -465,22 +463,22 @@ impl CostMeter {
         self.stages.lock().unwrap_or_else(|e| e.into_inner())
     }
 
-    /// From now until the guard drops, evaluations count to `stage` (the
-    /// stage a nested call enters wins: a calibration inside a refit is
-    /// the calibration's; parallel calls share it, [`Stages::entered`]).
+    /// From now until the guard drops, evaluations count to `stage`,
+    /// unless another stage runs: then they stay that stage's
+    /// ([`Stages::entered`]).
     pub(super) fn enter(&self, stage: Stage) -> StageGuard<'_> {
         let mut lock = self.lock();
-        match lock.entered.last_mut() {
-            Some((s, holders)) if *s == stage => *holders += 1,
-            _ => lock.entered.push((stage, 1)),
-        }
-        StageGuard { meter: self, stage }
+        lock.entered = Some(match lock.entered {
+            Some((running, holders)) => (running, holders + 1),
+            None => (stage, 1),
+        });
+        StageGuard { meter: self }
     }
 
     /// Adds one evaluation to the stage now running.
     fn add_to_stage(&self, spent: Spent) {
         let mut lock = self.lock();
-        let stage = lock.entered.last().map_or(Stage::Fits, |(s, _)| *s);
+        let stage = lock.entered.map_or(Stage::Fits, |(s, _)| s);
         let slot = match lock.spent.iter().position(|(s, _)| *s == stage) {
             Some(k) => k,
             None => {
@@ -1877,13 +1875,14 @@ mod tests {
     use super::*;
 
     /// Calibrations inside a refit on two threads whose guards leave in
-    /// the other order than they entered: the one still running counts to
-    /// the calibration, and after both the refit runs again. (A guard that
-    /// restored "the stage before me" counted the second thread's run to
-    /// the refit and left the calibration set after both: what a stage
-    /// cost depended on the threads' timing.)
+    /// the other order than they entered, one thread evaluating after its
+    /// calibration while the other's still runs: every evaluation is the
+    /// refit's, and the refit's stage is left with its guard. (A guard
+    /// that restored "the stage before me" counted the second thread's
+    /// run to the refit and left the calibration set after both: what a
+    /// stage cost depended on the threads' timing.)
     #[test]
-    fn parallel_calls_of_one_stage_count_to_it_and_leave_it_together() {
+    fn a_stage_inside_another_on_parallel_threads_is_the_outer_ones() {
         use std::sync::Barrier;
         let meter = CostMeter::default();
         let refit = meter.enter(Stage::Refits);
@@ -1916,10 +1915,10 @@ mod tests {
                 .find(|c| c.stage == stage)
                 .map_or(0, |c| c.cost.engine_runs)
         };
-        assert_eq!(runs(Stage::Calibration), 2);
-        assert_eq!(runs(Stage::Refits), 3);
+        assert_eq!(runs(Stage::Calibration), 0);
+        assert_eq!(runs(Stage::Refits), 5);
         assert_eq!(runs(Stage::Fits), 1);
-        assert!(meter.lock().entered.is_empty());
+        assert!(meter.lock().entered.is_none());
     }
 
     /// A bundled recording (recordings/NAME.mcap) and its truth

@@ -1790,6 +1790,9 @@ fn fewest_constants(
     mut sse: f64,
     noise: Option<f64>,
 ) -> Result<(ModelConfig, Vec<ProductKey>, f64)> {
+    // Its refits run side by side: the evaluations between them are the
+    // calibration's too.
+    let _stage = ev.cost.enter(fit::Stage::Calibration);
     let n = ev.active.iter().filter(|&&a| a).count() as f64;
     let mut model = model.clone();
     while keys.len() > 1 {
