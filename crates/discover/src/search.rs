@@ -19,7 +19,7 @@ use super::{CandidateResult, ConstantBeside, FitStopped, Options, Step};
 use tortwin_model::config::ModelConfig;
 use tortwin_model::effects::Named;
 use tortwin_model::generic::{ActsOn, Driver, FormKind};
-use tortwin_model::product::ProductKey;
+use tortwin_model::product::{ProductKey, ProductParams};
 use tortwin_recording::EventKind;
 use tortwin_study::{Progress, Result};
 
@@ -128,7 +128,7 @@ impl<'a> Search<'a> {
     /// longer lowers the SSE left out), those the residual's signature
     /// brings back, and the generic terms the screening proposes; with the
     /// screening's record.
-    fn candidates(&mut self, step: usize) -> Result<(Vec<(Candidate, Start)>, Screening)> {
+    fn candidates(&mut self, step: usize) -> Result<(Starts, Screening)> {
         let (data, ev, drivers, options, progress) = (
             self.data,
             self.ev,
@@ -362,15 +362,17 @@ impl<'a> Search<'a> {
         let Some(c) = space.slots.first() else {
             unreachable!("a fitted space has its slot")
         };
-        let (sse, n) = (self.sse, self.n);
-        r.label = c.label();
+        // Judged as a new result would be; what the fit recorded (its runs,
+        // a constant beside it, cross-validation) stays.
+        let judged = self.judge().result(&r.name, c.label(), eval_sse, r.k);
+        r.label = judged.label;
         r.params = c.named(&space.params(u).pop().unwrap_or_default());
-        r.sse = eval_sse;
-        r.rmse = rmse(eval_sse, n);
-        r.delta_bic = n as f64 * (eval_sse / sse).ln() + r.k as f64 * (n as f64).ln();
-        r.passes_bic = r.delta_bic < self.options.bic_threshold;
-        (r.excess_share, r.passes_share) =
-            judge_share(sse, eval_sse, n, self.noise_now, self.options);
+        r.sse = judged.sse;
+        r.rmse = judged.rmse;
+        r.delta_bic = judged.delta_bic;
+        r.passes_bic = judged.passes_bic;
+        r.excess_share = judged.excess_share;
+        r.passes_share = judged.passes_share;
     }
 
     /// `r` replaced by its refit, `space` at `u` with SSE `eval_sse`,
@@ -1785,7 +1787,7 @@ fn twin_direction(results: &[Ranked], ev: &Evaluator<'_>) -> Option<(space::Gene
 fn fewest_constants(
     ev: &Evaluator<'_>,
     model: &ModelConfig,
-    reference: &tortwin_model::product::ProductParams,
+    reference: &ProductParams,
     mut keys: Vec<ProductKey>,
     mut sse: f64,
     noise: Option<f64>,
@@ -1835,7 +1837,7 @@ fn effect_beside_constants(
     ev: &Evaluator<'_>,
     results: &[Ranked],
     keys: &[ProductKey],
-    reference: &tortwin_model::product::ProductParams,
+    reference: &ProductParams,
     sse_constants: f64,
     noise: Option<f64>,
     options: &Options,
@@ -1882,7 +1884,7 @@ fn best_beside_constants(
     ev: &Evaluator<'_>,
     tried: &[&Ranked],
     keys: &[ProductKey],
-    reference: &tortwin_model::product::ProductParams,
+    reference: &ProductParams,
     noise: Option<f64>,
     options: &Options,
 ) -> Result<Option<Beside>> {
@@ -1920,7 +1922,7 @@ fn beside_constants_at(
     results: &[Ranked],
     at: &[usize],
     keys: &[ProductKey],
-    reference: &tortwin_model::product::ProductParams,
+    reference: &ProductParams,
     noise: Option<f64>,
 ) -> Result<Vec<BesideAt>> {
     let tried: Vec<_> = at.iter().map(|&i| &results[i]).collect();
@@ -1943,7 +1945,7 @@ fn each_beside_constants(
     ev: &Evaluator<'_>,
     tried: &[&Ranked],
     keys: &[ProductKey],
-    reference: &tortwin_model::product::ProductParams,
+    reference: &ProductParams,
     noise: Option<f64>,
 ) -> Result<Vec<Beside>> {
     let pairs: Vec<Beside> = tried
@@ -2154,7 +2156,7 @@ fn calibrated_bic(
     ev: &Evaluator<'_>,
     results: &[Ranked],
     at: &[usize],
-    reference: &tortwin_model::product::ProductParams,
+    reference: &ProductParams,
     sse: f64,
     noise: Option<f64>,
 ) -> Result<Vec<(usize, f64)>> {
@@ -2262,7 +2264,7 @@ fn drop_unneeded(
     accepted: &mut Vec<Candidate>,
     starting: usize,
     current: &mut ModelConfig,
-    reference: &tortwin_model::product::ProductParams,
+    reference: &ProductParams,
     noise: Option<f64>,
     options: &Options,
 ) -> Result<Vec<Candidate>> {
@@ -2289,7 +2291,7 @@ fn without_each(
     starting: usize,
     current: &ModelConfig,
     keys: &[ProductKey],
-    reference: &tortwin_model::product::ProductParams,
+    reference: &ProductParams,
     noise: Option<f64>,
 ) -> Result<Vec<(usize, f64, ModelConfig)>> {
     let _stage = ev.cost.enter(fit::Stage::Refits);
@@ -2322,11 +2324,7 @@ fn swap_time_twins(
     accepted: &mut [Candidate],
     current: &mut ModelConfig,
     sse: &mut f64,
-    constants: (
-        &tortwin_model::product::ProductParams,
-        &[ProductKey],
-        Option<f64>,
-    ),
+    constants: (&ProductParams, &[ProductKey], Option<f64>),
     (options, progress, step): (&Options, &dyn Progress, usize),
 ) -> Result<Option<String>> {
     let _stage = ev.cost.enter(fit::Stage::Refits);
