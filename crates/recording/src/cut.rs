@@ -204,7 +204,10 @@ impl Output {
     fn copy(&mut self, m: &RawMessage, at: Option<u64>) -> Result<(), ConvertError> {
         let known = Topic::from_name(&m.topic).filter(|_| m.message_encoding == "json");
         let channel = match known {
-            Some(topic) => self.writer.channel_of(topic),
+            Some(topic) => self
+                .writer
+                .channel_of(topic)
+                .map_err(|source| self.write_error(source))?,
             None => {
                 let (topic, encoding) = (&m.topic, &m.message_encoding);
                 let key = (topic.clone(), encoding.clone());

@@ -34,7 +34,7 @@ pub(crate) struct DecodeError {
 }
 
 impl DecodeError {
-    fn at(field: impl Into<String>, message: String) -> Self {
+    pub(crate) fn at(field: impl Into<String>, message: String) -> Self {
         Self {
             field: Some(field.into()),
             message,

@@ -29,6 +29,7 @@ mod decode;
 pub mod error;
 pub mod event;
 pub mod limits;
+pub mod line;
 pub mod reader;
 pub mod recording;
 pub mod schema;

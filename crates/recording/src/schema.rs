@@ -1,4 +1,4 @@
-//! The JSON Schemas of the five input topics, stated once: the writer
+//! The JSON Schemas of the input topics (five, and `/line` for a line), stated once: the writer
 //! declares them on their channels (`encoding = "jsonschema"`, as Foxglove
 //! and the MCAP tools expect), so a recording describes itself to any
 //! reader. They say what a JSON Schema can say of
@@ -11,6 +11,8 @@
 //! changing it changes the bytes `tortwin synth` writes for a seed.
 
 pub const SECTION_SCHEMA: &str = include_str!("../schemas/section.json");
+
+pub const LINE_SCHEMA: &str = include_str!("../schemas/line.json");
 
 pub const PASSAGE_SCHEMA: &str = include_str!("../schemas/passage.json");
 

@@ -8,6 +8,8 @@ use crate::schema;
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash)]
 pub enum Topic {
     Section,
+    /// Optional (line.md): the section cut into segments.
+    Line,
     Passage,
     Pulse,
     Measurement,
@@ -15,8 +17,9 @@ pub enum Topic {
 }
 
 impl Topic {
-    pub const ALL: [Topic; 5] = [
+    pub const ALL: [Topic; 6] = [
         Topic::Section,
+        Topic::Line,
         Topic::Passage,
         Topic::Pulse,
         Topic::Measurement,
@@ -27,6 +30,7 @@ impl Topic {
     pub fn name(self) -> &'static str {
         match self {
             Topic::Section => "/section",
+            Topic::Line => "/line",
             Topic::Passage => "/train/passage",
             Topic::Pulse => "/applicator/pulse",
             Topic::Measurement => "/measurement/friction",
@@ -43,6 +47,7 @@ impl Topic {
     pub fn schema_name(self) -> &'static str {
         match self {
             Topic::Section => "tortwin.input.Section",
+            Topic::Line => "tortwin.input.Line",
             Topic::Passage => "tortwin.input.TrainPassage",
             Topic::Pulse => "tortwin.input.ApplicatorPulse",
             Topic::Measurement => "tortwin.input.MeasurementFriction",
@@ -54,6 +59,7 @@ impl Topic {
     pub fn schema(self) -> &'static str {
         match self {
             Topic::Section => schema::SECTION_SCHEMA,
+            Topic::Line => schema::LINE_SCHEMA,
             Topic::Passage => schema::PASSAGE_SCHEMA,
             Topic::Pulse => schema::PULSE_SCHEMA,
             Topic::Measurement => schema::MEASUREMENT_SCHEMA,

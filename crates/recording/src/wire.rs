@@ -74,6 +74,39 @@ pub struct SiteMsg {
     pub position_m: f64,
 }
 
+/// `/line`: the section cut into consecutive segments (line.md). At most
+/// one, at the `/section`'s log_time.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(expecting = "a JSON object")]
+pub struct LineMsg {
+    pub line_id: String,
+    #[serde(deserialize_with = "json::array")]
+    pub segments: Vec<SegmentMsg>,
+}
+
+/// A segment as written. The keys that only some types use stay JSON
+/// values, read only where the segment's type uses them: line.md ignores
+/// them unchecked elsewhere (a tangent's `high_rail`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(expecting = "a JSON object")]
+pub struct SegmentMsg {
+    pub id: String,
+    /// `tangent`, `transition` or `curve`.
+    #[serde(rename = "type")]
+    pub kind: String,
+    #[serde(deserialize_with = "json::number")]
+    pub end_m: f64,
+    /// A rail name (curve, transition).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub high_rail: Option<serde_json::Value>,
+    /// `start` or `end` (transition).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub curve_at: Option<serde_json::Value>,
+    /// A positive number (curve; descriptive).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub radius_m: Option<serde_json::Value>,
+}
+
 /// `/train/passage`: one train; log_time is when its front enters.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(expecting = "a JSON object")]
@@ -163,6 +196,9 @@ pub struct WeatherMsg {
 
 impl WireMessage for SectionMsg {
     const TOPIC: Topic = Topic::Section;
+}
+impl WireMessage for LineMsg {
+    const TOPIC: Topic = Topic::Line;
 }
 impl WireMessage for PassageMsg {
     const TOPIC: Topic = Topic::Passage;
@@ -272,6 +308,8 @@ pub(crate) mod json {
     }
     from_json_object!(
         super::SectionMsg,
+        super::LineMsg,
+        super::SegmentMsg,
         super::ApplicatorMsg,
         super::SiteMsg,
         super::PassageMsg,

@@ -26,8 +26,10 @@ use crate::wire::WireMessage;
 /// A recording being written to `W`; [`RecordingWriter::finish`] ends it.
 pub struct RecordingWriter<W: Write + Seek> {
     mcap: mcap::Writer<W>,
-    /// The channel of each topic, by its place in [`Topic::ALL`].
-    channels: [u16; 5],
+    /// The channel of each topic, by its place in [`Topic::ALL`]; `/line`'s
+    /// only once a line is written (a recording of a section declares the
+    /// five topics it always did, byte for byte).
+    channels: [Option<u16>; Topic::ALL.len()],
     /// The last sequence number written on each channel.
     sequences: BTreeMap<u16, u32>,
     /// Reused for every message's JSON.
@@ -55,17 +57,9 @@ impl<W: Write + Seek> RecordingWriter<W> {
             mcap.write_metadata(metadata)
                 .map_err(mcap_error("writing the metadata"))?;
         }
-        let mut channels = [0; 5];
-        for (slot, topic) in channels.iter_mut().zip(Topic::ALL) {
-            let schema_id = mcap
-                .add_schema(topic.schema_name(), "jsonschema", topic.schema().as_bytes())
-                .map_err(mcap_error(&format!(
-                    "adding the schema of {}",
-                    topic.name()
-                )))?;
-            *slot = mcap
-                .add_channel(schema_id, topic.name(), "json", &BTreeMap::new())
-                .map_err(mcap_error(&format!("adding channel {}", topic.name())))?;
+        let mut channels = [None; Topic::ALL.len()];
+        for topic in Topic::ALL.into_iter().filter(|&t| t != Topic::Line) {
+            channels[topic as usize] = Some(declare(&mut mcap, topic)?);
         }
         Ok(Self {
             mcap,
@@ -102,7 +96,8 @@ impl<W: Write + Seek> RecordingWriter<W> {
         log_time_ns: u64,
         json: &[u8],
     ) -> Result<(), WriteError> {
-        self.write_to_channel(self.channel_of(topic), log_time_ns, json)
+        let channel = self.channel_of(topic)?;
+        self.write_to_channel(channel, log_time_ns, json)
     }
 
     /// A channel outside the format's five: an unknown topic, or a known
@@ -116,9 +111,17 @@ impl<W: Write + Seek> RecordingWriter<W> {
             })
     }
 
-    /// The channel of a topic of the format.
-    pub fn channel_of(&self, topic: Topic) -> u16 {
-        self.channels[topic as usize]
+    /// The channel of a topic of the format (`/line`'s declared on its
+    /// first use).
+    pub fn channel_of(&mut self, topic: Topic) -> Result<u16, WriteError> {
+        match self.channels[topic as usize] {
+            Some(channel) => Ok(channel),
+            None => {
+                let channel = declare(&mut self.mcap, topic)?;
+                self.channels[topic as usize] = Some(channel);
+                Ok(channel)
+            }
+        }
     }
 
     /// Writes `data` on a channel of this writer.
@@ -178,6 +181,16 @@ impl<W: Write + Seek> RecordingWriter<W> {
         })?;
         Ok(self.mcap.into_inner())
     }
+}
+
+/// A schema and a `json` channel for `topic` on `mcap`: its channel id.
+fn declare<W: Write + Seek>(mcap: &mut mcap::Writer<W>, topic: Topic) -> Result<u16, WriteError> {
+    let mcap_error = |what: String| move |source| WriteError::Mcap { what, source };
+    let schema_id = mcap
+        .add_schema(topic.schema_name(), "jsonschema", topic.schema().as_bytes())
+        .map_err(mcap_error(format!("adding the schema of {}", topic.name())))?;
+    mcap.add_channel(schema_id, topic.name(), "json", &BTreeMap::new())
+        .map_err(mcap_error(format!("adding channel {}", topic.name())))
 }
 
 #[cfg(test)]

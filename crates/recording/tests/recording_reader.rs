@@ -1055,3 +1055,94 @@ fn overlong_record_after(bytes: &[u8], (offset, len): (usize, usize)) -> Vec<u8>
     out.extend_from_slice(&bytes[bytes.len() - 8..]);
     out
 }
+
+// ---------------------------------------------------------------------------
+// A line (line.md): the `/line` message beside the section.
+
+/// The base recording's 600 m cut into a tangent, a transition and a
+/// curve, the `/line` written as the file's message `at`.
+fn with_line(at: usize, log_time: u64) -> Vec<Msg> {
+    let mut msgs = base();
+    let line = json!({
+        "line_id": "test-line",
+        "segments": [
+            {"id": "T0", "type": "tangent", "end_m": 150.0, "high_rail": 3},
+            {"id": "X1", "type": "transition", "end_m": 210.0, "high_rail": "right", "curve_at": "end"},
+            {"id": "C1", "type": "curve", "end_m": 600.0, "high_rail": "right", "radius_m": 400.0}
+        ]
+    });
+    msgs.insert(at, msg("/line", log_time, line));
+    msgs
+}
+
+#[test]
+fn a_line_is_read_beside_its_section_wherever_the_file_puts_it() {
+    let (plain_reader, plain) = read_msgs(&base(), Layout::OneChunk).unwrap();
+    let last = base().len();
+    for at in [1, last] {
+        for layout in LAYOUTS {
+            let (reader, events) = read_msgs(&with_line(at, T0), layout).unwrap();
+            let line = reader.line().expect("the recording is a line");
+            assert_eq!(line.line_id, "test-line");
+            let ends: Vec<f64> = line.segments.iter().map(|s| s.end_m).collect();
+            assert_eq!(ends, [150.0, 210.0, 600.0]);
+            // Every other message means what it meant.
+            assert_eq!(events.len(), plain.len(), "{at} {layout:?}");
+            assert_eq!(
+                reader.unknown_topic_messages(),
+                plain_reader.unknown_topic_messages()
+            );
+        }
+    }
+    assert!(plain_reader.line().is_none());
+}
+
+#[test]
+fn a_line_at_another_time_than_its_section_is_refused() {
+    expect_error(&with_line(1, T0 + 1), 1, &["/section's log_time"]);
+}
+
+#[test]
+fn a_second_line_is_refused() {
+    let mut msgs = with_line(1, T0);
+    let again = msgs[1].clone();
+    msgs.push(again);
+    expect_error(&msgs, msgs.len() - 1, &["a second /line"]);
+}
+
+#[test]
+fn a_line_whose_segments_break_line_md_is_refused_naming_the_field() {
+    let cases: [(&str, Value, &[&str]); 3] = [
+        (
+            "an end before the section's",
+            json!(599.0),
+            &["segments[2].end_m", "length_m"],
+        ),
+        (
+            "a high rail of no rail",
+            json!("outer"),
+            &["segments[2].high_rail", "names no rail"],
+        ),
+        (
+            "no curve_at",
+            Value::Null,
+            &["segments[1].curve_at", "missing"],
+        ),
+    ];
+    for (what, value, needles) in cases {
+        let msgs = with(with_line(1, T0), 1, |line| match what {
+            "an end before the section's" => line["segments"][2]["end_m"] = value,
+            "a high rail of no rail" => line["segments"][2]["high_rail"] = value,
+            _ => remove(line, "/segments/1", "curve_at"),
+        });
+        expect_error(&msgs, 1, needles);
+    }
+}
+
+#[test]
+fn a_line_needs_a_section_of_two_rails() {
+    let msgs = with(with_line(1, T0), 0, |section| {
+        section["rails"] = json!(["left", "right", "third"]);
+    });
+    expect_error(&msgs, 1, &["exactly two rails"]);
+}

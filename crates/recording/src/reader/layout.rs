@@ -153,6 +153,8 @@ pub(super) struct Layout {
     pub loose: Vec<LooseRun>,
     /// The first two `/section` messages in replay order.
     pub sections: Vec<ReplayKey>,
+    /// The first two `/line` messages in replay order.
+    pub lines: Vec<ReplayKey>,
 }
 
 pub(super) fn scan_layout(path: &Path, file: &mut BufReader<File>) -> Result<Layout, InputError> {
@@ -604,10 +606,15 @@ fn message_key(
         topic: TopicRank::of(&channel.topic),
         index_in_file,
     };
-    if key.topic == TopicRank::Known(Topic::Section) {
-        layout.sections.push(key);
-        layout.sections.sort();
-        layout.sections.truncate(2);
+    let first_two = match key.topic {
+        TopicRank::Known(Topic::Section) => Some(&mut layout.sections),
+        TopicRank::Known(Topic::Line) => Some(&mut layout.lines),
+        _ => None,
+    };
+    if let Some(keys) = first_two {
+        keys.push(key);
+        keys.sort();
+        keys.truncate(2);
     }
     Ok(key)
 }

@@ -34,9 +34,10 @@ use std::path::Path;
 use crate::decode::{self, Decoder};
 use crate::error::{InputError, MessageLocation};
 use crate::event::{Event, EventKind, Section};
+use crate::line::{self, Line};
 use crate::topic::Topic;
-use crate::wire::{MeasurementMsg, PassageMsg, PulseMsg, SectionMsg, WeatherMsg};
-use layout::TopicRank;
+use crate::wire::{LineMsg, MeasurementMsg, PassageMsg, PulseMsg, SectionMsg, WeatherMsg};
+use layout::{ReplayKey, TopicRank};
 pub use layout::{MAX_CHUNK_BYTES, MAX_MESSAGE_BYTES};
 use replay::{PendingMessage, ReplayQueue};
 
@@ -71,6 +72,8 @@ pub struct RecordingReader {
     /// The `/section` message as written (g, rail names).
     section_msg: SectionMsg,
     section_log_time_ns: u64,
+    /// The `/line` (line.md), if the recording is a line.
+    line: Option<Line>,
     unknown_topic_messages: u64,
     layout: LayoutSummary,
     finished: bool,
@@ -123,7 +126,8 @@ impl RecordingReader {
         let Some(first) = queue.next_message()? else {
             return Err(no_section());
         };
-        let at_first = |message: String| InputError::at(path, queue.location(&first), message);
+        let first_location = queue.location(&first);
+        let at_first = |message: String| InputError::at(path, first_location.clone(), message);
         if first.key != first_section {
             return Err(at_first(format!(
                 "log_time {} ns is earlier than the /section message's ({} ns); \
@@ -150,6 +154,13 @@ impl RecordingReader {
             ));
         }
         let section = decode::section(&msg).map_err(|e| at_first(e.message))?;
+        let line = read_line(
+            path,
+            &mut queue,
+            &layout.lines,
+            &section,
+            first.key.log_time_ns,
+        )?;
         let origin_ns = match ctx.origin_ns {
             Some(origin_ns) => origin_ns,
             None => i64::try_from(first.key.log_time_ns).map_err(|_| {
@@ -161,6 +172,7 @@ impl RecordingReader {
             decoder: Decoder::new(section, origin_ns, ctx.occupied_until_s),
             section_msg: msg,
             section_log_time_ns: first.key.log_time_ns,
+            line,
             unknown_topic_messages: 0,
             layout: summary,
             finished: false,
@@ -176,6 +188,11 @@ impl RecordingReader {
     /// How the file holds its messages.
     pub fn layout(&self) -> LayoutSummary {
         self.layout
+    }
+
+    /// The recording's `/line` (line.md); `None` for a section.
+    pub fn line(&self) -> Option<&Line> {
+        self.line.as_ref()
     }
 
     /// The `/section` message as it is on the wire (grams, rail names).
@@ -259,6 +276,10 @@ impl RecordingReader {
                 self.section_log_time_ns
             )
             .into()),
+            // The one `/line` was read with the section (`read_line`).
+            Topic::Line => Err("a second /line message; a recording has at most one"
+                .to_string()
+                .into()),
             Topic::Passage => decode::parse::<PassageMsg>(data).and_then(|msg| {
                 let wire = keep(Wire::Passage(msg.clone()));
                 decoder
@@ -293,6 +314,67 @@ impl RecordingReader {
             wire,
         )))
     }
+}
+
+/// The `/line` message (line.md) of a recording whose `/section` was just
+/// read at `section_log_time_ns`, checked against it: at the section's
+/// log_time (so the next message in replay order), at most one.
+fn read_line(
+    path: &Path,
+    queue: &mut ReplayQueue,
+    lines: &[ReplayKey],
+    section: &Section,
+    section_log_time_ns: u64,
+) -> Result<Option<Line>, InputError> {
+    let Some(&first) = lines.first() else {
+        return Ok(None);
+    };
+    let at = |key: &ReplayKey, message: String| {
+        InputError::at(
+            path,
+            MessageLocation {
+                topic: Topic::Line.name().to_string(),
+                log_time_ns: key.log_time_ns,
+                index_in_file: key.index_in_file,
+            },
+            message,
+        )
+    };
+    if first.log_time_ns != section_log_time_ns {
+        return Err(at(
+            &first,
+            format!(
+                "the /line message is not at the /section's log_time ({section_log_time_ns} ns); \
+                 a line is given with its section"
+            ),
+        ));
+    }
+    if let Some(second) = lines.get(1) {
+        return Err(at(
+            second,
+            format!(
+                "a second /line message (the first is message {}); a recording has at most one",
+                first.index_in_file
+            ),
+        ));
+    }
+    let Some(message) = queue.next_message()? else {
+        return Err(at(
+            &first,
+            "the /line message could not be read".to_string(),
+        ));
+    };
+    if message.key != first {
+        return Err(at(
+            &first,
+            "the /line message is not next after the /section in replay order".to_string(),
+        ));
+    }
+    queue.check_json(&message)?;
+    let msg: LineMsg = decode::parse(message.data.as_slice()).map_err(|e| at(&first, e.message))?;
+    line::decode(&msg, section)
+        .map(Some)
+        .map_err(|e| at(&first, e.message))
 }
 
 /// A batch of [`read_ahead`] is handed over once its events weigh this
