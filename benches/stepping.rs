@@ -66,6 +66,7 @@ fn events(rails: usize) -> Vec<Event> {
                     };
                     rails
                 ],
+                segments: Vec::new(),
             })
             .collect();
         let passage = Event {

@@ -121,6 +121,7 @@ fn train(t_s: u64, rails: usize, speed_mps: f64, bogies: &[BogiePosition]) -> Ev
                         };
                         rails
                     ],
+                    segments: Vec::new(),
                 })
                 .collect(),
         }),

@@ -129,6 +129,7 @@ fn events_on(trains: &[TrainSpec], length_m: f64) -> Vec<Event> {
                     };
                     2
                 ],
+                segments: Vec::new(),
             })
             .collect();
         let last = axles.last().map_or(0.0, |a| a.offset_m);

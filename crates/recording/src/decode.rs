@@ -17,12 +17,16 @@ use std::collections::HashMap;
 use serde_json::Value;
 
 use crate::event::{
-    Applicator, Axle, AxleRef, Creepage, Measured, Measurement, Passage, Pulse, Quantity, Section,
-    Site, Weather,
+    Applicator, Axle, AxleRef, AxleSegment, Creepage, Measured, Measurement, Passage, Pulse,
+    Quantity, Section, Site, Weather,
 };
 use crate::limits::{self, Range};
+use crate::line::Line;
 use crate::wire::json::FromJson;
-use crate::wire::{MeasurementMsg, PassageMsg, PerRail, PulseMsg, SectionMsg, WeatherMsg};
+use crate::wire::{
+    AxleSegmentMsg, CreepageMsg, MeasurementMsg, PassageMsg, PerRail, PulseMsg, SectionMsg,
+    WeatherMsg,
+};
 
 /// Why a message breaks the format: a sentence, and the field it is about
 /// (its path in the message, e.g. `axles[3].offset_m`; `log_time` for the
@@ -203,6 +207,95 @@ fn resolve_rail(rails: &[String], name: &str, field: &str) -> Result<usize, Deco
             ),
         )
     })
+}
+
+/// An axle's wheel loads (`name`: the map's field path), kN -> N.
+fn wheel_loads_n(
+    map: &PerRail<f64>,
+    rails: &[String],
+    name: &dyn Fn() -> String,
+) -> Result<Vec<f64>, DecodeError> {
+    per_rail(map, rails, name, |kn, rail| {
+        let name = || format!("{}.{rail}", name());
+        Ok(within(&limits::WHEEL_LOAD_KN, name, positive(name, kn)?)? * 1e3)
+    })
+}
+
+/// An axle's creepages (`name`: the map's field path).
+fn creepages(
+    map: &PerRail<CreepageMsg>,
+    rails: &[String],
+    name: &dyn Fn() -> String,
+) -> Result<Vec<Creepage>, DecodeError> {
+    per_rail(map, rails, name, |c, rail| {
+        let name = |what: &str| format!("{}.{rail}.{what}", name());
+        Ok(Creepage {
+            cx: within(&limits::CREEPAGE, || name("cx"), c.cx)?,
+            cy: within(&limits::CREEPAGE, || name("cy"), c.cy)?,
+            spin_per_m: within(&limits::SPIN_PER_M, || name("spin_per_m"), c.spin_per_m)?,
+        })
+    })
+}
+
+/// Axle `i`'s field `segments` on `line` (line.md): per segment id, a
+/// load, a creepage or both, each complete per rail; an entry with neither
+/// and an unknown segment id are input errors.
+fn axle_segments(
+    value: &Value,
+    line: &Line,
+    rails: &[String],
+    i: usize,
+) -> Result<Vec<AxleSegment>, DecodeError> {
+    let entries: PerRail<AxleSegmentMsg> =
+        serde_path_to_error::deserialize(value).map_err(|e| {
+            let path = e.path().to_string();
+            let field = if path == "." {
+                format!("axles[{i}].segments")
+            } else {
+                format!("axles[{i}].segments.{path}")
+            };
+            DecodeError::at(field.clone(), format!("field `{field}`: {}", e.inner()))
+        })?;
+    let mut segments: Vec<AxleSegment> = Vec::with_capacity(entries.0.len());
+    for (id, entry) in &entries.0 {
+        let field = || format!("axles[{i}].segments.{id}");
+        let Some(segment) = line.segment(id) else {
+            return Err(DecodeError::at(
+                field(),
+                format!(
+                    "`{}` names segment `{id}`, which the line does not have",
+                    field()
+                ),
+            ));
+        };
+        if segments.iter().any(|s| s.segment == segment) {
+            return Err(DecodeError::at(
+                field(),
+                format!("`axles[{i}].segments` names segment `{id}` twice"),
+            ));
+        }
+        if entry.wheel_load_kn.is_none() && entry.creepage.is_none() {
+            return Err(DecodeError::at(
+                field(),
+                format!("`{}` gives neither wheel_load_kN nor creepage", field()),
+            ));
+        }
+        segments.push(AxleSegment {
+            segment,
+            wheel_load_n: entry
+                .wheel_load_kn
+                .as_ref()
+                .map(|m| wheel_loads_n(m, rails, &|| format!("{}.wheel_load_kN", field())))
+                .transpose()?,
+            creepage: entry
+                .creepage
+                .as_ref()
+                .map(|m| creepages(m, rails, &|| format!("{}.creepage", field())))
+                .transpose()?,
+        });
+    }
+    segments.sort_by_key(|s| s.segment);
+    Ok(segments)
 }
 
 /// A per-rail map as one value per rail of the section, in rail order, each
@@ -429,6 +522,8 @@ struct TrainSeen {
 #[derive(Debug, Clone)]
 pub(crate) struct Decoder {
     section: Section,
+    /// The section's `/line`, if the recording is a line.
+    line: Option<Line>,
     origin_ns: i64,
     trains: HashMap<String, TrainSeen>,
     /// `train_id` of the last passage, for the two-trains message.
@@ -439,9 +534,15 @@ pub(crate) struct Decoder {
 impl Decoder {
     /// `occupied_until_s`: when the last train before this recording left
     /// the section (s from `origin_ns`; `NEG_INFINITY` for none).
-    pub(crate) fn new(section: Section, origin_ns: i64, occupied_until_s: f64) -> Self {
+    pub(crate) fn new(
+        section: Section,
+        line: Option<Line>,
+        origin_ns: i64,
+        occupied_until_s: f64,
+    ) -> Self {
         Self {
             section,
+            line,
             origin_ns,
             trains: HashMap::new(),
             last_train_id: None,
@@ -451,6 +552,10 @@ impl Decoder {
 
     pub(crate) fn section(&self) -> &Section {
         &self.section
+    }
+
+    pub(crate) fn line(&self) -> Option<&Line> {
+        self.line.as_ref()
     }
 
     pub(crate) fn origin_ns(&self) -> i64 {
@@ -508,32 +613,15 @@ impl Decoder {
                     ));
                 }
             }
-            let wheel_load_n = per_rail(
-                &a.wheel_load_kn,
-                rails,
-                || format!("axles[{i}].wheel_load_kN"),
-                |kn, rail| {
-                    let name = || format!("axles[{i}].wheel_load_kN.{rail}");
-                    Ok(within(&limits::WHEEL_LOAD_KN, name, positive(name, kn)?)? * 1e3)
-                },
-            )?;
-            let creepage = per_rail(
-                &a.creepage,
-                rails,
-                || format!("axles[{i}].creepage"),
-                |c, rail| {
-                    let name = |what: &str| format!("axles[{i}].creepage.{rail}.{what}");
-                    Ok(Creepage {
-                        cx: within(&limits::CREEPAGE, || name("cx"), c.cx)?,
-                        cy: within(&limits::CREEPAGE, || name("cy"), c.cy)?,
-                        spin_per_m: within(
-                            &limits::SPIN_PER_M,
-                            || name("spin_per_m"),
-                            c.spin_per_m,
-                        )?,
-                    })
-                },
-            )?;
+            let wheel_load_n = wheel_loads_n(&a.wheel_load_kn, rails, &|| {
+                format!("axles[{i}].wheel_load_kN")
+            })?;
+            let creepage = creepages(&a.creepage, rails, &|| format!("axles[{i}].creepage"))?;
+            // Without a line the field is unknown and ignored (line.md).
+            let segments = match (&self.line, &a.segments) {
+                (Some(line), Some(value)) => axle_segments(value, line, rails, i)?,
+                _ => Vec::new(),
+            };
             axles.push(Axle {
                 offset_m,
                 bogie_position: a.bogie_position,
@@ -547,6 +635,7 @@ impl Decoder {
                 )?,
                 wheel_load_n,
                 creepage,
+                segments,
             });
         }
 

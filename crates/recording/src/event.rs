@@ -67,6 +67,22 @@ pub struct Axle {
     pub wheel_load_n: Vec<f64>,
     /// Creepages per rail index.
     pub creepage: Vec<Creepage>,
+    /// On a line (line.md): where the load or the creepage differs from
+    /// the axle's own, by segment (sorted by segment index). Empty on a
+    /// section.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub segments: Vec<AxleSegment>,
+}
+
+/// An axle's load or creepage in one segment of a line, in place of its
+/// own there (`None`: the axle's own).
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct AxleSegment {
+    /// An index into the line's segments.
+    pub segment: usize,
+    /// Per rail index, in N.
+    pub wheel_load_n: Option<Vec<f64>>,
+    pub creepage: Option<Vec<Creepage>>,
 }
 
 /// A `/train/passage` message.

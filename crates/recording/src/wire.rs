@@ -139,6 +139,27 @@ pub struct AxleMsg {
     #[serde(rename = "wheel_load_kN")]
     pub wheel_load_kn: PerRail<f64>,
     pub creepage: PerRail<CreepageMsg>,
+    /// On a line (line.md): the segments where the axle's load or creepage
+    /// differs from its own, by segment id. Kept as JSON: without `/line`
+    /// it is an unknown extra field, ignored unchecked; with one the reader
+    /// reads it as [`AxleSegmentMsg`]s.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub segments: Option<serde_json::Value>,
+}
+
+/// An axle's load or creepage (or both) in one segment of a line, each
+/// complete per rail like the axle's own.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(expecting = "a JSON object")]
+pub struct AxleSegmentMsg {
+    #[serde(
+        rename = "wheel_load_kN",
+        default,
+        skip_serializing_if = "Option::is_none"
+    )]
+    pub wheel_load_kn: Option<PerRail<f64>>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub creepage: Option<PerRail<CreepageMsg>>,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -314,6 +335,7 @@ pub(crate) mod json {
         super::SiteMsg,
         super::PassageMsg,
         super::AxleMsg,
+        super::AxleSegmentMsg,
         super::CreepageMsg,
         super::PulseMsg,
         super::MeasurementMsg,

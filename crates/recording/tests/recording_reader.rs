@@ -1146,3 +1146,71 @@ fn a_line_needs_a_section_of_two_rails() {
     });
     expect_error(&msgs, 1, &["exactly two rails"]);
 }
+
+/// The passage F-1 (message 3 once the `/line` is message 1) with
+/// `segments` on its leading axle.
+fn with_axle_segments(line: bool, segments: Value) -> Vec<Msg> {
+    let msgs = if line { with_line(1, T0) } else { base() };
+    let at = if line { 3 } else { 2 };
+    with(msgs, at, |p| p["axles"][0]["segments"] = segments)
+}
+
+fn passage_axles(events: &[Event]) -> Vec<tortwin_recording::Axle> {
+    match events.iter().find_map(|e| match &e.kind {
+        EventKind::Passage(p) => Some(p.axles.clone()),
+        _ => None,
+    }) {
+        Some(axles) => axles,
+        None => panic!("no passage"),
+    }
+}
+
+#[test]
+fn an_axle_s_segments_replace_its_load_or_creepage_there() {
+    let segments = json!({
+        "C1": {"wheel_load_kN": {"right": 120.0, "left": 80.0}},
+        "T0": {"creepage": {"left": {"cx": 0.0, "cy": 0.0, "spin_per_m": 0.0},
+                            "right": {"cx": 0.0, "cy": 0.001, "spin_per_m": 0.0}}}
+    });
+    let (_, events) = read_msgs(&with_axle_segments(true, segments), Layout::OneChunk).unwrap();
+    let axles = passage_axles(&events);
+    let s = &axles[0].segments;
+    // Sorted by segment: T0 (0) before C1 (2); kN -> N per rail index.
+    assert_eq!(s.iter().map(|s| s.segment).collect::<Vec<_>>(), [0, 2]);
+    assert_eq!(s[1].wheel_load_n, Some(vec![80e3, 120e3]));
+    assert!(s[1].creepage.is_none() && s[0].wheel_load_n.is_none());
+    assert_eq!(s[0].creepage.as_ref().map(|c| c[1].cy), Some(0.001));
+    assert!(axles[1].segments.is_empty());
+}
+
+#[test]
+fn without_a_line_an_axle_s_segments_are_an_unknown_field() {
+    for segments in [json!({"nowhere": {}}), json!(7)] {
+        let (_, events) =
+            read_msgs(&with_axle_segments(false, segments), Layout::OneChunk).unwrap();
+        assert!(passage_axles(&events)[0].segments.is_empty());
+    }
+}
+
+#[test]
+fn an_axle_s_segments_that_break_line_md_are_refused_naming_the_field() {
+    let cases: [(Value, &[&str]); 5] = [
+        (
+            json!({"C9": {"wheel_load_kN": {"left": 80.0, "right": 80.0}}}),
+            &["axles[0].segments.C9", "does not have"],
+        ),
+        (json!({"C1": {}}), &["axles[0].segments.C1", "neither"]),
+        (
+            json!({"C1": {"wheel_load_kN": {"left": 80.0}}}),
+            &["axles[0].segments.C1.wheel_load_kN", "lacks rail `right`"],
+        ),
+        (
+            json!({"C1": {"wheel_load_kN": {"left": 80.0, "right": -1.0}}}),
+            &["axles[0].segments.C1.wheel_load_kN.right"],
+        ),
+        (json!({"C1": {"creepage": 3}}), &["axles[0].segments"]),
+    ];
+    for (segments, needles) in cases {
+        expect_error(&with_axle_segments(true, segments), 3, needles);
+    }
+}

@@ -130,6 +130,7 @@ impl WaysideScenario {
                             cy: self.cy,
                             spin_per_m: 0.0,
                         }],
+                        segments: Vec::new(),
                     }],
                 }),
             })

@@ -260,6 +260,7 @@ impl<'p> Planner<'p> {
                     wheel_diameter_m,
                     wheel_load_n,
                     creepage: creepage[..rails.min(2)].to_vec(),
+                    segments: Vec::new(),
                 });
             }
             front_m += vehicle.length_m;

@@ -169,6 +169,7 @@ pub(super) fn passage_msg(train: &TrainPlan, rails: &[String]) -> PassageMsg {
                         }))
                         .collect(),
                 ),
+                segments: None,
             })
             .collect(),
     }

@@ -72,8 +72,6 @@ pub struct RecordingReader {
     /// The `/section` message as written (g, rail names).
     section_msg: SectionMsg,
     section_log_time_ns: u64,
-    /// The `/line` (line.md), if the recording is a line.
-    line: Option<Line>,
     unknown_topic_messages: u64,
     layout: LayoutSummary,
     finished: bool,
@@ -169,10 +167,9 @@ impl RecordingReader {
         };
         Ok(Self {
             queue,
-            decoder: Decoder::new(section, origin_ns, ctx.occupied_until_s),
+            decoder: Decoder::new(section, line, origin_ns, ctx.occupied_until_s),
             section_msg: msg,
             section_log_time_ns: first.key.log_time_ns,
-            line,
             unknown_topic_messages: 0,
             layout: summary,
             finished: false,
@@ -192,7 +189,7 @@ impl RecordingReader {
 
     /// The recording's `/line` (line.md); `None` for a section.
     pub fn line(&self) -> Option<&Line> {
-        self.line.as_ref()
+        self.decoder.line()
     }
 
     /// The `/section` message as it is on the wire (grams, rail names).

@@ -89,7 +89,7 @@ pub fn import_dir(dir: &Path, out: &Path) -> Result<ImportSummary, ConvertError>
     // Every rule a replay checks, in replay order, located in the tables.
     let typed = decode::section(&section.msg).map_err(|e| section.error(&section_path, &e))?;
     let origin_ns = i64::try_from(section_ns).unwrap_or(i64::MAX);
-    let mut decoder = Decoder::new(typed, origin_ns, f64::NEG_INFINITY);
+    let mut decoder = Decoder::new(typed, None, origin_ns, f64::NEG_INFINITY);
     for item in &items {
         let result = match &item.msg {
             Msg::Passage(m) => decoder.passage(m.clone(), item.log_time_ns).map(drop),
@@ -564,6 +564,7 @@ fn read_passages(path: &Path, rails: &[String], items: &mut Vec<Item>) -> Result
             wheel_diameter_m: table.number(&row, "wheel_diameter_m")?,
             wheel_load_kn,
             creepage,
+            segments: None,
         };
         match &mut open {
             Some((msg, t, lines)) if msg.train_id == train_id => {
