@@ -6,9 +6,10 @@
 //! UTC date) to the next day's first passage, so that no train is in the
 //! section at a cut; the first day also holds what comes before its first
 //! train. Each day's file opens with the `/section` message, logged at the
-//! day's first passage (the first day's at its own log_time). Merging is
-//! the inverse: the first recording's `/section`, then every other message
-//! of every recording; each later `/section` must be the first one's.
+//! day's first passage (the first day's at its own log_time), and on a
+//! line its `/line` at the same time. Merging is the inverse: the first
+//! recording's `/section` (and `/line`), then every other message of every
+//! recording; each later `/section` and `/line` must be the first one's.
 //!
 //! The outputs are written under temporary names and moved into place
 //! whole: all the days of a cut appear together, or none.
@@ -24,7 +25,7 @@ use crate::decode;
 use crate::error::{ConvertError, InputError, MessageLocation, WriteError};
 use crate::reader::{RawMessage, RawMessages};
 use crate::topic::Topic;
-use crate::wire::SectionMsg;
+use crate::wire::{LineMsg, SectionMsg};
 use crate::writer::RecordingWriter;
 
 /// One service day of a cut.
@@ -44,10 +45,15 @@ pub fn split_by_day(input: &Path, folder: &Path) -> Result<Vec<Day>, ConvertErro
     let starts = first_passages(input)?;
     let staged = tortwin_files::StagedFolder::beside(folder)?;
     let mut raw = RawMessages::open(input)?;
-    let section = opening_section(input, &mut raw)?;
+    let Opening {
+        section,
+        line,
+        next,
+    } = opening(input, &mut raw)?;
     let mut days: Vec<Day> = Vec::with_capacity(starts.len());
     let mut out: Option<Output> = None;
-    while let Some(m) = raw.next().transpose()? {
+    for m in next.map(Ok).into_iter().chain(raw) {
+        let m = m?;
         // The day of a message: the last whose first passage is not later.
         let k = starts
             .partition_point(|(_, start)| *start <= m.log_time_ns)
@@ -59,7 +65,11 @@ pub fn split_by_day(input: &Path, folder: &Path) -> Result<Vec<Day>, ConvertErro
             let (date, start) = &starts[k];
             let path = staged.path().join(format!("{date}.mcap"));
             let mut o = Output::create(path, k, date.clone())?;
-            o.copy(&section, (k > 0).then_some(*start))?;
+            let at = (k > 0).then_some(*start);
+            o.copy(&section, at)?;
+            if let Some(line) = &line {
+                o.copy(line, at)?;
+            }
             out = Some(o);
         }
         if let Some(o) = out.as_mut() {
@@ -81,18 +91,31 @@ pub fn split_by_day(input: &Path, folder: &Path) -> Result<Vec<Day>, ConvertErro
 pub fn merge(inputs: &[PathBuf], out: &Path) -> Result<u64, ConvertError> {
     let mut temp = tortwin_files::PartialFile::beside(out)?;
     let mut o = Output::create(temp.temp_path().to_path_buf(), 0, String::new())?;
-    let mut first: Option<(PathBuf, SectionMsg)> = None;
+    let mut first: Option<(PathBuf, SectionMsg, Option<LineMsg>)> = None;
     for input in inputs {
         let mut raw = RawMessages::open(input)?;
-        let section = opening_section(input, &mut raw)?;
+        let Opening {
+            section,
+            line,
+            next,
+        } = opening(input, &mut raw)?;
         let msg: SectionMsg = decode::parse(&section.data)
             .map_err(|e| InputError::at(input, location(&section), e.message))?;
+        let line_msg: Option<LineMsg> = line
+            .as_ref()
+            .map(|l| {
+                decode::parse(&l.data).map_err(|e| InputError::at(input, location(l), e.message))
+            })
+            .transpose()?;
         match &first {
             None => {
                 o.copy(&section, None)?;
-                first = Some((input.clone(), msg));
+                if let Some(line) = &line {
+                    o.copy(line, None)?;
+                }
+                first = Some((input.clone(), msg, line_msg));
             }
-            Some((path, known)) if *known != msg => {
+            Some((path, known, _)) if *known != msg => {
                 return Err(InputError::at(
                     input,
                     location(&section),
@@ -104,10 +127,22 @@ pub fn merge(inputs: &[PathBuf], out: &Path) -> Result<u64, ConvertError> {
                 )
                 .into());
             }
+            Some((path, _, known)) if *known != line_msg => {
+                let at = line.as_ref().unwrap_or(&section);
+                return Err(InputError::at(
+                    input,
+                    location(at),
+                    format!(
+                        "its /line is not the one of {}: only days of one line can be merged",
+                        path.display()
+                    ),
+                )
+                .into());
+            }
             Some(_) => {}
         }
-        while let Some(m) = raw.next().transpose()? {
-            o.copy(&m, None)?;
+        for m in next.map(Ok).into_iter().chain(raw) {
+            o.copy(&m?, None)?;
         }
     }
     let messages = o.finish()?.messages;
@@ -118,9 +153,10 @@ pub fn merge(inputs: &[PathBuf], out: &Path) -> Result<u64, ConvertError> {
 /// The UTC date and log_time of each day's first passage, in time order.
 fn first_passages(input: &Path) -> Result<Vec<(String, u64)>, ConvertError> {
     let mut raw = RawMessages::open(input)?;
-    opening_section(input, &mut raw)?;
+    let next = opening(input, &mut raw)?.next;
     let mut starts: Vec<(String, u64)> = Vec::new();
-    while let Some(m) = raw.next().transpose()? {
+    for m in next.map(Ok).into_iter().chain(raw) {
+        let m = m?;
         if m.topic == Topic::Passage.name() {
             let date = utc_date(m.log_time_ns);
             if starts.last().is_none_or(|(d, _)| *d != date) {
@@ -134,18 +170,47 @@ fn first_passages(input: &Path) -> Result<Vec<(String, u64)>, ConvertError> {
     Ok(starts)
 }
 
-/// The first message, which must be the `/section`.
-fn opening_section(input: &Path, raw: &mut RawMessages) -> Result<RawMessage, ConvertError> {
-    match raw.next().transpose()? {
-        Some(m) if m.topic == Topic::Section.name() => Ok(m),
-        Some(m) => Err(InputError::at(
-            input,
-            location(&m),
-            "the first message in replay order is not the /section message".to_string(),
-        )
-        .into()),
-        None => Err(InputError::file(input, "the recording has no /section message").into()),
-    }
+/// A recording's opening: its `/section` and, on a line (line.md), its
+/// `/line`; with the message after them when it was read to find out.
+struct Opening {
+    section: RawMessage,
+    line: Option<RawMessage>,
+    next: Option<RawMessage>,
+}
+
+/// The first message, which must be the `/section`, and the `/line` if
+/// the next message is one at the section's log_time (one anywhere else
+/// is an ordinary message here, which the reader refuses).
+fn opening(input: &Path, raw: &mut RawMessages) -> Result<Opening, ConvertError> {
+    let section = match raw.next().transpose()? {
+        Some(m) if m.topic == Topic::Section.name() => m,
+        Some(m) => {
+            return Err(InputError::at(
+                input,
+                location(&m),
+                "the first message in replay order is not the /section message".to_string(),
+            )
+            .into())
+        }
+        None => {
+            return Err(InputError::file(input, "the recording has no /section message").into())
+        }
+    };
+    let next = raw.next().transpose()?;
+    let is_line =
+        |m: &RawMessage| m.topic == Topic::Line.name() && m.log_time_ns == section.log_time_ns;
+    Ok(match next {
+        Some(m) if is_line(&m) => Opening {
+            section,
+            line: Some(m),
+            next: None,
+        },
+        next => Opening {
+            section,
+            line: None,
+            next,
+        },
+    })
 }
 
 fn location(m: &RawMessage) -> MessageLocation {

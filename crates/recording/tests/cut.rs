@@ -170,3 +170,53 @@ fn a_recording_without_a_train_cannot_be_cut() {
             || std::fs::read_dir(dir.path().join("days")).unwrap().count() == 0
     );
 }
+
+/// The two-day reference recording as a line: a `/line` (a curve between
+/// two tangents, `high` outer) written right after its `/section`, at its
+/// log_time, with `line_id` as given.
+fn two_days_as_a_line(path: &Path, line_id: &str) {
+    let mut msgs = read_messages(&two_days());
+    let at = msgs.iter().position(|m| m.topic == "/section").unwrap();
+    let line = serde_json::json!({
+        "line_id": line_id,
+        "segments": [
+            {"id": "T0", "type": "tangent", "end_m": 100.0},
+            {"id": "C1", "type": "curve", "end_m": 500.0, "high_rail": "high", "radius_m": 400.0},
+            {"id": "T1", "type": "tangent", "end_m": 600.0}
+        ]
+    });
+    let section_time = msgs[at].log_time;
+    msgs.insert(at + 1, recording::msg("/line", section_time, line));
+    write_recording(path, &msgs, Layout::OneChunk);
+}
+
+#[test]
+fn a_line_s_days_each_open_with_its_section_and_line_and_merge_back() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("line.mcap");
+    two_days_as_a_line(&input, "a");
+    let days = split_by_day(&input, &dir.path().join("days")).expect("the line is cut");
+    assert_eq!(days.len(), 2);
+    for day in &days {
+        let messages = read_messages(&day.path);
+        assert_eq!(messages[0].topic, "/section");
+        assert_eq!(messages[1].topic, "/line");
+        assert_eq!(messages[1].log_time, messages[0].log_time);
+        assert_eq!(messages.iter().filter(|m| m.topic == "/line").count(), 1);
+        let reader = RecordingReader::open(&day.path, ReaderContext::default()).unwrap();
+        assert_eq!(reader.line().map(|l| l.segments.len()), Some(3));
+    }
+    let merged = dir.path().join("merged.mcap");
+    let paths: Vec<PathBuf> = days.iter().map(|d| d.path.clone()).collect();
+    merge(&paths, &merged).expect("the days merge");
+    assert_eq!(contents(&merged), contents(&input));
+    assert_eq!(events(&merged), events(&input));
+
+    // A day of another line (or of the section without its line) is not merged.
+    let other = dir.path().join("other.mcap");
+    two_days_as_a_line(&other, "b");
+    let err = merge(&[input.clone(), other], &dir.path().join("no.mcap")).expect_err("two lines");
+    assert!(err.to_string().contains("/line"), "{err}");
+    let err = merge(&[input, two_days()], &dir.path().join("no.mcap")).expect_err("line, section");
+    assert!(err.to_string().contains("/line"), "{err}");
+}
