@@ -17,6 +17,7 @@
 
 pub mod readout;
 mod roll;
+pub mod rows;
 pub mod sink;
 mod sink_thread;
 mod state;
