@@ -15,6 +15,7 @@
 //! Everything that simulates (replay, paper scenarios, synthetic truth runs,
 //! fits, strategies) drives this one engine with [`Engine::push`].
 
+pub mod line;
 pub mod readout;
 mod roll;
 pub mod rows;
@@ -262,6 +263,10 @@ struct TrainRecord {
     site_at: Vec<(f64, Weather)>,
     /// With tangents: the tangents of `site_mass_kg` (else empty).
     site_tan: Vec<Tangent>,
+    /// On a line: every wheel per segment, [(axle * rails + rail) *
+    /// segments + segment], its load and creepage there (line.md, the
+    /// axle field `segments`); empty on a section.
+    seg_wheels: Vec<WheelOnRail>,
 }
 
 /// An event inside a train's occupation, waiting for the train to be rolled.
@@ -330,8 +335,11 @@ pub struct Engine {
     rail_tracks: Vec<[usize; 2]>,
     /// Per rail: the track a tribometer reads (the top band).
     reading_track: Vec<usize>,
-    /// Per rail: the tracks a pulse lands on.
-    pulse_tracks: Vec<Vec<usize>>,
+    /// Per applicator and rail: the tracks its pulse lands on, in equal
+    /// shares.
+    pulse_tracks: Vec<Vec<Vec<usize>>>,
+    /// On a line (line.md): its layout on the grid; `None` on a section.
+    line: Option<line::LineLayout>,
     applicator_points: Vec<usize>,
     site_points: Vec<usize>,
     /// Per track, per point: the applicator a wheel passes there, or NO_APPLICATOR.
@@ -385,6 +393,20 @@ impl Engine {
     /// A fresh section: clean rails, no weather yet, time origin `origin_ns`
     /// (the log_time of the first recording's `/section`).
     pub fn new(section: Section, cfg: ModelConfig, opts: EngineOptions, origin_ns: i64) -> Self {
+        Self::on_line(section, None, cfg, opts, origin_ns)
+    }
+
+    /// A fresh line (line.md) when `line` is given, else [`Engine::new`]'s
+    /// section. A line's tracks are its rails' crown and gauge corner
+    /// (bands `C` and `G`, in that order per rail); its configuration must
+    /// switch no effect on ([`line::check_config`]).
+    pub fn on_line(
+        section: Section,
+        line: Option<tortwin_recording::line::Line>,
+        cfg: ModelConfig,
+        opts: EngineOptions,
+        origin_ns: i64,
+    ) -> Self {
         let grid = Grid::new(section.length_m, section.nominal_wheel_diameter_m);
         let points = grid.d_m.len();
 
@@ -392,34 +414,31 @@ impl Engine {
         let mut track_info = Vec::new();
         let mut rail_tracks = Vec::new();
         let mut reading_track = Vec::new();
-        let mut pulse_tracks = Vec::new();
+        let mut rail_pulse_tracks = Vec::new();
         for (rail, name) in section.rails.iter().enumerate() {
-            if bands && name == "high" {
-                let gauge = track_info.len();
+            let mut track = |band: &str| {
                 track_info.push(TrackInfo {
                     rail,
                     rail_name: name.clone(),
-                    band: "gauge_corner".into(),
+                    band: band.into(),
                 });
-                let top = track_info.len();
-                track_info.push(TrackInfo {
-                    rail,
-                    rail_name: name.clone(),
-                    band: "top".into(),
-                });
+                track_info.len() - 1
+            };
+            if line.is_some() {
+                let (crown, gauge) = (track(line::CROWN), track(line::GAUGE_CORNER));
+                rail_tracks.push([crown, crown]);
+                reading_track.push(crown);
+                rail_pulse_tracks.push(vec![crown, gauge]);
+            } else if bands && name == "high" {
+                let (gauge, top) = (track("gauge_corner"), track("top"));
                 rail_tracks.push([gauge, top]);
                 reading_track.push(top);
-                pulse_tracks.push(vec![gauge, top]);
+                rail_pulse_tracks.push(vec![gauge, top]);
             } else {
-                let t = track_info.len();
-                track_info.push(TrackInfo {
-                    rail,
-                    rail_name: name.clone(),
-                    band: "top".into(),
-                });
+                let t = track("top");
                 rail_tracks.push([t, t]);
                 reading_track.push(t);
-                pulse_tracks.push(vec![t]);
+                rail_pulse_tracks.push(vec![t]);
             }
         }
 
@@ -433,10 +452,20 @@ impl Engine {
             .iter()
             .map(|s| grid.snap(s.position_m))
             .collect();
+        let line = line.map(|line| line::LineLayout::new(line, &grid, section.rails.len()));
+        let pulse_tracks: Vec<Vec<Vec<usize>>> = applicator_points
+            .iter()
+            .map(|&p| match &line {
+                Some(layout) => layout.pulse_tracks(&grid, p, section.rails.len()),
+                None => rail_pulse_tracks.clone(),
+            })
+            .collect();
         let mut applicator_at = vec![vec![NO_APPLICATOR; points]; track_info.len()];
         for (a, app) in section.applicators.iter().enumerate() {
             for &rail in &app.rails {
-                for &track in &pulse_tracks[rail] {
+                // A wheel passes the applicator on whatever band it runs:
+                // on a line, every track of the rail.
+                for &track in &rail_pulse_tracks[rail] {
                     let slot = &mut applicator_at[track][applicator_points[a]];
                     // Of several applicators at one point, the first listed counts.
                     if *slot == NO_APPLICATOR {
@@ -497,6 +526,7 @@ impl Engine {
             rail_tracks,
             reading_track,
             pulse_tracks,
+            line,
             applicator_points,
             site_points,
             applicator_at,
@@ -663,9 +693,10 @@ impl Engine {
         let time_s = self.time_s(event.log_time_ns);
         match &event.kind {
             EventKind::Pulse(pulse) => {
-                for k in 0..self.pulse_tracks[pulse.rail].len() {
-                    let track = self.pulse_tracks[pulse.rail][k];
-                    let share = pulse.mass_kg / self.pulse_tracks[pulse.rail].len() as f64;
+                let tracks = self.pulse_tracks[pulse.applicator][pulse.rail].len();
+                for k in 0..tracks {
+                    let track = self.pulse_tracks[pulse.applicator][pulse.rail][k];
+                    let share = pulse.mass_kg / tracks as f64;
                     let point = self.applicator_points[pulse.applicator];
                     let weather = self.weather;
                     let (ctx, states, works) = self.split();
@@ -804,6 +835,7 @@ impl Engine {
             site_levels: Vec::new(),
             site_at: Vec::new(),
             site_tan: Vec::new(),
+            seg_wheels: Vec::new(),
         });
         drop(passage);
         record.log_time_ns = log_time_ns;
@@ -820,22 +852,11 @@ impl Engine {
                     cy: 0.0,
                     spin_per_m: 0.0,
                 });
-                let hertz = self.hertz_shape(axle.wheel_diameter_m).contact(q_n);
-                let kalker = contact::kalker(self.cfg.contact.nu, hertz.a_m, hertz.b_m);
-                let fp_fc = product::pressure_factor(&self.cfg.product, hertz.pm_pa)
-                    * product::creepage_factor(&self.cfg.product, creepage.cx, creepage.cy);
-                let bogie = usize::from(axle.bogie_position == BogiePosition::Trailing);
-                record.wheels.push(WheelOnRail {
-                    track: self.rail_tracks[rail][bogie],
-                    q_n,
-                    hertz,
-                    kalker,
-                    creepage,
-                    fp_fc,
-                    drivers: wheel_drivers(record.passage.speed_mps, axle, rail),
-                });
+                let wheel = self.wheel_on_rail(axle, rail, q_n, creepage, record.passage.speed_mps);
+                record.wheels.push(wheel);
             }
         }
+        self.line_wheels(&mut record);
         record.site_mass_kg.clear();
         record.site_mass_kg.resize(
             record.passage.axles.len() * rails * self.section.sites.len(),
@@ -869,6 +890,32 @@ impl Engine {
         self.pending = Some(record);
         self.window.clear();
         Ok(())
+    }
+
+    /// Axle `axle`'s wheel on `rail` under load `q_n` and `creepage`:
+    /// Hertz, Kalker and eq. (2)-(3)'s `fp fc`.
+    fn wheel_on_rail(
+        &mut self,
+        axle: &Axle,
+        rail: usize,
+        q_n: f64,
+        creepage: Creepage,
+        speed_mps: f64,
+    ) -> WheelOnRail {
+        let hertz = self.hertz_shape(axle.wheel_diameter_m).contact(q_n);
+        let kalker = contact::kalker(self.cfg.contact.nu, hertz.a_m, hertz.b_m);
+        let fp_fc = product::pressure_factor(&self.cfg.product, hertz.pm_pa)
+            * product::creepage_factor(&self.cfg.product, creepage.cx, creepage.cy);
+        let bogie = usize::from(axle.bogie_position == BogiePosition::Trailing);
+        WheelOnRail {
+            track: self.rail_tracks[rail][bogie],
+            q_n,
+            hertz,
+            kalker,
+            creepage,
+            fp_fc,
+            drivers: wheel_drivers(speed_mps, axle, rail),
+        }
     }
 
     /// The Hertz shape of a wheel of this diameter on this section's rails,
@@ -907,7 +954,7 @@ impl Engine {
             match &buffered.event.kind {
                 EventKind::Weather(w) => self.timeline.push(buffered.time_s, *w),
                 EventKind::Pulse(p) => {
-                    let tracks = &self.pulse_tracks[p.rail];
+                    let tracks = &self.pulse_tracks[p.applicator][p.rail];
                     for &track in tracks {
                         let point = self.applicator_points[p.applicator];
                         self.work[track].events.push(PointEvent {
@@ -1036,7 +1083,7 @@ impl Engine {
         };
         match m.of {
             Measured::Adhesion(_) => {
-                let wheel = &record.wheels[axle.axle_index * rails + m.rail];
+                let wheel = self.wheel_at_site(record, axle.axle_index, m.rail, m.site);
                 self.adhesion(wheel, record.passage.speed_mps, mu)
             }
             _ => mu,
@@ -1048,7 +1095,7 @@ impl Engine {
         let rails = self.section.rails.len();
         let sites = self.section.sites.len();
         let k = (axle.axle_index * rails + m.rail) * sites + m.site;
-        let wheel = &record.wheels[axle.axle_index * rails + m.rail];
+        let wheel = self.wheel_at_site(record, axle.axle_index, m.rail, m.site);
         let (time_s, weather) = record.site_at[k];
         Readout {
             mass_kg: record.site_mass_kg[k],
@@ -1213,11 +1260,12 @@ impl Engine {
     /// recording of the same section.
     pub fn from_state(
         section: Section,
+        line: Option<tortwin_recording::line::Line>,
         cfg: ModelConfig,
         opts: EngineOptions,
         saved: &EngineState,
     ) -> Result<Self, state::StateError> {
-        state::restore(section, cfg, opts, saved)
+        state::restore(section, line, cfg, opts, saved)
     }
 }
 

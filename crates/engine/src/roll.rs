@@ -2,6 +2,8 @@
 //! order of model.md "One contact". This is the hot path: no allocation,
 //! everything that depends only on the wheel computed once before the loop.
 
+mod on_line;
+
 use std::sync::Arc;
 
 use super::terms::{GenericSet, When, Which};
@@ -32,6 +34,9 @@ pub(crate) struct Observed {
     pub(crate) mass_kg: Vec<f64>,
     /// The wheel's mass after the contact (after step 6), per point.
     pub(crate) wheel_mass_kg: Vec<f64>,
+    /// On a line: the axle whose contact it was, per point (`u32::MAX`
+    /// where no wheel of the train used this track there); else empty.
+    pub(crate) axle: Vec<u32>,
 }
 
 impl Observed {
@@ -39,6 +44,7 @@ impl Observed {
         Self {
             mass_kg: vec![0.0; points],
             wheel_mass_kg: vec![0.0; points],
+            axle: Vec::new(),
         }
     }
 }
@@ -47,6 +53,9 @@ impl Observed {
 #[derive(Clone)]
 struct WheelRoll {
     wheel_kg: f64,
+    /// On a line: the tread's bands F, C, G (line.md); `wheel_kg` holds the
+    /// band in contact during a contact.
+    bands: [f64; 3],
     /// The wheel_edge_reservoir effect's m_e.
     edge_kg: f64,
     /// Grid point of the applicator passed last (N = 1 there).
@@ -796,6 +805,8 @@ pub(crate) struct RollContext<'a> {
     /// Never the vector kernel ([`crate::EngineOptions::portable_kernel`]).
     portable: bool,
     origin_ns: i64,
+    /// On a line: its layout.
+    line: Option<&'a crate::line::LineLayout>,
 }
 
 /// Consecutive wheels of one track (at most [`LANES`]), rolled together.
@@ -852,6 +863,7 @@ impl Engine {
                 },
                 portable: self.opts.portable_kernel,
                 origin_ns: self.origin_ns,
+                line: self.line.as_ref(),
             },
             &mut self.tracks,
             &mut self.work,
@@ -871,6 +883,9 @@ impl Engine {
         record: &mut TrainRecord,
         sink: &mut dyn Sink,
     ) -> Result<(), EngineError> {
+        if self.line.is_some() {
+            return self.roll_train_line(record, sink);
+        }
         let rails = self.section.rails.len();
         let axles = record.passage.axles.len();
         self.last_axle.fill(usize::MAX);
@@ -1454,6 +1469,7 @@ impl RollContext<'_> {
         // no transfer.
         let st = WheelRoll {
             wheel_kg: 0.0,
+            bands: [0.0; 3],
             edge_kg: 0.0,
             applicator_point: None,
             consumed_kg: 0.0,
@@ -1748,6 +1764,12 @@ impl Engine {
         kind: SnapshotKind,
         sink: &mut dyn Sink,
     ) -> Result<(), EngineError> {
+        if self.line.is_some() {
+            for track in 0..self.tracks.len() {
+                self.emit_line_field(record, track, kind, record.end_ns, sink)?;
+            }
+            return Ok(());
+        }
         for track in 0..self.tracks.len() {
             let a = self.last_axle[track];
             // A track no wheel of this train ran on (a band only leading or

@@ -9,6 +9,7 @@ use serde::{Deserialize, Serialize};
 use super::weather::WeatherState;
 use super::{Engine, EngineOptions};
 use tortwin_model::config::{Effects, ModelConfig};
+use tortwin_recording::line::Line;
 use tortwin_recording::Section;
 
 /// Names the document kind, so that a wrong file is refused early.
@@ -44,6 +45,11 @@ pub struct EngineState {
     /// a state can be continued with other effects, but not with another
     /// band layout).
     pub effects: Effects,
+    /// On a line: its `/line` (line.md, "Outputs and state": the next
+    /// recording's segments must be the same; `line_id` and `radius_m`
+    /// may differ). Absent for a section.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub line: Option<Line>,
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -72,6 +78,8 @@ pub enum StateError {
         saved: Vec<String>,
         found: Vec<String>,
     },
+    #[error("the state was written {saved}, the recording is {found}: a state continues only the layout it was written for")]
+    Line { saved: String, found: String },
     #[error("the state is inconsistent: {0}")]
     Inconsistent(String),
 }
@@ -110,6 +118,40 @@ pub(super) fn capture(engine: &Engine) -> EngineState {
             .is_finite()
             .then_some(engine.last_event_s),
         effects: engine.cfg.effects.clone(),
+        line: engine.line.as_ref().map(|l| l.line.clone()),
+    }
+}
+
+/// A line's state continues the same segments (id, type, end, high rail,
+/// curve end); its `line_id` and `radius_m` may differ.
+fn check_line(saved: Option<&Line>, found: Option<&Line>) -> Result<(), StateError> {
+    let describe = |line: Option<&Line>| match line {
+        None => "for a section (no /line)".to_string(),
+        Some(l) => format!(
+            "for a line of segments [{}]",
+            l.segments
+                .iter()
+                .map(|s| format!("{} {:?} to {} m", s.id, s.kind, s.end_m))
+                .collect::<Vec<_>>()
+                .join(", ")
+        ),
+    };
+    let same = match (saved, found) {
+        (None, None) => true,
+        (Some(a), Some(b)) => {
+            a.segments.len() == b.segments.len()
+                && a.segments.iter().zip(&b.segments).all(|(x, y)| {
+                    x.id == y.id && x.kind == y.kind && x.end_m.to_bits() == y.end_m.to_bits()
+                })
+        }
+        _ => false,
+    };
+    match same {
+        true => Ok(()),
+        false => Err(StateError::Line {
+            saved: describe(saved),
+            found: describe(found),
+        }),
     }
 }
 
@@ -121,6 +163,7 @@ fn track_names(tracks: impl Iterator<Item = (String, String)>) -> Vec<String> {
 
 pub(super) fn restore(
     section: Section,
+    line: Option<Line>,
     cfg: ModelConfig,
     opts: EngineOptions,
     saved: &EngineState,
@@ -141,7 +184,8 @@ pub(super) fn restore(
             found: section.section_id.clone(),
         });
     }
-    let mut engine = Engine::new(section, cfg, opts, saved.origin_ns);
+    check_line(saved.line.as_ref(), line.as_ref())?;
+    let mut engine = Engine::on_line(section, line, cfg, opts, saved.origin_ns);
     let found = track_names(
         engine
             .track_info

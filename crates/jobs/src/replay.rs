@@ -215,10 +215,14 @@ fn run(
         .per_train
         .then(|| PerTrain::new(&section, &cfg, &Target::default()))
         .transpose()?;
+    let line = reader.line().cloned();
+    if line.is_some() {
+        tortwin_engine::line::check_config(&cfg, &source)?;
+    }
     let mut engine = match &start {
-        Some(s) => Engine::from_state(section, cfg, opts, s.state)
+        Some(s) => Engine::from_state(section, line, cfg, opts, s.state)
             .map_err(|e| InputError::file(Path::new(&s.name), e.to_string()))?,
-        None => Engine::new(section, cfg, opts, reader.origin_ns()),
+        None => Engine::on_line(section, line, cfg, opts, reader.origin_ns()),
     };
 
     let mcap = args
