@@ -228,7 +228,10 @@ fn run(
     let mcap = args
         .out_mcap
         .as_deref()
-        .map(|p| McapSink::for_replay(p, provenance.as_ref(), reader.message_count()))
+        .map(|p| {
+            let line = reader.line().is_some();
+            McapSink::for_replay(p, provenance.as_ref(), reader.message_count(), line)
+        })
         .transpose()?;
     let rrd = args
         .out_rrd

@@ -51,10 +51,20 @@ const MU_STOPS: [(f64, [u8; 3]); 10] = [
     (0.80, [100, 0, 30]),
 ];
 
-/// The class of `mu` (1 to [`MU_CLASSES`]); NaN falls in class 1.
+/// The class of a point no wheel of the train touched on a band (a NaN mu:
+/// on a line, a rail band the rows there do not use).
+pub const NO_CONTACT_CLASS: u16 = 0;
+
+/// The colour of [`NO_CONTACT_CLASS`]: a neutral grey, off the mu scale.
+const NO_CONTACT_COLOR: [u8; 3] = [150, 150, 150];
+
+/// The class of `mu` (1 to [`MU_CLASSES`]); NaN (no contact) is
+/// [`NO_CONTACT_CLASS`].
 pub fn mu_class(mu: f64) -> u16 {
     let k = (mu / MU_CLASS_WIDTH).floor();
-    if k.is_nan() || k < 0.0 {
+    if mu.is_nan() {
+        NO_CONTACT_CLASS
+    } else if k < 0.0 {
         1
     } else if k >= f64::from(MU_CLASSES) {
         MU_CLASSES
@@ -70,14 +80,20 @@ pub fn mu_class_range(class: u16) -> [f64; 2] {
 }
 
 /// The colour of `class` (1 to [`MU_CLASSES`]): the scale at the class's
-/// middle, `(2 class - 1) / 200`.
+/// middle, `(2 class - 1) / 200`; grey for [`NO_CONTACT_CLASS`].
 pub fn mu_class_color(class: u16) -> [u8; 3] {
-    let class = class.clamp(1, MU_CLASSES);
+    if class == NO_CONTACT_CLASS {
+        return NO_CONTACT_COLOR;
+    }
+    let class = class.min(MU_CLASSES);
     mu_scale(f64::from(2 * class - 1) / 200.0)
 }
 
 /// "mu 0.30-0.31 (in band)".
 pub fn mu_class_label(class: u16) -> String {
+    if class == NO_CONTACT_CLASS {
+        return "no contact: no wheel of the train on this band here".to_owned();
+    }
     let [low, high] = mu_class_range(class);
     let [band_low, band_high] = TARGET_BAND;
     let mid = (low + high) / 2.0;
@@ -200,7 +216,7 @@ mod tests {
         assert_eq!(mu_class(0.3999), 40);
         assert_eq!(mu_class(0.40), 41);
         assert_eq!(mu_class(0.95), MU_CLASSES);
-        assert_eq!(mu_class(f64::NAN), 1);
+        assert_eq!(mu_class(f64::NAN), NO_CONTACT_CLASS);
         assert_eq!(mu_class_range(31), [0.30, 0.31]);
         // Below, in and above the band differ in hue: blue, green, yellow-red.
         let [r, g, b] = mu_class_color(30);

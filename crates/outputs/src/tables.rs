@@ -469,15 +469,24 @@ impl Sink for TableSink {
             return Ok(());
         };
         let (lo, hi) = self.options.band;
-        let n = f.mu.len().max(1) as f64;
+        // Over the points a wheel of the train touched on this band (every
+        // point on a section).
+        let touched = f.mu.iter().filter(|m| !m.is_nan()).count();
+        let n = match touched {
+            0 => f64::NAN,
+            k => k as f64,
+        };
         let (mut min, mut max, mut sum) = (f64::INFINITY, f64::NEG_INFINITY, 0.0);
         let (mut inside, mut below) = (0usize, 0usize);
-        for &mu in f.mu.iter() {
+        for &mu in f.mu.iter().filter(|m| !m.is_nan()) {
             min = min.min(mu);
             max = max.max(mu);
             sum += mu;
             inside += usize::from((lo..=hi).contains(&mu));
             below += usize::from(mu < lo);
+        }
+        if touched == 0 {
+            (min, max) = (f64::NAN, f64::NAN);
         }
         // The wheel leaves the section carrying what it has after its last
         // contact (the exit end of its direction of travel).

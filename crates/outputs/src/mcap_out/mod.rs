@@ -165,16 +165,16 @@ impl McapSink {
     /// count, known from its layout pass before the first is stepped): the
     /// sink chooses how hard it compresses
     /// ([`McapCompression::for_recording`]), [`McapSink::create`] the rest.
+    /// `line`: the recording is a line (line.md), whose `/twin/field`
+    /// holds nulls where no wheel used a band ([`LINE_FIELD_SCHEMA`]).
     pub fn for_replay(
         path: &Path,
         provenance: Option<&Provenance>,
         input_messages: u64,
+        line: bool,
     ) -> Result<McapSink, McapError> {
-        Self::create(
-            path,
-            provenance,
-            McapCompression::for_recording(input_messages),
-        )
+        let compression = McapCompression::for_recording(input_messages);
+        Self::open(path, provenance, compression, line)
     }
 
     /// Opens `.NAME.partial-XXXXXX` next to `path` and registers every
@@ -185,6 +185,15 @@ impl McapSink {
         path: &Path,
         provenance: Option<&Provenance>,
         compression: McapCompression,
+    ) -> Result<McapSink, McapError> {
+        Self::open(path, provenance, compression, false)
+    }
+
+    fn open(
+        path: &Path,
+        provenance: Option<&Provenance>,
+        compression: McapCompression,
+        line: bool,
     ) -> Result<McapSink, McapError> {
         let temp = PartialFile::beside(path)?;
         let file = File::create(temp.temp_path()).map_err(|source| McapError::Io {
@@ -248,8 +257,12 @@ impl McapSink {
         let no_metadata = BTreeMap::new();
         let mut channel_ids = [0; Topic::ALL.len()];
         for topic in Topic::ALL {
+            let schema = match topic {
+                Topic::Field if line => LINE_FIELD_SCHEMA,
+                _ => topic.schema(),
+            };
             let schema_id = writer
-                .add_schema(topic.schema_name(), "jsonschema", topic.schema().as_bytes())
+                .add_schema(topic.schema_name(), "jsonschema", schema.as_bytes())
                 .map_err(mcap_error(&format!(
                     "adding the schema of {}",
                     topic.name()
@@ -648,10 +661,12 @@ impl Sink for McapSink {
                 return Err(self.inconsistent(topic, problem).into());
             }
         }
-        finite_all(topic, "mu", t, &f.mu, 1.0)?;
-        finite_all(topic, "adhesion", t, &f.adhesion, 1.0)?;
+        // What the last wheel saw is missing (NaN, written as null) where no
+        // wheel of the train used the band: on a line's bands (line.md).
+        finite_or_missing(topic, "mu", t, &f.mu, 1.0)?;
+        finite_or_missing(topic, "adhesion", t, &f.adhesion, 1.0)?;
         finite_all(topic, "rail_mass_mg", t, &f.rail_mass_kg, MG_PER_KG)?;
-        finite_all(topic, "wheel_mass_mg", t, &f.wheel_mass_kg, MG_PER_KG)?;
+        finite_or_missing(topic, "wheel_mass_mg", t, &f.wheel_mass_kg, MG_PER_KG)?;
         let message = FieldMsg {
             train_id: &f.train_id,
             rail: &f.rail_name,
@@ -789,6 +804,20 @@ fn finite_all(
     scale: f64,
 ) -> Result<(), NonFiniteValue> {
     match values.iter().map(|&v| v * scale).find(|v| !v.is_finite()) {
+        None => Ok(()),
+        Some(value) => finite(topic, field, log_time_ns, value),
+    }
+}
+
+/// [`finite_all`] but for NaN, which stands for a missing value (null).
+fn finite_or_missing(
+    topic: Topic,
+    field: &'static str,
+    log_time_ns: u64,
+    values: &[f64],
+    scale: f64,
+) -> Result<(), NonFiniteValue> {
+    match values.iter().map(|&v| v * scale).find(|v| v.is_infinite()) {
         None => Ok(()),
         Some(value) => finite(topic, field, log_time_ns, value),
     }
@@ -1031,6 +1060,13 @@ const PULSE_SCHEMA: &str = include_str!("../../schemas/tortwin/pulse.json");
 const MEASUREMENT_SCHEMA: &str = include_str!("../../schemas/tortwin/measurement.json");
 
 const FIELD_SCHEMA: &str = include_str!("../../schemas/tortwin/field.json");
+
+/// `/twin/field` of a line (docs/spec/line.md, "Outputs and state"): mu,
+/// adhesion and the wheel mass are null where no wheel of the train used
+/// the rail band. JSON Schema says so with `"type": ["number", "null"]`,
+/// which Foxglove Studio 1.48 cannot parse (it drops the topic); a
+/// section's field has no nulls and keeps [`FIELD_SCHEMA`].
+pub const LINE_FIELD_SCHEMA: &str = include_str!("../../schemas/tortwin/line_field.json");
 
 #[cfg(test)]
 mod tests {

@@ -54,9 +54,12 @@ pub(super) struct PendingRows {
     pub(super) mu_ids: Vec<u16>,
     /// The curve's rail product classes, likewise.
     pub(super) mass_ids: Vec<u16>,
-    /// A simplified line per snapshot: mu, adhesion, rail product, wheel
-    /// product, in their views' coordinates.
+    /// Simplified lines per snapshot: mu, adhesion, rail product, wheel
+    /// product, in their views' coordinates; one per run of points with a
+    /// value (a line's band no wheel used at some points has gaps there).
     pub(super) strips: [Vec<Vec<[f32; 2]>>; 4],
+    /// How many of `strips` each snapshot has, per profile.
+    pub(super) strips_per_row: [Vec<usize>; 4],
 }
 
 impl PendingRows {
@@ -107,13 +110,14 @@ pub(super) fn send_rows(
                 .columns(lengths.clone())?,
         )?;
     }
-    for (path, strips) in track.entities.profiles().into_iter().zip(pending.strips) {
+    let profiles = pending.strips.into_iter().zip(pending.strips_per_row);
+    for (path, (strips, per_row)) in track.entities.profiles().into_iter().zip(profiles) {
         rec.send_columns(
             path.clone(),
             indexes(),
             rerun_sdk::LineStrips2D::update_fields()
                 .with_strips(strips)
-                .columns_of_unit_batches()?,
+                .columns(per_row)?,
         )?;
     }
     Ok(())

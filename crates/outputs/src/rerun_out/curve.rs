@@ -145,7 +145,7 @@ fn distance_ticks(length_m: f64, y: f64) -> (Vec<[f32; 2]>, Vec<String>) {
 /// The annotation context of the mu scale: class, label, colour.
 fn mu_context() -> rerun_sdk::AnnotationContext {
     rerun_sdk::AnnotationContext::new(
-        (1..=MU_CLASSES)
+        (0..=MU_CLASSES)
             .map(|c| (c, mu_class_label(c), rgba(mu_class_color(c))))
             .collect::<Vec<_>>()
             .iter()
@@ -485,6 +485,22 @@ pub(super) fn classes(
 ) {
     mu_ids.extend(mu.iter().map(|&m| mu_class(m)));
     mass_ids.extend(rail_mass_mg.map(mass_class));
+}
+
+/// The runs of consecutive values that are not NaN: the whole profile on
+/// a section, the stretches a line's band was in contact otherwise.
+pub(super) fn runs(values: &[f64]) -> impl Iterator<Item = std::ops::Range<usize>> + '_ {
+    let mut i = 0;
+    std::iter::from_fn(move || {
+        while values.get(i).is_some_and(|v| v.is_nan()) {
+            i += 1;
+        }
+        let start = i;
+        while values.get(i).is_some_and(|v| !v.is_nan()) {
+            i += 1;
+        }
+        (i > start).then_some(start..i)
+    })
 }
 
 /// A profile through fewer points: Ramer-Douglas-Peucker on (d, value),

@@ -544,35 +544,41 @@ impl Sink for RerunSink {
             &mut pending.mu_ids,
             &mut pending.mass_ids,
         );
-        // The profile lines, through fewer points where they are straight.
+        // The profile lines, through fewer points where they are straight,
+        // broken where a value is missing (NaN: no wheel on a line's band).
         let d = &self.grid_d_m;
-        let line = |values: &[f64], tolerance: f64, y: &dyn Fn(f64) -> f64| -> Vec<[f32; 2]> {
-            curve::simplify(d, values, tolerance)
-                .into_iter()
-                .map(|i| [d[i] as f32, y(values[i]) as f32])
-                .collect()
+        let line = |values: &[f64], tolerance: f64, y: &dyn Fn(f64) -> f64| {
+            curve::runs(values)
+                .map(|run| {
+                    curve::simplify(&d[run.clone()], &values[run.clone()], tolerance)
+                        .into_iter()
+                        .map(|k| [d[run.start + k] as f32, y(values[run.start + k]) as f32])
+                        .collect::<Vec<_>>()
+                })
+                .collect::<Vec<_>>()
         };
         let mu_y = |v: f64| frames.mu_y(v);
         let product_y = |v: f64| frames.product_y(v);
         let decades = |masses_kg: &[f64]| -> Vec<f64> {
             masses_kg
                 .iter()
-                .map(|&m| (m * MG_PER_KG).max(1e-4).log10())
+                .map(|&m| match m.is_nan() {
+                    true => f64::NAN,
+                    false => (m * MG_PER_KG).max(1e-4).log10(),
+                })
                 .collect()
         };
         let from_decades = |v: f64| product_y(10f64.powf(v));
-        pending.strips[0].push(line(&f.mu, MU_TOLERANCE, &mu_y));
-        pending.strips[1].push(line(&f.adhesion, MU_TOLERANCE, &mu_y));
-        pending.strips[2].push(line(
-            &decades(&f.rail_mass_kg),
-            DECADE_TOLERANCE,
-            &from_decades,
-        ));
-        pending.strips[3].push(line(
-            &decades(&f.wheel_mass_kg),
-            DECADE_TOLERANCE,
-            &from_decades,
-        ));
+        let profiles = [
+            line(&f.mu, MU_TOLERANCE, &mu_y),
+            line(&f.adhesion, MU_TOLERANCE, &mu_y),
+            line(&decades(&f.rail_mass_kg), DECADE_TOLERANCE, &from_decades),
+            line(&decades(&f.wheel_mass_kg), DECADE_TOLERANCE, &from_decades),
+        ];
+        for (k, strips) in profiles.into_iter().enumerate() {
+            pending.strips_per_row[k].push(strips.len());
+            pending.strips[k].extend(strips);
+        }
         if pending.len() >= self.profile_chunk_rows {
             send_rows(rec, track, grid_len).map_err(sdk_error(path, what))?;
         }
