@@ -103,7 +103,7 @@ pub struct PassageFacts {
 impl Dataset {
     /// Reads the whole recording.
     pub fn read(path: &Path) -> Result<Self> {
-        let r = Recording::read(path)?;
+        let r = Recording::read_section(path, "discover and calibrate need")?;
         let day0_ns = (r.section_log_time_ns / DAY_NS) * DAY_NS;
         Self::from_events(
             &r.path,

@@ -663,11 +663,20 @@ impl Decoder {
                 Some(id) => format!("train `{id}`"),
                 None => "the last train of the previous recording".to_string(),
             };
+            // line.md lets trains share a line while none catches up with
+            // another; this tortwin still rolls one train at a time.
+            let line = match self.line {
+                Some(_) => {
+                    "; docs/spec/line.md allows trains on a line at once while none catches up \
+                     with another, which this version of tortwin does not replay yet"
+                }
+                None => "",
+            };
             return Err(DecodeError::at(
                 "log_time",
                 format!(
                     "two trains in the section at once: train `{}` enters at {t_passage_s} s, \
-                     before {previous} has left it at {} s",
+                     before {previous} has left it at {} s{line}",
                     msg.train_id, self.occupied_until_s
                 ),
             ));

@@ -7,6 +7,7 @@ use std::path::{Path, PathBuf};
 
 use crate::error::InputError;
 use crate::event::{Event, Section};
+use crate::line::Line;
 use crate::reader::{ReaderContext, RecordingReader};
 
 /// Every event of a recording after its `/section`, in replay order, checked
@@ -20,6 +21,8 @@ pub struct Recording {
     pub origin_ns: i64,
     pub events: Vec<Event>,
     pub unknown_topic_messages: u64,
+    /// The `/line`, when the recording is a line (docs/spec/line.md).
+    pub line: Option<Line>,
 }
 
 impl Recording {
@@ -36,7 +39,28 @@ impl Recording {
             origin_ns: reader.origin_ns(),
             events,
             unknown_topic_messages: reader.unknown_topic_messages(),
+            line: reader.line().cloned(),
         })
+    }
+
+    /// [`Recording::read`] for a study that takes sections only: a line is
+    /// refused, naming the file and `study`, rather than read as the
+    /// section it is not.
+    pub fn read_section(path: &Path, study: &str) -> Result<Self, InputError> {
+        let r = Self::read(path)?;
+        match &r.line {
+            None => Ok(r),
+            Some(line) => Err(InputError::file(
+                path,
+                format!(
+                    "the recording is a line (`/line` `{}`, {} segments); in this version of \
+                     tortwin {study} a section (a recording without /line): replay the line \
+                     with `tortwin replay` (docs/spec/line.md)",
+                    line.line_id,
+                    line.segments.len()
+                ),
+            )),
+        }
     }
 
     /// The log_time of the last event (the `/section`'s without events).

@@ -63,7 +63,7 @@ pub struct Traffic {
 impl Traffic {
     /// Reads a recording (every input error names where it is).
     pub fn read(path: &Path) -> Result<Self, InputError> {
-        let r = Recording::read(path)?;
+        let r = Recording::read_section(path, "strategy needs")?;
         // The span counts the measurements too, which `new` then drops.
         let span_s = (r.last_log_time_ns() - r.section_log_time_ns) as f64 * 1e-9;
         Ok(Self::new(
