@@ -366,3 +366,306 @@ fn cuts_between_segments_of_one_type_change_nothing() {
     );
     assert_same(&whole, &cut_line, &[("C", "C"), ("G", "G")]);
 }
+
+mod sharing {
+    //! Trains that share a line (line.md, "Order"): B enters while A is
+    //! still on the line, and none catches up with the other.
+
+    use super::*;
+    use tortwin_recording::line::CurveAt;
+    use tortwin_recording::{
+        Applicator, Axle, AxleRef, BogiePosition, Creepage, Direction, Event, EventKind, Measured,
+        Measurement, Passage, Pulse, Section, Site,
+    };
+
+    const S: f64 = 1e9;
+
+    fn section() -> Section {
+        Section {
+            section_id: "sharing".into(),
+            length_m: 300.0,
+            rails: vec!["left".into(), "right".into()],
+            curve_radius_m: None,
+            rail_head_radius_m: 0.3,
+            nominal_wheel_diameter_m: 0.92,
+            applicators: vec![Applicator {
+                id: "A".into(),
+                position_m: 80.0,
+                rails: vec![0, 1],
+                nominal_pulse_kg: 2e-4,
+            }],
+            sites: vec![Site {
+                id: "M".into(),
+                position_m: 150.0,
+            }],
+        }
+    }
+
+    fn line() -> Line {
+        let transition = |curve_at| SegmentKind::Transition {
+            high_rail: 1,
+            curve_at,
+        };
+        line_of(&[
+            ("T0", SegmentKind::Tangent, 40.0),
+            ("X1", transition(CurveAt::End), 70.0),
+            ("C1", SegmentKind::Curve { high_rail: 1 }, 180.0),
+            ("X2", transition(CurveAt::Start), 210.0),
+            ("T1", SegmentKind::Tangent, 300.0),
+        ])
+    }
+
+    fn passage(t_s: f64, seq: usize) -> (f64, EventKind) {
+        let creepage = Creepage {
+            cx: 0.004,
+            cy: 0.002,
+            spin_per_m: 0.0,
+        };
+        let axles = (0..8)
+            .map(|k| Axle {
+                offset_m: 2.5 * k as f64,
+                bogie_position: [BogiePosition::Leading, BogiePosition::Trailing][k % 2],
+                wheel_diameter_m: 0.92,
+                wheel_load_n: vec![90e3, 110e3],
+                creepage: vec![creepage; 2],
+                segments: Vec::new(),
+            })
+            .collect();
+        let passage = Passage {
+            train_id: format!("T{seq}"),
+            train_seq: seq,
+            direction: Direction::Up,
+            speed_mps: 10.0,
+            axles,
+        };
+        (t_s, EventKind::Passage(passage))
+    }
+
+    fn pulse(t_s: f64, rail: usize) -> (f64, EventKind) {
+        let p = Pulse {
+            applicator: 0,
+            rail,
+            mass_kg: 2e-4,
+        };
+        (t_s, EventKind::Pulse(p))
+    }
+
+    fn reading(t_s: f64, rail: usize) -> (f64, EventKind) {
+        let of = Measured::RailMu;
+        let m = Measurement {
+            site: 0,
+            rail,
+            of,
+            value: 0.5,
+        };
+        (t_s, EventKind::Measurement(m))
+    }
+
+    fn mu(t_s: f64, seq: usize, axle_index: usize, rail: usize) -> (f64, EventKind) {
+        let axle = AxleRef {
+            train_id: format!("T{seq}"),
+            train_seq: seq,
+            axle_index,
+        };
+        let m = Measurement {
+            site: 0,
+            rail,
+            of: Measured::Mu(axle),
+            value: 0.5,
+        };
+        (t_s, EventKind::Measurement(m))
+    }
+
+    fn replay(events: &[(f64, EventKind)]) -> Run {
+        let mut engine = Engine::on_line(
+            section(),
+            Some(line()),
+            ModelConfig::default(),
+            EngineOptions::default(),
+            0,
+        );
+        let mut rec = Recorder::with_fields();
+        for (k, (t_s, kind)) in events.iter().enumerate() {
+            let event = Event {
+                log_time_ns: (t_s * S).round() as u64,
+                index_in_file: k as u64,
+                kind: kind.clone(),
+            };
+            engine.push(event, &mut rec).unwrap();
+        }
+        let summary = engine.finish(&mut rec, 0).unwrap();
+        Run {
+            rec,
+            state: engine.state(),
+            summary,
+        }
+    }
+
+    /// With no effects, time only orders the events at each point. Train A
+    /// (T0) enters at 10 s, 10 m/s, its last axle 17.5 m behind the front:
+    /// at the applicator (80 m) 18-19.75 s, at the site (150 m) 25-26.75 s,
+    /// gone at 41.75 s. Train B (T1) enters at 20 s, while A is on the line:
+    /// at the applicator 28-29.75 s, at the site 35-36.75 s. The same line
+    /// with B 100 s later (and every pulse or reading that comes after A's
+    /// last wheel at its point 100 s later) keeps every point's order, so
+    /// it must give the same bits: pulses before, among and after both
+    /// trains' wheels, readings between the trains and among B's wheels.
+    #[test]
+    fn a_train_entering_while_another_is_on_the_line_is_the_same_as_after_it() {
+        let shared = |dt: f64| {
+            let mut events = vec![
+                pulse(1.0, 0),
+                pulse(1.0, 1),
+                passage(10.0, 0),
+                pulse(12.0, 1),
+                pulse(19.0, 0),
+                reading(20.0, 0),
+                passage(20.0 + dt, 1),
+                pulse(25.0 + dt, 1),
+                reading(26.0, 1),
+                mu(27.0, 0, 3, 0),
+                mu(27.0, 0, 4, 1),
+                pulse(29.0 + dt, 0),
+                reading(30.0 + dt, 0),
+                pulse(35.0 + dt, 1),
+                reading(36.0 + dt, 1),
+                mu(38.0 + dt, 1, 0, 1),
+                mu(38.0 + dt, 1, 7, 0),
+                reading(40.0 + dt, 0),
+                pulse(41.0 + dt, 0),
+                reading(300.0, 1),
+            ];
+            events.sort_by(|a, b| a.0.total_cmp(&b.0));
+            replay(&events)
+        };
+        let together = shared(0.0);
+        let apart = shared(100.0);
+        let sim = |r: &Run| bits(&r.rec.simulated());
+        assert_eq!(together.rec.measurements.len(), 10);
+        assert_eq!(sim(&together), sim(&apart));
+        for (a, b) in together.state.tracks.iter().zip(&apart.state.tracks) {
+            assert_eq!(
+                bits(&a.rail_mass_kg),
+                bits(&b.rail_mass_kg),
+                "{}/{}",
+                a.rail,
+                a.band
+            );
+        }
+        let last = |r: &Run| {
+            r.rec
+                .fields
+                .iter()
+                .filter(|f| f.train_id == "T1")
+                .map(|f| (f.track.clone(), bits(&f.mu), bits(&f.wheel_mass_kg)))
+                .collect::<Vec<_>>()
+        };
+        assert_eq!(last(&together), last(&apart));
+        assert_eq!(
+            together.summary.mass_balance.applied_kg.to_bits(),
+            apart.summary.mass_balance.applied_kg.to_bits()
+        );
+        assert!(together.summary.mass_balance.closing_error() < 1e-12);
+        // And the order matters: a pulse between the trains lands before
+        // B's wheels (B's first axle sees it), one after B's last wheel at
+        // the applicator (29.75 s) does not.
+        let b_sees = |t_pulse: f64| {
+            let mut events = vec![
+                pulse(1.0, 0),
+                passage(10.0, 0),
+                passage(20.0, 1),
+                pulse(t_pulse, 0),
+                mu(38.0, 1, 0, 0),
+            ];
+            events.sort_by(|a, b| a.0.total_cmp(&b.0));
+            replay(&events).rec.simulated()[0]
+        };
+        assert!(
+            b_sees(25.0) < b_sees(31.0),
+            "{} {}",
+            b_sees(25.0),
+            b_sees(31.0)
+        );
+    }
+
+    /// Writes a line (or a section, `line` false) of 300 m with two trains
+    /// up, the second `start_s` after the first at `speed_mps`; reads it.
+    fn read_two_trains(line: bool, start_s: f64, speed_mps: f64) -> Result<usize, String> {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("two.mcap");
+        let file = std::io::BufWriter::new(std::fs::File::create(&path).unwrap());
+        let mut w =
+            tortwin_recording::RecordingWriter::new(file, mcap::WriteOptions::new(), None).unwrap();
+        let t0: u64 = 1_700_000_000_000_000_000;
+        use tortwin_recording::Topic;
+        let section = r#"{"section_id": "s", "length_m": 300.0, "rails": ["left", "right"],
+            "rail_head_radius_m": 0.3, "nominal_wheel_diameter_m": 0.92,
+            "applicators": [{"id": "A", "position_m": 50.0, "rails": ["left"], "nominal_pulse_g": 0.1}],
+            "measurement_sites": []}"#;
+        w.write_json(Topic::Section, t0, section.as_bytes())
+            .unwrap();
+        if line {
+            let l =
+                r#"{"line_id": "l", "segments": [{"id": "T", "type": "tangent", "end_m": 300.0}]}"#;
+            w.write_json(Topic::Line, t0, l.as_bytes()).unwrap();
+        }
+        let train = |id: &str, v: f64| {
+            let axle = |offset: f64| {
+                format!(
+                    r#"{{"offset_m": {offset}, "bogie_position": "leading", "wheel_diameter_m": 0.92,
+                    "wheel_load_kN": {{"left": 100, "right": 100}},
+                    "creepage": {{"left": {{"cx": 0.01, "cy": 0, "spin_per_m": 0}},
+                                 "right": {{"cx": 0.01, "cy": 0, "spin_per_m": 0}}}}}}"#
+                )
+            };
+            format!(
+                r#"{{"train_id": "{id}", "direction": "up", "speed_mps": {v}, "axles": [{}, {}]}}"#,
+                axle(0.0),
+                axle(20.0)
+            )
+        };
+        w.write_json(
+            Topic::Passage,
+            t0 + 10_000_000_000,
+            train("A", 10.0).as_bytes(),
+        )
+        .unwrap();
+        let t_b = t0 + 10_000_000_000 + (start_s * 1e9) as u64;
+        w.write_json(Topic::Passage, t_b, train("B", speed_mps).as_bytes())
+            .unwrap();
+        w.finish().unwrap();
+        let reader =
+            RecordingReader::open(&path, ReaderContext::default()).map_err(|e| e.to_string())?;
+        let mut n = 0;
+        for event in reader {
+            event.map_err(|e| e.to_string())?;
+            n += 1;
+        }
+        Ok(n)
+    }
+
+    /// The reader lets a train enter a line while another is on it as long
+    /// as it does not catch up with it at either end (equal is allowed);
+    /// on a section it stays an error.
+    #[test]
+    fn trains_share_a_line_while_none_catches_up() {
+        // A: front at 0 m at 10 s, last axle (20 m behind) at 12 s, at
+        // 300 m at 42 s.
+        assert_eq!(read_two_trains(true, 5.0, 10.0), Ok(2));
+        assert_eq!(read_two_trains(true, 2.0, 10.0), Ok(2), "equal at d = 0");
+        let early = read_two_trains(true, 1.0, 10.0).unwrap_err();
+        assert!(
+            early.contains("catches up with train `A`") && early.contains("d = 0 m"),
+            "{early}"
+        );
+        // Faster: at 300 m B's front (5 + 300/20 = 20 s after A) is before
+        // A's last axle (32 s after A).
+        let fast = read_two_trains(true, 5.0, 20.0).unwrap_err();
+        assert!(fast.contains("d = 300 m"), "{fast}");
+        let section = read_two_trains(false, 5.0, 10.0).unwrap_err();
+        assert!(
+            section.contains("two trains in the section at once"),
+            "{section}"
+        );
+    }
+}

@@ -4,7 +4,8 @@
 //!
 //! Events arrive in replay order (log_time). A train occupies the section
 //! from its passage's time until its last axle has left; trains never share
-//! the section (the reader refuses recordings where they would). So the
+//! the section (the reader refuses recordings where they would; on a line
+//! trains may share it while none catches up, docs/spec/line.md). So the
 //! engine buffers the events of one occupation (pulses, tribometer readings,
 //! weather, measurements) until the stream passes the train's end, then rolls
 //! the train's wheels one after the other over every grid point. That order
@@ -277,6 +278,23 @@ struct Buffered {
     /// The simulated value of a tribometer reading and the rail mass it
     /// read, filled while rolling.
     reading: Option<roll::Reading>,
+    /// A pulse that has landed: on a line, a train's roll lands the pulses
+    /// that come before its wheels, and the next train's roll (which shares
+    /// the rest of the window) must not land them again.
+    landed: bool,
+}
+
+/// A train that entered a line while the trains before it were still on it
+/// (line.md: trains share a line while none catches up with another). It
+/// starts once those before it have been rolled.
+#[derive(Debug, Clone)]
+struct Following {
+    log_time_ns: u64,
+    index_in_file: u64,
+    passage: Passage,
+    /// The window's length when its passage came: the window's events from
+    /// here on come after it in replay order.
+    at: usize,
 }
 
 /// A pulse or tribometer reading at one point of one track, inside a window.
@@ -364,6 +382,9 @@ pub struct Engine {
     // The occupation being buffered.
     pending: Option<TrainRecord>,
     window: Vec<Buffered>,
+    /// On a line: the trains that entered while `pending` was on it, in
+    /// order.
+    following: VecDeque<Following>,
     /// Pulses and measurements outside an occupation, held until the replay
     /// moves past their log_time: a weather message with the same log_time
     /// comes after them in replay order (topic order) yet is the weather in
@@ -543,6 +564,7 @@ impl Engine {
             begun: false,
             pending: None,
             window: Vec::new(),
+            following: VecDeque::new(),
             deferred: Vec::new(),
             recent: VecDeque::new(),
             timeline: WeatherTimeline::default(),
@@ -601,16 +623,32 @@ impl Engine {
         }
         let time_s = self.time_s(event.log_time_ns);
         self.last_event_s = self.last_event_s.max(time_s);
-        if let Some(train) = &self.pending {
-            if matches!(event.kind, EventKind::Passage(_)) || time_s > train.end_s {
-                self.roll_pending(sink)?;
+        let passage = matches!(event.kind, EventKind::Passage(_));
+        while let Some(train) = &self.pending {
+            // On a section a passage ends the window; on a line a train may
+            // enter while others are on it (the reader checks that none
+            // catches up), and a train rolls once the replay is past its end.
+            let ends = time_s > train.end_s || (passage && self.line.is_none());
+            if !ends {
+                break;
             }
+            self.roll_pending(sink)?;
         }
         if self.pending.is_some() {
+            if let EventKind::Passage(passage) = event.kind {
+                self.following.push_back(Following {
+                    log_time_ns: event.log_time_ns,
+                    index_in_file: event.index_in_file,
+                    passage,
+                    at: self.window.len(),
+                });
+                return Ok(());
+            }
             self.window.push(Buffered {
                 event,
                 time_s,
                 reading: None,
+                landed: false,
             });
             return Ok(());
         }
@@ -757,7 +795,7 @@ impl Engine {
     ) -> Result<RunSummary, EngineError> {
         self.begin(sink)?;
         self.flush_deferred(sink)?;
-        if self.pending.is_some() {
+        while self.pending.is_some() {
             self.roll_pending(sink)?;
         }
         let summary = self.summary(unknown_topic_messages);
@@ -953,6 +991,9 @@ impl Engine {
         for (b, buffered) in self.window.iter().enumerate() {
             match &buffered.event.kind {
                 EventKind::Weather(w) => self.timeline.push(buffered.time_s, *w),
+                // Run in the roll of a train before this one on the line.
+                EventKind::Pulse(_) if buffered.landed => {}
+                EventKind::Measurement(_) if buffered.reading.is_some() => {}
                 EventKind::Pulse(p) => {
                     let tracks = &self.pulse_tracks[p.applicator][p.rail];
                     for &track in tracks {
@@ -988,11 +1029,21 @@ impl Engine {
 
         self.roll_train(&mut record, sink)?;
 
-        // Point events after the last wheel at their point, in replay order.
+        // The window's events before the next train's passage (all of them
+        // without one) are this train's to publish; the rest is the next
+        // train's window.
+        let split = self.following.front().map_or(self.window.len(), |f| f.at);
+        // Point events after the last wheel at their point, in replay order;
+        // after the next train's passage they wait for its wheels.
         for track in 0..self.tracks.len() {
             for k in 0..self.work[track].events.len() {
                 let ev = self.work[track].events[k];
-                if !ev.done {
+                if ev.done {
+                    if let PointEventKind::Pulse { .. } = ev.kind {
+                        self.window[ev.buffered].landed = true;
+                    }
+                }
+                if !ev.done && ev.buffered < split {
                     let (ctx, states, works) = self.split();
                     let weather = *ctx.timeline.at(ev.time_s);
                     if let roll::Ran::Pulse(added) = ctx.run_point_event(
@@ -1008,11 +1059,22 @@ impl Engine {
             }
         }
         self.settle(&mut record);
-        self.weather = self.timeline.last();
+        self.weather = match split < self.window.len() {
+            // The weather at the next train's passage: where its window's
+            // weather carries on from.
+            true => self.window[..split]
+                .iter()
+                .fold(self.timeline.first(), |w, b| match &b.event.kind {
+                    EventKind::Weather(m) => w.after_message(b.time_s, *m),
+                    _ => w,
+                }),
+            false => self.timeline.last(),
+        };
         self.occupied_until_s = record.end_s.max(self.occupied_until_s);
 
         // Publish the window in replay order, then the field.
-        let window = std::mem::take(&mut self.window);
+        let mut window = std::mem::take(&mut self.window);
+        let rest = window.split_off(split);
         for buffered in &window {
             match &buffered.event.kind {
                 EventKind::Pulse(p) => self.emit_pulse(buffered.event.log_time_ns, p, sink)?,
@@ -1049,6 +1111,14 @@ impl Engine {
         self.window.clear();
         self.emit_fields(&record, SnapshotKind::Train, sink)?;
         self.recent.push_back(record);
+        // The next train on the line starts, with the rest of the window.
+        if let Some(next) = self.following.pop_front() {
+            self.start_train(next.log_time_ns, next.index_in_file, next.passage, sink)?;
+            self.window = rest;
+            for f in &mut self.following {
+                f.at -= split;
+            }
+        }
         Ok(())
     }
 

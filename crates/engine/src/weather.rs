@@ -107,6 +107,11 @@ impl WeatherTimeline {
     }
 
     /// The state after every message of the window.
+    /// The weather in effect before the window's first message.
+    pub(crate) fn first(&self) -> WeatherState {
+        self.base
+    }
+
     pub(crate) fn last(&self) -> WeatherState {
         *self.changes.last().unwrap_or(&self.base)
     }

@@ -17,8 +17,8 @@ use std::collections::HashMap;
 use serde_json::Value;
 
 use crate::event::{
-    Applicator, Axle, AxleRef, AxleSegment, Creepage, Measured, Measurement, Passage, Pulse,
-    Quantity, Section, Site, Weather,
+    Applicator, Axle, AxleRef, AxleSegment, Creepage, Direction, Measured, Measurement, Passage,
+    Pulse, Quantity, Section, Site, Weather,
 };
 use crate::limits::{self, Range};
 use crate::line::Line;
@@ -529,6 +529,18 @@ pub(crate) struct Decoder {
     /// `train_id` of the last passage, for the two-trains message.
     last_train_id: Option<String>,
     occupied_until_s: f64,
+    /// On a line: when the last passage's last axle reaches each end of the
+    /// line (`d = 0`, `d = L`), for the rule that no train catches up with
+    /// the one before it.
+    last_axle_at_ends_s: Option<[f64; 2]>,
+}
+
+/// When an axle `offset_m` behind the front of a train that enters at
+/// `t_passage_s` reaches the line's two ends (model.md's time at a point,
+/// in its form).
+fn at_ends_s(t_passage_s: f64, up: bool, length_m: f64, offset_m: f64, speed_mps: f64) -> [f64; 2] {
+    let d_entry_m = if up { 0.0 } else { length_m };
+    [0.0, length_m].map(|x: f64| t_passage_s + ((x - d_entry_m).abs() + offset_m) / speed_mps)
 }
 
 impl Decoder {
@@ -547,6 +559,7 @@ impl Decoder {
             trains: HashMap::new(),
             last_train_id: None,
             occupied_until_s,
+            last_axle_at_ends_s: None,
         }
     }
 
@@ -658,18 +671,39 @@ impl Decoder {
                 ),
             )
         })?;
-        if t_passage_s < self.occupied_until_s {
+        let up = msg.direction == Direction::Up;
+        let length_m = self.section.length_m;
+        let first_offset_m = axles.first().map_or(0.0, |a| a.offset_m);
+        if let (Some(_), Some(before)) = (&self.line, self.last_axle_at_ends_s) {
+            // line.md: trains may share a line as long as none catches up
+            // with the one before it; speeds are constant, so the ends
+            // decide (equal is allowed).
+            let front = at_ends_s(t_passage_s, up, length_m, first_offset_m, speed_mps);
+            if let Some(end) = (0..2).find(|&k| front[k] < before[k]) {
+                return Err(DecodeError::at(
+                    "log_time",
+                    format!(
+                        "train `{}` catches up with train `{}` on the line: its first axle \
+                         reaches d = {} m at {} s, before the other's last axle at {} s \
+                         (docs/spec/line.md: trains share a line while none catches up with \
+                         another)",
+                        msg.train_id,
+                        self.last_train_id.as_deref().unwrap_or("?"),
+                        [0.0, length_m][end],
+                        front[end],
+                        before[end]
+                    ),
+                ));
+            }
+        } else if t_passage_s < self.occupied_until_s {
             let previous = match &self.last_train_id {
                 Some(id) => format!("train `{id}`"),
                 None => "the last train of the previous recording".to_string(),
             };
-            // line.md lets trains share a line while none catches up with
-            // another; this tortwin still rolls one train at a time.
+            // A line's first train after a state: the state was cut where
+            // no train was on the line.
             let line = match self.line {
-                Some(_) => {
-                    "; docs/spec/line.md allows trains on a line at once while none catches up \
-                     with another, which this version of tortwin does not replay yet"
-                }
+                Some(_) => " (a state is cut where no train is on the line)",
                 None => "",
             };
             return Err(DecodeError::at(
@@ -693,7 +727,14 @@ impl Decoder {
                 ),
             ));
         }
-        self.occupied_until_s = leaves_s;
+        self.occupied_until_s = self.occupied_until_s.max(leaves_s);
+        self.last_axle_at_ends_s = Some(at_ends_s(
+            t_passage_s,
+            up,
+            length_m,
+            last_offset_m,
+            speed_mps,
+        ));
         self.trains.insert(
             msg.train_id.clone(),
             TrainSeen {
