@@ -26,6 +26,9 @@ use tortwin_model::tangent::{
 };
 use tortwin_recording::Section;
 
+/// In [`Observed::axle`]: a point no wheel of the train touched on a track.
+const NO_AXLE: u32 = u32::MAX;
+
 /// What a wheel saw at every point of its track (kept for the last wheel of
 /// each track, or for every wheel when a sink asks for it).
 #[derive(Debug, Clone, Default)]
@@ -1854,22 +1857,45 @@ impl Engine {
             buf.adhesion.push(contact.forces(mu).t_over_q);
             buf.wheel_mass_kg.push(wheel_mass_kg);
         }
+        self.send_field(record, track, kind, log_time_ns, buf, sink)
+    }
+
+    /// Hands `track`'s field, computed into `buf`, to the sink, once every
+    /// value there is checked finite (on a line, NaN stands where no wheel
+    /// used the band: [`Observed::axle`]); `buf` goes back to the engine.
+    pub(super) fn send_field(
+        &mut self,
+        record: &TrainRecord,
+        track: usize,
+        kind: SnapshotKind,
+        log_time_ns: u64,
+        buf: SnapshotBuffers,
+        sink: &mut dyn Sink,
+    ) -> Result<(), EngineError> {
         let info = &self.track_info[track];
         let rail_mass_kg = &self.tracks[track].rail_mass_kg;
-        let columns: [(&str, &[f64]); 4] = [
-            ("mu", &buf.mu),
-            ("adhesion", &buf.adhesion),
-            ("the rail mass", rail_mass_kg),
-            ("the wheel mass", &buf.wheel_mass_kg),
+        let axle = &self.work[track].observed.axle;
+        let touched = |k: usize| axle.get(k).is_none_or(|&a| a != NO_AXLE);
+        // (what, values, whether a missing wheel leaves it NaN)
+        let columns: [(&str, &[f64], bool); 4] = [
+            ("mu", &buf.mu, true),
+            ("adhesion", &buf.adhesion, true),
+            ("the rail mass", rail_mass_kg, false),
+            ("the wheel mass", &buf.wheel_mass_kg, true),
         ];
         let non_finite = match self.opts.non_finite_allowed {
             true => None,
-            false => columns.iter().find_map(|(what, values)| {
-                let k = values.iter().position(|x| !x.is_finite())?;
+            false => columns.iter().find_map(|(what, values, per_wheel)| {
+                let k = (0..values.len())
+                    .position(|k| (!per_wheel || touched(k)) && !values[k].is_finite())?;
                 Some((what, k, values[k]))
             }),
         };
         if let Some((what, k, value)) = non_finite {
+            let band = match self.line {
+                Some(_) => format!(", band {}", info.band),
+                None => String::new(),
+            };
             let error = EngineError::NotFinite {
                 what: what.to_string(),
                 value,
@@ -1877,7 +1903,7 @@ impl Engine {
                 log_time_ns: record.log_time_ns,
                 index_in_file: record.index_in_file,
                 about: format!(
-                    "; train `{}`, rail `{}`, d = {} m",
+                    "; train `{}`, rail `{}`{band}, d = {} m",
                     record.passage.train_id,
                     info.rail_name,
                     self.grid.d_m.get(k).copied().unwrap_or(f64::NAN)

@@ -10,16 +10,13 @@
 
 use super::{
     Addend, AddendKind, Engine, EngineError, Lane, Ran, RollContext, SiteValue, TrackState,
-    TrackWork, TrainRecord, NO_APPLICATOR, PARALLEL_MIN_CONTACTS,
+    TrackWork, TrainRecord, NO_APPLICATOR, NO_AXLE, PARALLEL_MIN_CONTACTS,
 };
 use crate::line::RAIL_BANDS;
-use crate::sink::{FieldSnapshot, Sink};
+use crate::sink::Sink;
 use crate::{enters_at_zero, SnapshotKind};
 use tortwin_model::product;
 use tortwin_recording::BogiePosition;
-
-/// Marks a point no wheel of the train touched on a track.
-const NO_AXLE: u32 = u32::MAX;
 
 impl Engine {
     /// Rolls every wheel of the train on a line: each rail's wheels in axle
@@ -212,57 +209,7 @@ impl Engine {
             buf.adhesion.push(polach.forces(mu).t_over_q);
             buf.wheel_mass_kg.push(observed.wheel_mass_kg[i]);
         }
-        let info = &self.track_info[track];
-        let rail_mass_kg = &self.tracks[track].rail_mass_kg;
-        let touched = |k: usize| observed.axle[k] != NO_AXLE;
-        let columns: [(&str, &[f64], bool); 4] = [
-            ("mu", &buf.mu, true),
-            ("adhesion", &buf.adhesion, true),
-            ("the rail mass", rail_mass_kg, false),
-            ("the wheel mass", &buf.wheel_mass_kg, true),
-        ];
-        let non_finite = match self.opts.non_finite_allowed {
-            true => None,
-            false => columns.iter().find_map(|(what, values, per_wheel)| {
-                let k = (0..values.len())
-                    .position(|k| (!per_wheel || touched(k)) && !values[k].is_finite())?;
-                Some((what, k, values[k]))
-            }),
-        };
-        if let Some((what, k, value)) = non_finite {
-            let error = EngineError::NotFinite {
-                what: what.to_string(),
-                value,
-                topic: "/train/passage",
-                log_time_ns: record.log_time_ns,
-                index_in_file: record.index_in_file,
-                about: format!(
-                    "; train `{}`, rail `{}`, band {}, d = {} m",
-                    record.passage.train_id,
-                    info.rail_name,
-                    info.band,
-                    self.grid.d_m.get(k).copied().unwrap_or(f64::NAN)
-                ),
-            };
-            self.snapshot = buf;
-            return Err(error);
-        }
-        let result = sink.field(&FieldSnapshot {
-            kind,
-            log_time_ns,
-            train_id: record.passage.train_id.as_str().into(),
-            track,
-            rail_name: info.rail_name.as_str().into(),
-            band: info.band.as_str().into(),
-            wheel_pass: self.tracks[track].wheel_pass,
-            d_m: self.grid.d_m.as_slice().into(),
-            mu: buf.mu.as_slice().into(),
-            adhesion: buf.adhesion.as_slice().into(),
-            rail_mass_kg: self.tracks[track].rail_mass_kg.as_slice().into(),
-            wheel_mass_kg: buf.wheel_mass_kg.as_slice().into(),
-        });
-        self.snapshot = buf;
-        Ok(result?)
+        self.send_field(record, track, kind, log_time_ns, buf, sink)
     }
 }
 

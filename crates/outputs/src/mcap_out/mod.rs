@@ -803,10 +803,7 @@ fn finite_all(
     values: &[f64],
     scale: f64,
 ) -> Result<(), NonFiniteValue> {
-    match values.iter().map(|&v| v * scale).find(|v| !v.is_finite()) {
-        None => Ok(()),
-        Some(value) => finite(topic, field, log_time_ns, value),
-    }
+    check_values(topic, field, log_time_ns, values, scale, |v| v.is_finite())
 }
 
 /// [`finite_all`] but for NaN, which stands for a missing value (null).
@@ -817,7 +814,20 @@ fn finite_or_missing(
     values: &[f64],
     scale: f64,
 ) -> Result<(), NonFiniteValue> {
-    match values.iter().map(|&v| v * scale).find(|v| v.is_infinite()) {
+    check_values(topic, field, log_time_ns, values, scale, |v| {
+        !v.is_infinite()
+    })
+}
+
+fn check_values(
+    topic: Topic,
+    field: &'static str,
+    log_time_ns: u64,
+    values: &[f64],
+    scale: f64,
+    good: fn(&f64) -> bool,
+) -> Result<(), NonFiniteValue> {
+    match values.iter().map(|&v| v * scale).find(|v| !good(v)) {
         None => Ok(()),
         Some(value) => finite(topic, field, log_time_ns, value),
     }
