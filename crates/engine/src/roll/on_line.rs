@@ -51,8 +51,6 @@ impl Engine {
             let parallel = rails > 1
                 && rayon::current_num_threads() > 1
                 && axles * points >= PARALLEL_MIN_CONTACTS;
-            let rail_states = states.chunks_mut(RAIL_BANDS);
-            let rail_works = works.chunks_mut(RAIL_BANDS);
             if parallel {
                 use rayon::prelude::*;
                 states
@@ -63,7 +61,10 @@ impl Engine {
                         ctx.roll_rail_line(record_ref, rail, 0..axles, states, works);
                     });
             } else {
-                for (rail, (states, works)) in rail_states.zip(rail_works).enumerate() {
+                let rails = states
+                    .chunks_mut(RAIL_BANDS)
+                    .zip(works.chunks_mut(RAIL_BANDS));
+                for (rail, (states, works)) in rails.enumerate() {
                     ctx.roll_rail_line(record_ref, rail, 0..axles, states, works);
                 }
             }
