@@ -1407,23 +1407,7 @@ impl RollContext<'_> {
         i: usize,
     ) -> f64 {
         let t = lane.roller.time_at(self.d_m, i);
-        if work.pending_at[i] > 0 {
-            for k in 0..work.events.len() {
-                let ev = work.events[k];
-                if !ev.done && ev.point == i && ev.time_s < t {
-                    let weather = *self.timeline.at(ev.time_s);
-                    if let Ran::Pulse(totals) =
-                        self.run_point_event(track, state, work, k, &weather)
-                    {
-                        work.ledger.push(Addend {
-                            order: lane.serial << 32 | lane.pulses,
-                            kind: AddendKind::Pulse(totals),
-                        });
-                        lane.pulses += 1;
-                    }
-                }
-            }
-        }
+        self.run_events_before(track, state, work, lane, i, t);
         if self.applicator_at[track][i] != NO_APPLICATOR {
             // The wheel passes this applicator: N counts from here.
             lane.st.applicator_point = Some(i);
@@ -1458,6 +1442,36 @@ impl RollContext<'_> {
             });
         }
         m_kg
+    }
+
+    /// The pulses and readings of `track` at point `i` that come before
+    /// `lane`'s wheel there (at `t`, strictly after them), in the window's
+    /// order; a pulse's totals go to the ledger in the wheel's serial place.
+    fn run_events_before(
+        &self,
+        track: usize,
+        state: &mut TrackState,
+        work: &mut TrackWork,
+        lane: &mut Lane,
+        i: usize,
+        t: f64,
+    ) {
+        if work.pending_at[i] == 0 {
+            return;
+        }
+        for k in 0..work.events.len() {
+            let ev = work.events[k];
+            if !ev.done && ev.point == i && ev.time_s < t {
+                let weather = *self.timeline.at(ev.time_s);
+                if let Ran::Pulse(totals) = self.run_point_event(track, state, work, k, &weather) {
+                    work.ledger.push(Addend {
+                        order: lane.serial << 32 | lane.pulses,
+                        kind: AddendKind::Pulse(totals),
+                    });
+                    lane.pulses += 1;
+                }
+            }
+        }
     }
 
     /// A wheel (axle `a` on `track`'s rail) ready to roll: everything that

@@ -9,8 +9,8 @@
 //! point's segment: a line of one tangent is the section bit for bit.
 
 use super::{
-    Addend, AddendKind, Engine, EngineError, Lane, Ran, RollContext, SiteValue, TrackState,
-    TrackWork, TrainRecord, NO_APPLICATOR, NO_AXLE, PARALLEL_MIN_CONTACTS,
+    Engine, EngineError, Lane, RollContext, SiteValue, TrackState, TrackWork, TrainRecord,
+    NO_APPLICATOR, NO_AXLE, PARALLEL_MIN_CONTACTS,
 };
 use crate::line::RAIL_BANDS;
 use crate::sink::Sink;
@@ -315,25 +315,7 @@ impl RollContext<'_> {
     ) -> f64 {
         let t = lane.roller.time_at(self.d_m, i);
         for (band, (state, work)) in states.iter_mut().zip(works.iter_mut()).enumerate() {
-            if work.pending_at[i] == 0 {
-                continue;
-            }
-            let track = rail * RAIL_BANDS + band;
-            for k in 0..work.events.len() {
-                let ev = work.events[k];
-                if !ev.done && ev.point == i && ev.time_s < t {
-                    let weather = *self.timeline.at(ev.time_s);
-                    if let Ran::Pulse(totals) =
-                        self.run_point_event(track, state, work, k, &weather)
-                    {
-                        work.ledger.push(Addend {
-                            order: lane.serial << 32 | lane.pulses,
-                            kind: AddendKind::Pulse(totals),
-                        });
-                        lane.pulses += 1;
-                    }
-                }
-            }
+            self.run_events_before(rail * RAIL_BANDS + band, state, work, lane, i, t);
         }
         if self.applicator_at[rail * RAIL_BANDS][i] != NO_APPLICATOR {
             // The wheel passes this applicator on whatever band it runs.
