@@ -669,3 +669,77 @@ mod sharing {
         );
     }
 }
+
+/// The README's picture of the field line (docs/figures/line_field.svg):
+/// mu that the last train's axles 4 (leading) and 5 (trailing) see at every
+/// point of both rails, over the rows each rail has there. It is drawn from
+/// this replay (which the tests above hold to the reference to 1.3e-15) and
+/// must equal the committed file; `TORTWIN_WRITE_FIGURES=1` writes it.
+#[test]
+fn the_readme_picture_of_the_field_line_is_this_replay() {
+    use tortwin_plot::{Colour, LinePlot, Panel, ReferenceLine, Series};
+    let mut contacts = Contacts {
+        train_seq: 11,
+        ..Contacts::default()
+    };
+    let engine = replay_engine(&recordings().join("line_field.mcap"), &mut contacts);
+    let p = ModelConfig::default().product;
+    let d: Vec<f64> = engine.grid().d_m.clone();
+    let mu = |axle: usize, rail: usize| -> Vec<f64> {
+        let seen = &contacts
+            .seen
+            .iter()
+            .find(|(k, _)| *k == (axle, rail))
+            .unwrap()
+            .1;
+        seen.iter().map(|&m| product::friction(&p, m)).collect()
+    };
+    let wheels = [
+        ("left (low), leading", 4, 0, Colour::BLUE, false),
+        ("left (low), trailing", 5, 0, Colour::BLUE, true),
+        ("right (high), leading", 4, 1, Colour::RED, false),
+        ("right (high), trailing", 5, 1, Colour::RED, true),
+    ];
+    let mut top = Panel::new("mu")
+        .reference_line(ReferenceLine::new(p.mu_d, "dry (mu_D)"))
+        .y_range(0.25, 0.6);
+    for (name, axle, rail, colour, trailing) in wheels {
+        let s = Series::new(name, d.clone(), mu(axle, rail)).colour(colour);
+        top = top.series(if trailing { s.dashed() } else { s });
+    }
+    // The rows: 1 where a rail is in curve rows (its transition halves at
+    // the curve included), 0 on tangent rows.
+    let reader = RecordingReader::open(
+        &recordings().join("line_field.mcap"),
+        ReaderContext::default(),
+    )
+    .unwrap();
+    let line = reader.line().unwrap().clone();
+    let curve_rows: Vec<f64> = d
+        .iter()
+        .map(|&x| {
+            let row =
+                tortwin_engine::rows::row(&line, 1, tortwin_recording::BogiePosition::Leading, x);
+            f64::from(u8::from(row.rail == tortwin_engine::rows::RailBand::G))
+        })
+        .collect();
+    let bottom = Panel::new("1: curve rows (C1, C2), 0: tangent")
+        .series(Series::new("", d.clone(), curve_rows).colour(Colour::GREY))
+        .y_range(-0.1, 1.1);
+    let plot = LinePlot::stacked(
+        "Field line: mu seen by the last train's axles 4 and 5 (applicator at 260 m)",
+        "d (m)",
+        vec![top, bottom],
+    );
+    let svg = plot.render_svg().unwrap();
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("docs/figures/line_field.svg");
+    if std::env::var_os("TORTWIN_WRITE_FIGURES").is_some() {
+        std::fs::write(&path, &svg).unwrap();
+    }
+    let committed = std::fs::read_to_string(&path).unwrap_or_default();
+    assert!(
+        committed == svg,
+        "{} differs from this replay's picture: run TORTWIN_WRITE_FIGURES=1 cargo test --release --test line",
+        path.display()
+    );
+}
