@@ -743,3 +743,260 @@ fn the_readme_picture_of_the_field_line_is_this_replay() {
         path.display()
     );
 }
+
+/// `tortwin synth --layout`: a line described segment by segment, written
+/// as line.md's recording and replayed to its truth.
+mod synth {
+    use super::*;
+    use std::process::Output;
+    use tortwin_recording::{Direction, EventKind};
+
+    fn example() -> PathBuf {
+        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("docs/examples/line-10km.toml")
+    }
+
+    fn run(out: &Path, args: &[&str]) -> Output {
+        common::tortwin()
+            .arg("synth")
+            .arg("--out")
+            .arg(out)
+            .arg("--quiet")
+            .args(args)
+            .output()
+            .unwrap()
+    }
+
+    /// The measurements of `path` as the replay publishes them.
+    fn replayed(path: &Path) -> Vec<common::MeasurementRow> {
+        let mut rows = Recorder::default();
+        replay(
+            &ReplayArgs::new(path),
+            None,
+            &mut [&mut rows],
+            &tortwin_study::Silent,
+        )
+        .unwrap();
+        rows.measurements
+    }
+
+    /// Every noise-free measured value is the replay's (to the 1e-5 the
+    /// generator rounds to): the truth the generator computed is the line
+    /// the reader reads back.
+    fn assert_replayed_truth(path: &Path) -> usize {
+        let rows = replayed(path);
+        assert!(!rows.is_empty());
+        for m in &rows {
+            assert!(
+                (m.measured - m.simulated).abs() <= 5.000_001e-6,
+                "{m:?} at {}",
+                path.display()
+            );
+        }
+        rows.len()
+    }
+
+    /// The example layout: 17 segments, curves of both hands, a one-rail
+    /// applicator. Its axles carry the tangent's loads and creepages as
+    /// their own and each curve's and transition's in `segments`, the
+    /// outer rail spinning one way and the inner the other; trains run
+    /// both ways; A2 sprays the right rail only; the replay gives back
+    /// every measured value.
+    #[test]
+    fn a_described_line_is_written_as_line_md_says_and_replays_to_its_truth() {
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("line.mcap");
+        let layout = example();
+        let o = run(
+            &out,
+            &[
+                "--layout",
+                layout.to_str().unwrap(),
+                "--noise-sigma",
+                "0",
+                "--trains-per-day",
+                "24",
+            ],
+        );
+        common::check(&o, "synth --layout");
+        let reader = RecordingReader::open(&out, ReaderContext::default()).unwrap();
+        let line = reader.line().cloned().expect("a /line");
+        let section = reader.section().clone();
+        assert_eq!(line.line_id, "demo-10km");
+        assert_eq!(line.segments.len(), 17);
+        assert_eq!(section.length_m, 10_000.0);
+        let bends: Vec<usize> = (0..line.segments.len())
+            .filter(|&k| !matches!(line.segments[k].kind, SegmentKind::Tangent))
+            .collect();
+        assert_eq!(bends.len(), 12);
+        let right = section.rails.iter().position(|r| r == "right").unwrap();
+        let a2 = section
+            .applicators
+            .iter()
+            .position(|a| a.id == "A2")
+            .unwrap();
+        assert_eq!(section.applicators[a2].rails, vec![right]);
+        let (mut up, mut down, mut a2_pulses, mut axles) = (0, 0, 0, 0);
+        for event in reader {
+            match event.unwrap().kind {
+                EventKind::Passage(p) => {
+                    match p.direction {
+                        Direction::Up => up += 1,
+                        Direction::Down => down += 1,
+                    }
+                    for a in &p.axles {
+                        axles += 1;
+                        let ks: Vec<usize> = a.segments.iter().map(|s| s.segment).collect();
+                        assert_eq!(ks, bends, "{} axle: every curve and transition", p.train_id);
+                        assert!(a.creepage[0].spin_per_m > 0.0 && a.creepage[1].spin_per_m < 0.0);
+                        for s in &a.segments {
+                            let high = match line.segments[s.segment].kind {
+                                SegmentKind::Curve { high_rail }
+                                | SegmentKind::Transition { high_rail, .. } => high_rail,
+                                SegmentKind::Tangent => unreachable!(),
+                            };
+                            let c = s.creepage.as_ref().unwrap();
+                            assert!(
+                                c[high].spin_per_m > 0.0,
+                                "{}: {c:?}",
+                                line.segments[s.segment].id
+                            );
+                            assert!(c[1 - high].spin_per_m < 0.0);
+                            assert_eq!(s.wheel_load_n.as_ref().unwrap().len(), 2);
+                        }
+                    }
+                }
+                EventKind::Pulse(p) if p.applicator == a2 => {
+                    assert_eq!(p.rail, right);
+                    a2_pulses += 1;
+                }
+                _ => {}
+            }
+        }
+        assert!(up > 0 && down > 0, "both directions: {up} up, {down} down");
+        assert!(a2_pulses > 0 && axles > 0);
+        let n = assert_replayed_truth(&out);
+        assert!(n > 1000, "{n} measurements");
+        let key: serde_json::Value = serde_json::from_str(
+            &std::fs::read_to_string(dir.path().join("line.key.json")).unwrap(),
+        )
+        .unwrap();
+        assert_eq!(key["params"]["preset"], "line");
+        assert_eq!(key["params"]["line"]["segments"][10]["cant_m"], 0.12);
+    }
+
+    /// At 150 trains a day with a minute's headway on 10 km, trains enter
+    /// while the one before is still on the line (line.md: none catches
+    /// up with another); the reader accepts the file and the replay gives
+    /// back every measured value.
+    #[test]
+    fn trains_share_a_described_line() {
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("busy.mcap");
+        let layout = example();
+        let o = run(
+            &out,
+            &[
+                "--layout",
+                layout.to_str().unwrap(),
+                "--noise-sigma",
+                "0",
+                "--trains-per-day",
+                "150",
+                "--min-headway-s",
+                "60",
+                "--measured-train-share",
+                "0.1",
+                "--seed",
+                "4",
+            ],
+        );
+        common::check(&o, "synth --layout");
+        let reader = RecordingReader::open(&out, ReaderContext::default()).unwrap();
+        let length_m = reader.section().length_m;
+        let mut shared = 0;
+        let mut before: Option<(f64, f64)> = None;
+        for event in reader {
+            let event = event.unwrap();
+            if let EventKind::Passage(p) = event.kind {
+                let t_s = event.log_time_ns as f64 * 1e-9;
+                let last = p.axles.last().unwrap().offset_m;
+                if before.is_some_and(|(_, leaves_s)| t_s < leaves_s) {
+                    shared += 1;
+                }
+                before = Some((t_s, t_s + (length_m + last) / p.speed_mps));
+            }
+        }
+        assert!(shared > 5, "{shared} trains entered an occupied line");
+        assert_replayed_truth(&out);
+    }
+
+    /// A layout the reader would refuse, or one with a key the generator
+    /// does not know, is a usage error naming the key; nothing is written.
+    #[test]
+    fn a_bad_layout_is_refused_naming_the_key() {
+        let dir = tempfile::tempdir().unwrap();
+        let text = std::fs::read_to_string(example()).unwrap();
+        let cases = [
+            (
+                text.replacen("end_m = 880.0", "end_m = 700.0", 1),
+                "segments[1].end_m",
+            ),
+            (
+                text.replacen("radius_m = 400.0", "radius = 400.0", 1),
+                "layout1.toml:29:1: unknown field `radius`",
+            ),
+            (
+                text.replacen("rails = [\"right\"]", "rails = [\"high\"]", 1),
+                "applicators[1].rails",
+            ),
+            (
+                text.replacen("high_rail = \"left\"", "high_rail = \"north\"", 1),
+                "segments[5].high_rail",
+            ),
+            (
+                text.replacen("end_m = 10000.0", "end_m = 1e400", 1),
+                "layout4.toml:122:9: floating-point number overflowed",
+            ),
+            (
+                text.replacen("end_m = 10000.0", "end_m = inf", 1),
+                "segments[16].end_m = inf",
+            ),
+            (
+                text.replacen("position_m = 9500.0", "position_m = 12000.0", 1),
+                "layout6.toml: site M6 position is 12000",
+            ),
+        ];
+        for (i, (layout, names)) in cases.iter().enumerate() {
+            let path = dir.path().join(format!("layout{i}.toml"));
+            std::fs::write(&path, layout).unwrap();
+            let out = dir.path().join(format!("out{i}.mcap"));
+            let o = run(&out, &["--layout", path.to_str().unwrap()]);
+            let stderr = String::from_utf8_lossy(&o.stderr);
+            assert_eq!(o.status.code(), Some(2), "case {i}: {stderr}");
+            assert!(
+                stderr.contains(names),
+                "case {i} should name {names}: {stderr}"
+            );
+            assert!(!out.exists(), "case {i} wrote {}", out.display());
+        }
+        let out = dir.path().join("both.mcap");
+        let layout = example();
+        let o = run(
+            &out,
+            &["--layout", layout.to_str().unwrap(), "--preset", "tangent"],
+        );
+        assert_eq!(o.status.code(), Some(2));
+        assert!(String::from_utf8_lossy(&o.stderr).contains("--preset"));
+        let o = run(
+            &out,
+            &[
+                "--layout",
+                layout.to_str().unwrap(),
+                "--hidden",
+                "rail_ageing:tau_s=7200",
+            ],
+        );
+        assert_eq!(o.status.code(), Some(2));
+        assert!(String::from_utf8_lossy(&o.stderr).contains("effects.rail_ageing"));
+    }
+}

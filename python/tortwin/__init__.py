@@ -264,7 +264,7 @@ def replay(
 def synth(
     out: PathLike,
     *,
-    preset: str = "curve",
+    preset: str | None = None,
     days: int = 1,
     seed: int = 1,
     hidden: Iterable[str] = (),
@@ -279,7 +279,9 @@ def synth(
     out
         The recording to write (MCAP).
     preset
-        ``"curve"`` (rails high/low, radius 400 m) or ``"tangent"``.
+        ``"curve"`` (rails high/low, radius 400 m, the default) or
+        ``"tangent"``; or give ``layout``, a line's TOML file
+        (``docs/examples/line-10km.toml``), instead.
     days
         Days of traffic.
     seed

@@ -26,6 +26,15 @@ pub struct SynthArgs {
     /// (rails left/right).
     #[cfg_attr(feature = "cli", arg(long, default_value = "curve"))]
     pub preset: Preset,
+    /// A line (docs/spec/line.md) described in a TOML file: its segments,
+    /// applicators and sites (docs/examples/line-10km.toml); it replaces
+    /// --preset, --length-m and --applicator-m, and trains run both ways
+    /// (--down-share 0.5) and may share the line.
+    #[cfg_attr(
+        feature = "cli",
+        arg(long, value_name = "FILE", conflicts_with_all = ["preset", "length_m", "applicator_m"])
+    )]
+    pub layout: Option<PathBuf>,
     /// Section length; the measurement sites (60, 210, 460 m of 600 m) scale with it.
     #[cfg_attr(feature = "cli", arg(long, default_value_t = 600.0))]
     pub length_m: f64,
@@ -166,17 +175,22 @@ fn prepare(args: &SynthArgs) -> Result<(SynthParams, ModelConfig)> {
                 args.start
             ))
         })?;
-    let mut p = SynthParams::new(args.preset, args.length_m);
+    let mut p = match &args.layout {
+        Some(path) => SynthParams::on_line(read_layout(path)?),
+        None => SynthParams::new(args.preset, args.length_m),
+    };
     p.seed = args.seed;
     p.days = args.days;
     p.start_ns = start_ns;
-    p.applicator_position_m = args.applicator_m;
+    if p.line.is_none() {
+        p.applicator_position_m = args.applicator_m;
+    }
     p.nominal_pulse_g = args.pulse_g;
     p.trains_per_day = args.trains_per_day;
     p.passenger_share = args.passenger_share;
     p.down_share = args
         .down_share
-        .unwrap_or_else(|| args.preset.default_down_share());
+        .unwrap_or_else(|| p.preset.default_down_share());
     p.min_headway_s = args.min_headway_s;
     p.pulse_every_axles = args.pulse_every_axles;
     p.pulse_delay_s = args.pulse_delay_s;
@@ -185,7 +199,9 @@ fn prepare(args: &SynthArgs) -> Result<(SynthParams, ModelConfig)> {
     p.rain_events_per_day = args.rain_events_per_day;
     p.measured_train_share = args.measured_train_share;
     p.adhesion_train_share = args.adhesion_train_share;
-    p.adhesion_site = args.adhesion_site.clone();
+    if p.line.as_ref().is_none_or(|l| l.adhesion_site.is_none()) {
+        p.adhesion_site = args.adhesion_site.clone();
+    }
     p.tribometer_per_day = args.tribometer_per_day;
     p.rail_mu_at_end = args.rail_mu_at_end;
     p.noise_sigma = args.noise_sigma;
@@ -198,6 +214,17 @@ fn prepare(args: &SynthArgs) -> Result<(SynthParams, ModelConfig)> {
     p.validate()?;
     let truth = synth::truth_config(args.truth_config.as_ref(), &args.hidden)?;
     Ok((p, truth))
+}
+
+/// The line `--layout` describes.
+fn read_layout(path: &Path) -> Result<synth::LineLayout> {
+    let text = std::fs::read_to_string(path).map_err(|source| Error::Io {
+        what: "reading the layout",
+        path: path.to_path_buf(),
+        source,
+    })?;
+    synth::LineLayout::from_toml(&text, &path.display().to_string())
+        .map_err(|e| UsageError(format!("--layout {e}")).into())
 }
 
 /// `--key`, or the recording's path with `.mcap` replaced by `.key.json`.
@@ -227,25 +254,45 @@ pub fn render(recording: &Path, key: &Path, r: &SynthReport) -> String {
         r.size_bytes as f64 / 1e6,
         key.display()
     );
-    let geometry = match p.curve_radius_m {
-        Some(radius) => format!("curve radius {radius} m"),
-        None => "tangent".to_string(),
+    let geometry = match (&p.line, p.curve_radius_m) {
+        (Some(line), _) => {
+            let ids: Vec<&str> = line.segments.iter().map(|s| s.id.as_str()).collect();
+            format!("line {}: {}", line.line_id, ids.join(" "))
+        }
+        (None, Some(radius)) => format!("curve radius {radius} m"),
+        (None, None) => "tangent".to_string(),
     };
     let sites: Vec<String> = p
         .sites
         .iter()
         .map(|s| format!("{} {} m", s.id, s.position_m))
         .collect();
+    let applicators = match &p.line {
+        Some(line) => line
+            .applicators
+            .iter()
+            .map(|a| {
+                let rails = a
+                    .rails
+                    .as_ref()
+                    .map_or_else(|| p.rails.join("/"), |r| r.join("/"));
+                let g = a.nominal_pulse_g.unwrap_or(p.nominal_pulse_g);
+                format!("{} at {} m on {rails} ({g} g)", a.id, a.position_m)
+            })
+            .collect::<Vec<_>>()
+            .join(", "),
+        None => format!(
+            "{} at {} m ({} g)",
+            p.applicator_id, p.applicator_position_m, p.nominal_pulse_g
+        ),
+    };
     let _ = writeln!(
         out,
-        "  section {}: {} m, {}, rails {}; {} at {} m ({} g); sites {}",
+        "  section {}: {} m, {}, rails {}; {applicators}; sites {}",
         p.section_id,
         p.length_m,
         geometry,
         p.rails.join("/"),
-        p.applicator_id,
-        p.applicator_position_m,
-        p.nominal_pulse_g,
         sites.join(", ")
     );
     let _ = writeln!(

@@ -21,7 +21,7 @@ use crate::event::{
     Pulse, Quantity, Section, Site, Weather,
 };
 use crate::limits::{self, Range};
-use crate::line::Line;
+use crate::line::{axle_at_ends_s, Line};
 use crate::wire::json::FromJson;
 use crate::wire::{
     AxleSegmentMsg, CreepageMsg, MeasurementMsg, PassageMsg, PerRail, PulseMsg, SectionMsg,
@@ -535,14 +535,6 @@ pub(crate) struct Decoder {
     last_axle_at_ends_s: Option<[f64; 2]>,
 }
 
-/// When an axle `offset_m` behind the front of a train that enters at
-/// `t_passage_s` reaches the line's two ends (model.md's time at a point,
-/// in its form).
-fn at_ends_s(t_passage_s: f64, up: bool, length_m: f64, offset_m: f64, speed_mps: f64) -> [f64; 2] {
-    let d_entry_m = if up { 0.0 } else { length_m };
-    [0.0, length_m].map(|x: f64| t_passage_s + ((x - d_entry_m).abs() + offset_m) / speed_mps)
-}
-
 impl Decoder {
     /// `occupied_until_s`: when the last train before this recording left
     /// the section (s from `origin_ns`; `NEG_INFINITY` for none).
@@ -678,7 +670,7 @@ impl Decoder {
             // line.md: trains may share a line as long as none catches up
             // with the one before it; speeds are constant, so the ends
             // decide (equal is allowed).
-            let front = at_ends_s(t_passage_s, up, length_m, first_offset_m, speed_mps);
+            let front = axle_at_ends_s(t_passage_s, up, length_m, first_offset_m, speed_mps);
             if let Some(end) = (0..2).find(|&k| front[k] < before[k]) {
                 return Err(DecodeError::at(
                     "log_time",
@@ -728,7 +720,7 @@ impl Decoder {
             ));
         }
         self.occupied_until_s = self.occupied_until_s.max(leaves_s);
-        self.last_axle_at_ends_s = Some(at_ends_s(
+        self.last_axle_at_ends_s = Some(axle_at_ends_s(
             t_passage_s,
             up,
             length_m,

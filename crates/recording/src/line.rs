@@ -79,6 +79,31 @@ impl Line {
     }
 }
 
+impl Line {
+    /// `msg` as the typed line of `section`, checked as the reader checks a
+    /// `/line` message (for a writer that builds one, e.g. `tortwin synth`
+    /// from a described layout); the error names the field.
+    pub fn from_message(msg: &LineMsg, section: &Section) -> Result<Line, String> {
+        decode(msg, section).map_err(|e| e.message)
+    }
+}
+
+/// When an axle `offset_m` behind the front of a train that enters at
+/// `t_passage_s` reaches the line's two ends `d = 0` and `d = L` (model.md's
+/// time at a point, in its form): the reader's rule for trains sharing a
+/// line compares these, and a writer planning trains uses the same
+/// arithmetic.
+pub fn axle_at_ends_s(
+    t_passage_s: f64,
+    up: bool,
+    length_m: f64,
+    offset_m: f64,
+    speed_mps: f64,
+) -> [f64; 2] {
+    let d_entry_m = if up { 0.0 } else { length_m };
+    [0.0, length_m].map(|x: f64| t_passage_s + ((x - d_entry_m).abs() + offset_m) / speed_mps)
+}
+
 /// The `/line` message as the typed [`Line`] of `section`.
 pub(crate) fn decode(msg: &LineMsg, section: &Section) -> Result<Line, DecodeError> {
     if section.rails.len() != 2 {

@@ -48,11 +48,14 @@
 //! truth configuration), `climate` (the weather), `traffic` (what a
 //! train is), `planner` (a day's trains, pulses, weather and
 //! measurements), `truth` (the engine runs, noise and the key's figures),
-//! `writing` (the file, through the recording crate's writer) and
-//! `report` (the key).
+//! `writing` (the file, through the recording crate's writer),
+//! `report` (the key) and `layout` (a line described segment by segment,
+//! docs/spec/line.md: loads and creepages per segment, applicators on one
+//! rail or both, trains both ways that may share the line).
 
 mod climate;
 mod hidden;
+mod layout;
 mod params;
 mod planner;
 mod report;
@@ -64,6 +67,7 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
 pub use hidden::truth_config;
+pub use layout::{LayoutApplicator, LayoutSegment, LineLayout};
 pub use params::{LocalFriction, Preset, SiteParam, SynthParams};
 pub use report::{ByQuantity, Counts, NoiseKey, RainKey, RmseKey, SynthReport};
 pub use truth::generate;

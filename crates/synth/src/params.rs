@@ -5,8 +5,9 @@
 use std::f64::consts::PI;
 use std::str::FromStr;
 
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
+use super::layout::LineLayout;
 use super::{round_dp, DAY_NS};
 use tortwin_files::usage::UsageError;
 use tortwin_recording::{Applicator, Section, Site};
@@ -19,6 +20,8 @@ pub enum Preset {
     Curve,
     /// Tangent track: rails `left` and `right`, small creepages.
     Tangent,
+    /// A line described by a layout file (`--layout`, line.md).
+    Line,
 }
 
 impl FromStr for Preset {
@@ -39,6 +42,7 @@ impl Preset {
         match self {
             Preset::Curve => "curve",
             Preset::Tangent => "tangent",
+            Preset::Line => "line",
         }
     }
 
@@ -48,12 +52,14 @@ impl Preset {
         match self {
             Preset::Curve => 0.0,
             Preset::Tangent => 0.4,
+            Preset::Line => 0.5,
         }
     }
 }
 
 /// A measurement site of the generated section.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct SiteParam {
     pub id: String,
     pub position_m: f64,
@@ -110,6 +116,10 @@ pub struct SynthParams {
     pub outlier_share: f64,
     /// Friction changed at one site for a while, outside every model term.
     pub local_friction: Vec<LocalFriction>,
+    /// A line (`--layout`): its segments, applicators and sites, which
+    /// replace the preset's geometry, applicator A1 and sites.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub line: Option<LineLayout>,
 }
 
 /// Friction at one measurement site changed by `delta` for `hours` from
@@ -144,7 +154,8 @@ impl SynthParams {
                 Some(400.0),
                 0.10,
             ),
-            Preset::Tangent => (
+            // A line's own rails and id replace these (`on_line`).
+            Preset::Tangent | Preset::Line => (
                 format!("tangent-{}", round_dp(length_m, 1.0)),
                 vec!["left".to_string(), "right".to_string()],
                 None,
@@ -193,7 +204,33 @@ impl SynthParams {
             noise_sigma: 0.01,
             outlier_share: 0.0,
             local_friction: Vec::new(),
+            line: None,
         }
+    }
+
+    /// The defaults on the line `layout` describes: its rails, segments,
+    /// applicators and sites; trains both ways in equal shares.
+    pub fn on_line(layout: LineLayout) -> Self {
+        let mut p = SynthParams::new(Preset::Line, layout.length_m());
+        p.section_id = layout.line_id.clone();
+        p.rails = layout.rails.clone();
+        p.curve_radius_m = None;
+        p.cant_m = 0.0;
+        p.sites = layout.sites.clone();
+        if let Some(site) = &layout.adhesion_site {
+            p.adhesion_site = site.clone();
+        }
+        p.line = Some(layout);
+        p
+    }
+
+    /// Applicator `a`'s nominal pulse mass, g.
+    pub(crate) fn nominal_pulse_g(&self, a: usize) -> f64 {
+        self.line
+            .as_ref()
+            .and_then(|l| l.applicators.get(a))
+            .and_then(|app| app.nominal_pulse_g)
+            .unwrap_or(self.nominal_pulse_g)
     }
 
     /// The recording's end: `days` after the start (exclusive).
@@ -242,6 +279,9 @@ impl SynthParams {
                 "few enough to end before 2262 from the start",
             );
         }
+        if let Some(layout) = &self.line {
+            layout.validate().map_err(|e| UsageError(layout.error(e)))?;
+        }
         if !(self.length_m.is_finite() && self.length_m > 0.0) {
             return bad("--length-m", &self.length_m, "finite and > 0");
         }
@@ -258,7 +298,11 @@ impl SynthParams {
                 ),
             );
         }
-        if !(0.0..=self.length_m).contains(&self.applicator_position_m) {
+        if let Some(layout) = &self.line {
+            layout
+                .line(&self.section())
+                .map_err(|e| UsageError(layout.error(e)))?;
+        } else if !(0.0..=self.length_m).contains(&self.applicator_position_m) {
             return bad(
                 "--applicator-m",
                 &self.applicator_position_m,
@@ -270,8 +314,12 @@ impl SynthParams {
         }
         for site in &self.sites {
             if !(0.0..=self.length_m).contains(&site.position_m) {
+                let layout = self
+                    .line
+                    .as_ref()
+                    .map_or_else(String::new, |l| format!("--layout {}: ", l.source));
                 return bad(
-                    &format!("site {} position", site.id),
+                    &format!("{layout}site {} position", site.id),
                     &site.position_m,
                     "inside the section",
                 );
@@ -357,6 +405,32 @@ impl SynthParams {
 
     /// The `/section` the recording describes, as the reader will type it.
     pub(crate) fn section(&self) -> Section {
+        if let Some(layout) = &self.line {
+            let rail = |name: &String| self.rails.iter().position(|r| r == name);
+            return Section {
+                section_id: self.section_id.clone(),
+                length_m: self.length_m,
+                rails: self.rails.clone(),
+                curve_radius_m: None,
+                rail_head_radius_m: self.rail_head_radius_m,
+                nominal_wheel_diameter_m: self.nominal_wheel_diameter_m,
+                applicators: layout
+                    .applicators
+                    .iter()
+                    .enumerate()
+                    .map(|(a, app)| Applicator {
+                        id: app.id.clone(),
+                        position_m: app.position_m,
+                        rails: match &app.rails {
+                            Some(names) => names.iter().filter_map(rail).collect(),
+                            None => (0..self.rails.len()).collect(),
+                        },
+                        nominal_pulse_kg: self.nominal_pulse_g(a) * 1e-3,
+                    })
+                    .collect(),
+                sites: self.sites(),
+            };
+        }
         Section {
             section_id: self.section_id.clone(),
             length_m: self.length_m,
@@ -371,14 +445,17 @@ impl SynthParams {
                 // The reader's conversion, so that replay and truth agree.
                 nominal_pulse_kg: self.nominal_pulse_g * 1e-3,
             }],
-            sites: self
-                .sites
-                .iter()
-                .map(|s| Site {
-                    id: s.id.clone(),
-                    position_m: s.position_m,
-                })
-                .collect(),
+            sites: self.sites(),
         }
+    }
+
+    fn sites(&self) -> Vec<Site> {
+        self.sites
+            .iter()
+            .map(|s| Site {
+                id: s.id.clone(),
+                position_m: s.position_m,
+            })
+            .collect()
     }
 }

@@ -1,6 +1,8 @@
 //! Planning a day: trains at random times in the service hours (one in the
-//! section at a time, a headway between them), the pulses the applicator's
-//! axle counter triggers, the weather messages, and the measurements (every
+//! section at a time, a headway between them; on a line a train may enter
+//! while another is on it, as long as it does not catch up with it, the
+//! headway kept at both ends), the pulses the applicators' axle counter
+//! triggers, the weather messages, and the measurements (every
 //! axle of a share of the trains at every site and rail, adhesion at one
 //! site for some of them, tribometer readings between trains). The typed
 //! events are built from the values as they will be written, with the
@@ -10,12 +12,14 @@ use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 
 use super::climate::Climate;
+use super::layout::Bend;
 use super::params::SynthParams;
 use super::traffic::{creepages, freight_consist, passenger_consist, TrainKind, TrainPlan};
 use super::{round_dp, stream, uniform, Stream, DAY_NS, HOUR_NS, NS_PER_S};
+use tortwin_recording::line::axle_at_ends_s;
 use tortwin_recording::{
-    Axle, AxleRef, BogiePosition, Direction, EventKind, Measured, Measurement, Passage, Pulse,
-    Quantity, Section,
+    Axle, AxleRef, AxleSegment, BogiePosition, Direction, EventKind, Measured, Measurement,
+    Passage, Pulse, Quantity, Section,
 };
 
 /// Standard gravity, m/s², for the cant deficiency of a curve.
@@ -57,6 +61,8 @@ pub(super) struct Day {
 pub(super) struct Planner<'p> {
     p: &'p SynthParams,
     section: Section,
+    /// A line's segments that are not tangent (none on a section).
+    bends: Vec<Bend>,
     traffic: ChaCha8Rng,
     weather_rng: ChaCha8Rng,
     tribometer: ChaCha8Rng,
@@ -66,17 +72,21 @@ pub(super) struct Planner<'p> {
     /// The last train's passage time and the end of its occupation, as the
     /// reader computes them (s from the origin).
     last_train_s: Option<(f64, f64)>,
+    /// On a line: when the last train's last axle reaches `d = 0` and
+    /// `d = L`, s from the origin (the reader's rule for sharing a line).
+    last_axle_at_ends_s: Option<[f64; 2]>,
     next_weather: u64,
     seq: u64,
 }
 
 impl<'p> Planner<'p> {
-    pub(super) fn new(p: &'p SynthParams, section: Section) -> Self {
+    pub(super) fn new(p: &'p SynthParams, section: Section, bends: Vec<Bend>) -> Self {
         let mut weather_rng = stream(p.seed, Stream::Weather);
         let climate = Climate::new(p, &mut weather_rng);
         Planner {
             p,
             section,
+            bends,
             traffic: stream(p.seed, Stream::Traffic),
             weather_rng,
             tribometer: stream(p.seed, Stream::Tribometer),
@@ -84,6 +94,7 @@ impl<'p> Planner<'p> {
             next_train_seq: 0,
             axles_counted: 0,
             last_train_s: None,
+            last_axle_at_ends_s: None,
             next_weather: 0,
             seq: 0,
         }
@@ -210,20 +221,15 @@ impl<'p> Planner<'p> {
         let measured = rng.random_bool(p.measured_train_share);
         let adhesion = measured && rng.random_bool(p.adhesion_train_share);
 
-        // Above the balance speed of the curve the high rail carries more:
-        // load transfer ~ unbalanced lateral acceleration × centre of
-        // gravity height / half the rail spacing, here 12 % per m/s².
+        // Above the balance speed of the curve the high rail carries more.
         let load_shift = match p.curve_radius_m {
-            Some(radius_m) => {
-                let unbalanced_mps2 =
-                    speed_mps * speed_mps / radius_m - G_MPS2 * p.cant_m / RAIL_SPACING_M;
-                (0.12 * unbalanced_mps2).clamp(-0.12, 0.25)
-            }
+            Some(radius_m) => load_shift_at(speed_mps, radius_m, p.cant_m),
             None => 0.0,
         };
         let rails = p.rails.len();
         let mut axles = Vec::new();
         let mut load_kn = Vec::new();
+        let mut segment_load_kn = Vec::new();
         let mut front_m = 0.0;
         for vehicle in &consist {
             let overhang_m =
@@ -241,26 +247,52 @@ impl<'p> Planner<'p> {
                 let axle_load_kn = vehicle.wheel_load_kn * (1.0 + uniform(rng, -0.03, 0.03));
                 let creepage = creepages(rng, p.curve_radius_m, bogie_position);
                 let wheel_diameter_m = round_dp(uniform(rng, 0.84, 0.96), 1e3);
-                let mut wheel_load_n = Vec::with_capacity(rails);
-                for rail in 0..rails {
-                    let side = if rail == 0 { 1.0 } else { -1.0 };
-                    let kn = round_dp(
-                        axle_load_kn
-                            * (1.0 + side * load_shift)
-                            * (1.0 + uniform(rng, -0.01, 0.01)),
-                        10.0,
-                    );
-                    load_kn.push(kn);
-                    // The reader's kN -> N conversion, exactly.
-                    wheel_load_n.push(kn * 1e3);
+                let loads = |rng: &mut ChaCha8Rng, shift_to_first: f64| {
+                    (0..rails)
+                        .map(|rail| {
+                            let side = if rail == 0 { 1.0 } else { -1.0 };
+                            round_dp(
+                                axle_load_kn
+                                    * (1.0 + side * shift_to_first)
+                                    * (1.0 + uniform(rng, -0.01, 0.01)),
+                                10.0,
+                            )
+                        })
+                        .collect::<Vec<f64>>()
+                };
+                let kn = loads(rng, load_shift);
+                // The reader's kN -> N conversion, exactly.
+                let wheel_load_n = kn.iter().map(|kn| kn * 1e3).collect();
+                load_kn.extend(kn);
+                // A line's curves and transitions: the outer rail's load
+                // and creepage first, as on the section's curve.
+                let mut segments = Vec::with_capacity(self.bends.len());
+                let mut kn_per_segment = Vec::with_capacity(self.bends.len());
+                for bend in &self.bends {
+                    let c = creepages(rng, Some(bend.radius_m), bogie_position);
+                    let outer = bend.high_rail;
+                    let shift = load_shift_at(speed_mps, bend.radius_m, bend.cant_m);
+                    let kn = loads(rng, if outer == 0 { shift } else { -shift });
+                    let creepage = if outer == 0 {
+                        vec![c[0], c[1]]
+                    } else {
+                        vec![c[1], c[0]]
+                    };
+                    segments.push(AxleSegment {
+                        segment: bend.segment,
+                        wheel_load_n: Some(kn.iter().map(|kn| kn * 1e3).collect()),
+                        creepage: Some(creepage),
+                    });
+                    kn_per_segment.push(kn);
                 }
+                segment_load_kn.push(kn_per_segment);
                 axles.push(Axle {
                     offset_m: round_dp(front_m + overhang_m + at_m, 100.0),
                     bogie_position,
                     wheel_diameter_m,
                     wheel_load_n,
                     creepage: creepage[..rails.min(2)].to_vec(),
-                    segments: Vec::new(),
+                    segments,
                 });
             }
             front_m += vehicle.length_m;
@@ -269,9 +301,28 @@ impl<'p> Planner<'p> {
         let occupation_s = (p.length_m + last_offset_m) / speed_mps;
 
         // Earliest entry: as drawn, or the previous train's exit plus the
-        // headway, checked with the reader's own arithmetic.
+        // headway (on a line: its last axle at either end plus the headway
+        // before this one's first axle gets there), checked with the
+        // reader's own arithmetic.
         let mut log_time_ns = drawn_ns;
-        if let Some((_, occupied_until_s)) = self.last_train_s {
+        let up = direction == Direction::Up;
+        let first_offset_m = axles.first().map_or(0.0, |a| a.offset_m);
+        let front_at_ends =
+            |t_s: f64| axle_at_ends_s(t_s, up, p.length_m, first_offset_m, speed_mps);
+        if let (Some(before), true) = (self.last_axle_at_ends_s, p.line.is_some()) {
+            let kept = |t_s: f64| {
+                let front = front_at_ends(t_s);
+                (0..2).all(|k| front[k] >= before[k] + p.min_headway_s)
+            };
+            let lead_s = (0..2)
+                .map(|k| before[k] + p.min_headway_s - (front_at_ends(0.0)[k]))
+                .fold(f64::NEG_INFINITY, f64::max);
+            let earliest_ns = p.start_ns + (lead_s * NS_PER_S).ceil().max(0.0) as u64;
+            log_time_ns = log_time_ns.max(earliest_ns);
+            while !kept(self.time_s(log_time_ns)) {
+                log_time_ns += 1;
+            }
+        } else if let Some((_, occupied_until_s)) = self.last_train_s {
             let earliest_s = occupied_until_s + p.min_headway_s;
             let earliest_ns = p.start_ns + (earliest_s * NS_PER_S).ceil().max(0.0) as u64;
             log_time_ns = log_time_ns.max(earliest_ns);
@@ -285,6 +336,13 @@ impl<'p> Planner<'p> {
         }
         let t_s = self.time_s(log_time_ns);
         self.last_train_s = Some((t_s, t_s + occupation_s));
+        self.last_axle_at_ends_s = Some(axle_at_ends_s(
+            t_s,
+            up,
+            p.length_m,
+            last_offset_m,
+            speed_mps,
+        ));
 
         let train_seq = self.next_train_seq;
         self.next_train_seq += 1;
@@ -302,6 +360,7 @@ impl<'p> Planner<'p> {
                 axles,
             },
             load_kn,
+            segment_load_kn,
             log_time_ns,
             measured,
             adhesion,
@@ -326,21 +385,27 @@ impl<'p> Planner<'p> {
             {
                 continue;
             }
-            let at_ns = self.axle_time_ns(train, axle.offset_m, p.applicator_position_m) + delay_ns;
-            for rail in 0..p.rails.len() {
-                let jitter = uniform(&mut self.traffic, -p.pulse_mass_jitter, p.pulse_mass_jitter);
-                let mass_g = round_dp(p.nominal_pulse_g * (1.0 + jitter), 1e4);
-                self.push(
-                    items,
-                    at_ns,
-                    EventKind::Pulse(Pulse {
-                        applicator: 0,
-                        rail,
-                        mass_kg: mass_g * 1e-3,
-                    }),
-                );
-                if let Some(last) = items.last_mut() {
-                    last.pulse_mass_g = Some(mass_g);
+            for applicator in 0..self.section.applicators.len() {
+                let position_m = self.section.applicators[applicator].position_m;
+                let at_ns = self.axle_time_ns(train, axle.offset_m, position_m) + delay_ns;
+                let nominal_g = p.nominal_pulse_g(applicator);
+                for r in 0..self.section.applicators[applicator].rails.len() {
+                    let rail = self.section.applicators[applicator].rails[r];
+                    let jitter =
+                        uniform(&mut self.traffic, -p.pulse_mass_jitter, p.pulse_mass_jitter);
+                    let mass_g = round_dp(nominal_g * (1.0 + jitter), 1e4);
+                    self.push(
+                        items,
+                        at_ns,
+                        EventKind::Pulse(Pulse {
+                            applicator,
+                            rail,
+                            mass_kg: mass_g * 1e-3,
+                        }),
+                    );
+                    if let Some(last) = items.last_mut() {
+                        last.pulse_mass_g = Some(mass_g);
+                    }
                 }
             }
         }
@@ -460,4 +525,13 @@ impl<'p> Planner<'p> {
             }
         }
     }
+}
+
+/// The share of an axle's load moved to a curve's outer rail at
+/// `speed_mps`: above the balance speed the high rail carries more, load
+/// transfer ~ unbalanced lateral acceleration × centre of gravity height /
+/// half the rail spacing, here 12 % per m/s².
+fn load_shift_at(speed_mps: f64, radius_m: f64, cant_m: f64) -> f64 {
+    let unbalanced_mps2 = speed_mps * speed_mps / radius_m - G_MPS2 * cant_m / RAIL_SPACING_M;
+    (0.12 * unbalanced_mps2).clamp(-0.12, 0.25)
 }

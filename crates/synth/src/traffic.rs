@@ -102,6 +102,9 @@ pub(super) struct TrainPlan {
     pub(super) passage: Passage,
     /// Wheel loads as written, kN: `[axle * rails + rail]`.
     pub(super) load_kn: Vec<f64>,
+    /// On a line, per axle, the loads as written in each of its
+    /// `segments` entries (in their order), kN per rail.
+    pub(super) segment_load_kn: Vec<Vec<Vec<f64>>>,
     pub(super) log_time_ns: u64,
     pub(super) measured: bool,
     pub(super) adhesion: bool,

@@ -20,6 +20,7 @@ use super::writing::{self, SynthFile};
 use super::{round_dp, stream, utc, Stream, GENERATOR, HOUR_NS};
 use tortwin_engine::sink::{MeasurementOutput, Sink};
 use tortwin_engine::{Engine, EngineOptions};
+use tortwin_files::usage::UsageError;
 use tortwin_model::config::ModelConfig;
 use tortwin_recording::wire::{MeasurementMsg, PulseMsg};
 use tortwin_recording::{Direction, Event, EventKind, Quantity};
@@ -42,21 +43,37 @@ pub fn generate(
         &section,
         "truth configuration",
     )?;
-    let mut truth_engine = Engine::new(
+    let line = match &params.line {
+        Some(layout) => {
+            let line = layout
+                .line(&section)
+                .map_err(|e| UsageError(layout.error(e)))?;
+            tortwin_engine::line::check_config(truth, "the truth (--truth-config, --hidden)")?;
+            Some(line)
+        }
+        None => None,
+    };
+    let bends = match (&params.line, &line) {
+        (Some(layout), Some(line)) => layout.bends(line),
+        _ => Vec::new(),
+    };
+    let mut truth_engine = Engine::on_line(
         section.clone(),
+        line.clone(),
         truth.clone(),
         EngineOptions::default(),
         origin_ns,
     );
-    let mut baseline_engine = Engine::new(
+    let mut baseline_engine = Engine::on_line(
         section.clone(),
+        line.clone(),
         ModelConfig::default(),
         EngineOptions::default(),
         origin_ns,
     );
     let grid = truth_engine.grid().clone();
 
-    let mut planner = Planner::new(params, section.clone());
+    let mut planner = Planner::new(params, section.clone(), bends);
     let mut file = SynthFile::create(out, params)?;
     let mut counts = Counts::default();
     let mut stats = Residuals::default();
@@ -71,6 +88,9 @@ pub fn generate(
     let mut at_end: Vec<(u64, MeasurementMsg, bool)> = Vec::new();
 
     file.write(params.start_ns, &writing::section_msg(&section, params))?;
+    if let Some(layout) = &params.line {
+        file.write(params.start_ns, &layout.line_msg())?;
+    }
     let days = planner.days();
     let n_days = days.len() as u64;
     progress.stage_of("simulating the traffic, day by day", n_days);
@@ -117,7 +137,7 @@ pub fn generate(
                     counts.measured_trains += u64::from(train.measured);
                     file.write(
                         item.log_time_ns,
-                        &writing::passage_msg(train, &section.rails),
+                        &writing::passage_msg(train, &section.rails, line.as_ref())?,
                     )?;
                 }
                 EventKind::Pulse(pulse) => {
@@ -128,7 +148,7 @@ pub fn generate(
                     file.write(
                         item.log_time_ns,
                         &PulseMsg {
-                            applicator_id: params.applicator_id.clone(),
+                            applicator_id: section.applicators[pulse.applicator].id.clone(),
                             rail: section.rails[pulse.rail].clone(),
                             mass_g,
                         },

@@ -13,11 +13,12 @@ use super::params::SynthParams;
 use super::traffic::TrainPlan;
 use super::GENERATOR;
 use tortwin_outputs::files::PartialFile;
+use tortwin_recording::line::Line;
 use tortwin_recording::wire::{
-    ApplicatorMsg, AxleMsg, CreepageMsg, MeasurementMsg, PassageMsg, PerRail, SectionMsg, SiteMsg,
-    WeatherMsg, WireMessage,
+    ApplicatorMsg, AxleMsg, AxleSegmentMsg, CreepageMsg, MeasurementMsg, PassageMsg, PerRail,
+    SectionMsg, SiteMsg, WeatherMsg, WireMessage,
 };
-use tortwin_recording::{Measurement, RecordingWriter, Section, Weather};
+use tortwin_recording::{Creepage, Measurement, RecordingWriter, Section, Weather};
 use tortwin_study::{Error, Result};
 
 /// Writes the recording under `.NAME.partial-XXXXXX` and renames it into
@@ -115,12 +116,13 @@ pub(super) fn section_msg(s: &Section, p: &SynthParams) -> SectionMsg {
         applicators: s
             .applicators
             .iter()
-            .map(|a| ApplicatorMsg {
+            .enumerate()
+            .map(|(k, a)| ApplicatorMsg {
                 id: a.id.clone(),
                 position_m: a.position_m,
                 rails: a.rails.iter().map(|&r| s.rails[r].clone()).collect(),
                 // The grams the section's kg were converted from.
-                nominal_pulse_g: p.nominal_pulse_g,
+                nominal_pulse_g: p.nominal_pulse_g(k),
             })
             .collect(),
         measurement_sites: s
@@ -134,11 +136,32 @@ pub(super) fn section_msg(s: &Section, p: &SynthParams) -> SectionMsg {
     }
 }
 
-/// A planned train's `/train/passage`, its wheel loads in kN as drawn.
-pub(super) fn passage_msg(train: &TrainPlan, rails: &[String]) -> PassageMsg {
+/// A planned train's `/train/passage`, its wheel loads in kN as drawn; on
+/// `line`, each axle's loads and creepages per segment in its field
+/// `segments`.
+pub(super) fn passage_msg(
+    train: &TrainPlan,
+    rails: &[String],
+    line: Option<&Line>,
+) -> Result<PassageMsg> {
+    let per_rail_creepage = |c: &[Creepage]| {
+        PerRail(
+            rails
+                .iter()
+                .cloned()
+                .zip(c.iter().map(|c| CreepageMsg {
+                    cx: c.cx,
+                    cy: c.cy,
+                    spin_per_m: c.spin_per_m,
+                }))
+                .collect(),
+        )
+    };
+    let per_rail_load =
+        |kn: &[f64]| PerRail(rails.iter().cloned().zip(kn.iter().copied()).collect());
     let n = rails.len();
     let passage = &train.passage;
-    PassageMsg {
+    Ok(PassageMsg {
         train_id: passage.train_id.clone(),
         direction: passage.direction,
         speed_mps: passage.speed_mps,
@@ -147,32 +170,38 @@ pub(super) fn passage_msg(train: &TrainPlan, rails: &[String]) -> PassageMsg {
             .axles
             .iter()
             .enumerate()
-            .map(|(i, a)| AxleMsg {
-                offset_m: a.offset_m,
-                bogie_position: a.bogie_position,
-                wheel_diameter_m: a.wheel_diameter_m,
-                wheel_load_kn: PerRail(
-                    rails
-                        .iter()
-                        .cloned()
-                        .zip(train.load_kn[i * n..(i + 1) * n].iter().copied())
-                        .collect(),
-                ),
-                creepage: PerRail(
-                    rails
-                        .iter()
-                        .cloned()
-                        .zip(a.creepage.iter().map(|c| CreepageMsg {
-                            cx: c.cx,
-                            cy: c.cy,
-                            spin_per_m: c.spin_per_m,
-                        }))
-                        .collect(),
-                ),
-                segments: None,
+            .map(|(i, a)| {
+                Ok(AxleMsg {
+                    offset_m: a.offset_m,
+                    bogie_position: a.bogie_position,
+                    wheel_diameter_m: a.wheel_diameter_m,
+                    wheel_load_kn: per_rail_load(&train.load_kn[i * n..(i + 1) * n]),
+                    creepage: per_rail_creepage(&a.creepage),
+                    segments: line
+                        .filter(|_| !a.segments.is_empty())
+                        .map(|line| {
+                            let entries = a
+                                .segments
+                                .iter()
+                                .zip(&train.segment_load_kn[i])
+                                .map(|(s, kn)| {
+                                    let entry = AxleSegmentMsg {
+                                        wheel_load_kn: Some(per_rail_load(kn)),
+                                        creepage: s.creepage.as_deref().map(per_rail_creepage),
+                                    };
+                                    (line.segments[s.segment].id.clone(), entry)
+                                })
+                                .collect();
+                            serde_json::to_value(PerRail(entries)).map_err(|source| Error::Json {
+                                what: "an axle's segments",
+                                source,
+                            })
+                        })
+                        .transpose()?,
+                })
             })
-            .collect(),
-    }
+            .collect::<Result<_>>()?,
+    })
 }
 
 pub(super) fn weather_msg(w: &Weather) -> WeatherMsg {
