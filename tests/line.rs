@@ -930,6 +930,63 @@ mod synth {
         assert_replayed_truth(&out);
     }
 
+    /// Replays `path` as its line with `opts`.
+    fn run_with(path: &Path, opts: EngineOptions) -> (Recorder, String, f64) {
+        let reader = RecordingReader::open(path, ReaderContext::default()).unwrap();
+        let mut engine = Engine::on_line(
+            reader.section().clone(),
+            reader.line().cloned(),
+            ModelConfig::default(),
+            opts,
+            reader.origin_ns(),
+        );
+        let mut rec = Recorder::default();
+        for event in reader {
+            engine.push(event.unwrap(), &mut rec).unwrap();
+        }
+        let summary = engine.finish(&mut rec, 0).unwrap();
+        let state = serde_json::to_string(&engine.state()).unwrap();
+        (rec, state, summary.mass_balance.consumed_kg)
+    }
+
+    /// Four wheels of a rail at once (the wavefront, each wheel on its
+    /// row's bands) are the wheels one at a time, bit for bit, on the
+    /// example line: curves of both hands, transitions, a one-rail
+    /// applicator, trains both ways and sharing the line. A field snapshot
+    /// after every wheel makes the engine roll one wheel at a time.
+    #[test]
+    fn four_wheels_at_once_are_one_wheel_at_a_time_on_a_line() {
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("wave.mcap");
+        let layout = example();
+        let o = run(
+            &out,
+            &[
+                "--layout",
+                layout.to_str().unwrap(),
+                "--trains-per-day",
+                "40",
+                "--min-headway-s",
+                "30",
+                "--measured-train-share",
+                "0.5",
+                "--seed",
+                "9",
+            ],
+        );
+        common::check(&o, "synth --layout");
+        let (wave, wave_state, wave_consumed) = run_with(&out, EngineOptions::default());
+        let one_at_a_time = EngineOptions {
+            snapshot_every_wheel: true,
+            ..EngineOptions::default()
+        };
+        let (serial, serial_state, serial_consumed) = run_with(&out, one_at_a_time);
+        assert!(wave.measurements.len() > 10_000);
+        assert_eq!(bits(&wave.simulated()), bits(&serial.simulated()));
+        assert_eq!(wave_state, serial_state, "the state after the day");
+        assert_eq!(wave_consumed.to_bits(), serial_consumed.to_bits());
+    }
+
     /// A layout the reader would refuse, or one with a key the generator
     /// does not know, is a usage error naming the key; nothing is written.
     #[test]

@@ -1175,11 +1175,14 @@ impl RollContext<'_> {
                 if !is.iter().any(|&i| special[i]) {
                     // Compiled three times: without tangents nothing of them
                     // is left; without effect slots only the constants'.
+                    let one = (std::slice::from_mut(state), std::slice::from_mut(work));
+                    let (states, works) = one;
                     let seen = match self.tangent_width {
-                        0 => self.contacts4::<0>(&mut lanes, state, work, is, v),
-                        tangent::STATE_SLOTS => self
-                            .contacts4::<{ tangent::STATE_SLOTS }>(&mut lanes, state, work, is, v),
-                        _ => self.contacts4::<SLOTS>(&mut lanes, state, work, is, v),
+                        0 => self.contacts4::<0>(&mut lanes, states, works, [0; LANES], is, v),
+                        tangent::STATE_SLOTS => self.contacts4::<{ tangent::STATE_SLOTS }>(
+                            &mut lanes, states, works, [0; LANES], is, v,
+                        ),
+                        _ => self.contacts4::<SLOTS>(&mut lanes, states, works, [0; LANES], is, v),
                     };
                     if self.keep_seen {
                         for (lane, (&i, &m)) in lanes.iter().zip(is.iter().zip(&seen)) {
@@ -1280,7 +1283,8 @@ impl RollContext<'_> {
     fn touches4(
         &self,
         lanes: &[Lane; LANES],
-        state: &TrackState,
+        states: &[TrackState],
+        tracks: [usize; LANES],
         is: [usize; LANES],
         div4: impl Div4,
     ) -> [Touch<'_>; LANES] {
@@ -1299,7 +1303,7 @@ impl RollContext<'_> {
         );
         let touch = |j: usize| {
             let precip_mm = parts[j].map_or(0.0, |(at_since, _)| at_since + rises[j]);
-            r(j).touch_at(state, t[j], weather[j], precip_mm, is[j])
+            r(j).touch_at(&states[tracks[j]], t[j], weather[j], precip_mm, is[j])
         };
         // Written out, not `from_fn`: the compiler outlines that helper for
         // a `Touch` array, and an outlined call loses this function's AVX2
@@ -1312,22 +1316,25 @@ impl RollContext<'_> {
     /// distinct points `is`: the phases of [`Roller::contact`] lane by
     /// lane, with each phase's exponentials taken for the four lanes at
     /// once ([`exp4`]; bit for bit `f64::exp` with glibc on an FMA CPU).
+    /// Lane j's contact is on track `tracks[j]` of `states` and `works`
+    /// (a section's one track; a line's rail band of the lane's row).
     #[inline(always)]
     fn contacts4<const W: usize>(
         &self,
         lanes: &mut [Lane; LANES],
-        state: &mut TrackState,
-        work: &mut TrackWork,
+        states: &mut [TrackState],
+        works: &mut [TrackWork],
+        tracks: [usize; LANES],
         is: [usize; LANES],
         v: Vector<impl Exp4, impl Div4>,
     ) -> [f64; LANES] {
         let exp4 = v.exp;
-        let mut touches = self.touches4(lanes, state, is, v.div);
+        let mut touches = self.touches4(lanes, states, tracks, is, v.div);
         // With tangents: the rail masses' tangents, aged with them.
         let mut dr: [Tangent; LANES] = [[0.0; SLOTS]; LANES];
         if W > 0 {
-            for (d, &i) in dr.iter_mut().zip(&is) {
-                *d = work.rail_tan[i];
+            for (j, (d, &i)) in dr.iter_mut().zip(&is).enumerate() {
+                *d = works[tracks[j]].rail_tan[i];
             }
         }
         if touches.iter().any(|t| t.aged) {
@@ -1353,8 +1360,8 @@ impl RollContext<'_> {
                 }
             }
         }
-        for (lane, (touch, &i)) in lanes.iter().zip(touches.iter().zip(&is)) {
-            lane.roller.touched(state, touch, i);
+        for (j, (lane, (touch, &i))) in lanes.iter().zip(touches.iter().zip(&is)).enumerate() {
+            lane.roller.touched(&mut states[tracks[j]], touch, i);
         }
         let conditions: [ContactConditions; LANES] = std::array::from_fn(|j| {
             lanes[j]
@@ -1369,6 +1376,7 @@ impl RollContext<'_> {
         let mut seen = [0.0; LANES];
         for (j, lane) in lanes.iter_mut().enumerate() {
             let exps = [transfer[j], consumption[j]];
+            let (state, work) = (&mut states[tracks[j]], &mut works[tracks[j]]);
             seen[j] = if W > 0 {
                 lane.roller.finish_tangent::<W, false>(
                     &mut lane.st,

@@ -8,9 +8,11 @@
 //! band in `WheelRoll::wheel_kg` for its duration and `fp fc` of the
 //! point's segment: a line of one tangent is the section bit for bit.
 
+#[cfg(target_arch = "x86_64")]
+use super::{div4_avx, exp4_inline, exp4_is_vectorised};
 use super::{
-    Engine, EngineError, Lane, RollContext, SiteValue, TrackState, TrackWork, TrainRecord,
-    NO_APPLICATOR, NO_AXLE, PARALLEL_MIN_CONTACTS,
+    Div4, Engine, EngineError, Exp4, Lane, RollContext, SiteValue, TrackState, TrackWork,
+    TrainRecord, Vector, LANES, NO_APPLICATOR, NO_AXLE, PARALLEL_MIN_CONTACTS,
 };
 use crate::line::RAIL_BANDS;
 use crate::sink::Sink;
@@ -215,9 +217,11 @@ impl Engine {
 }
 
 impl RollContext<'_> {
-    /// The wheels of `axles` on `rail` of a line, one after the other over
-    /// every point of their path; `states` and `works` are the rail's
-    /// tracks (crown, gauge corner).
+    /// The wheels of `axles` on `rail` of a line, in axle order, [`LANES`]
+    /// at a time in a wavefront as on a section ([`RollContext::roll_group`]);
+    /// with tangents (never asked for on a line today) one after the
+    /// other. `states` and `works` are the rail's tracks (crown, gauge
+    /// corner).
     pub(super) fn roll_rail_line(
         &self,
         record: &TrainRecord,
@@ -227,11 +231,179 @@ impl RollContext<'_> {
         works: &mut [TrackWork],
     ) {
         let points = self.d_m.len();
-        for a in axles {
-            let mut lane = self.line_lane(record, rail, a);
-            self.roll_wheel_line(record, rail, &mut lane, 0..points, states, works);
-            self.finish_line_lane(&mut lane, states, works);
+        if self.tangent_width > 0 {
+            for a in axles {
+                let mut lane = self.line_lane(record, rail, a);
+                self.roll_wheel_line(record, rail, &mut lane, 0..points, states, works);
+                self.finish_line_lane(&mut lane, states, works);
+            }
+            return;
         }
+        let mut first = axles.start;
+        while first < axles.end {
+            let group = first..axles.end.min(first + LANES);
+            first = group.end;
+            #[cfg(target_arch = "x86_64")]
+            if !self.portable && exp4_is_vectorised() {
+                // SAFETY: the CPU has AVX2 and FMA.
+                unsafe { self.roll_group_line_fma(record, rail, group, states, works) };
+                continue;
+            }
+            let v = Vector {
+                exp: |x: [f64; LANES]| x.map(f64::exp),
+                div: |a: [f64; LANES], b: [f64; LANES]| std::array::from_fn(|j| a[j] / b[j]),
+            };
+            self.roll_group_line_with(record, rail, group, states, works, v);
+        }
+    }
+
+    /// [`RollContext::roll_group_line_with`] compiled for AVX2 and FMA, as
+    /// [`RollContext::roll_group`]'s.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    fn roll_group_line_fma(
+        &self,
+        record: &TrainRecord,
+        rail: usize,
+        axles: std::ops::Range<usize>,
+        states: &mut [TrackState],
+        works: &mut [TrackWork],
+    ) {
+        let v = Vector {
+            // SAFETY: this function runs only on a CPU with AVX2 and FMA.
+            exp: |x| unsafe { exp4_inline(x) },
+            // SAFETY: as above.
+            div: |a, b| unsafe { div4_avx(a, b) },
+        };
+        self.roll_group_line_with(record, rail, axles, states, works, v);
+    }
+
+    /// The wheels of `axles` (at most [`LANES`] consecutive axles) on
+    /// `rail` as a wavefront: at step s, wheel j is at step s - j of its
+    /// path, so every point sees the wheels in axle order, and each wheel's
+    /// contact there is on its row's bands, which depend on the point and
+    /// the wheel's bogie position alone. Four ordinary contacts run as
+    /// [`RollContext::contacts4`] on the four lanes' rail bands; a step
+    /// with a special point among its four runs lane by lane
+    /// ([`RollContext::step_line`]), as does a group's start and end.
+    #[inline(always)]
+    fn roll_group_line_with(
+        &self,
+        record: &TrainRecord,
+        rail: usize,
+        axles: std::ops::Range<usize>,
+        states: &mut [TrackState],
+        works: &mut [TrackWork],
+        v: Vector<impl Exp4, impl Div4>,
+    ) {
+        let Some(layout) = self.line else {
+            return;
+        };
+        let n = axles.len();
+        debug_assert!((1..=LANES).contains(&n));
+        let points = self.d_m.len();
+        let up = enters_at_zero(record.passage.direction);
+        // Unused lanes repeat the first wheel and are never stepped.
+        let first = self.line_lane(record, rail, axles.start);
+        let mut lanes: [Lane; LANES] = std::array::from_fn(|j| {
+            if j > 0 && j < n {
+                self.line_lane(record, rail, axles.start + j)
+            } else {
+                first.clone()
+            }
+        });
+        let mut paths: [LinePath<'_>; LANES] =
+            std::array::from_fn(|j| self.line_path(record, rail, lanes[j].axle));
+        let special = &self.special[rail * RAIL_BANDS];
+        for s in 0..points + n - 1 {
+            let lo = s.saturating_sub(points - 1);
+            let hi = n.min(s + 1);
+            if lo == 0 && hi == LANES {
+                let is: [usize; LANES] =
+                    std::array::from_fn(|j| if up { s - j } else { points - 1 - (s - j) });
+                if !is.iter().any(|&i| special[i]) {
+                    let mut wheel_bands = [0; LANES];
+                    let mut rail_bands = [0; LANES];
+                    for (j, (lane, path)) in lanes.iter_mut().zip(&mut paths).enumerate() {
+                        (wheel_bands[j], rail_bands[j]) = path.enter(layout, lane, is[j]);
+                    }
+                    let seen = self.contacts4::<0>(&mut lanes, states, works, rail_bands, is, v);
+                    for (j, lane) in lanes.iter_mut().enumerate() {
+                        self.leave_line(lane, wheel_bands[j], rail_bands[j], is[j], seen[j], works);
+                    }
+                    if s + 1 >= points {
+                        self.finish_line_lane(&mut lanes[s + 1 - points], states, works);
+                    }
+                    continue;
+                }
+            }
+            for j in lo..hi {
+                let step = s - j;
+                let i = if up { step } else { points - 1 - step };
+                self.step_line(rail, &mut lanes[j], &mut paths[j], i, states, works);
+            }
+            // The lane that took its last step now.
+            if s + 1 >= points {
+                self.finish_line_lane(&mut lanes[s + 1 - points], states, works);
+            }
+        }
+    }
+
+    /// What a wheel of axle `a` on `rail` meets along the line: its row's
+    /// bogie position and its contact conditions per segment.
+    fn line_path<'r>(&self, record: &'r TrainRecord, rail: usize, a: usize) -> LinePath<'r> {
+        let segments = self.line.map_or(0, |l| l.segments());
+        let rails = self.section.rails.len();
+        LinePath {
+            trailing: record.passage.axles[a].bogie_position == BogiePosition::Trailing,
+            wheels: &record.seg_wheels[(a * rails + rail) * segments..][..segments],
+            segment: usize::MAX,
+            rail,
+        }
+    }
+
+    /// After `lane`'s contact at point `i` on wheel band `wb` and rail band
+    /// `rb`: the wheel band keeps what the contact left, the rail band's
+    /// field records the axle, and its step-2 mass `m_kg` is kept when
+    /// asked for.
+    #[inline(always)]
+    fn leave_line(
+        &self,
+        lane: &mut Lane,
+        wb: usize,
+        rb: usize,
+        i: usize,
+        m_kg: f64,
+        works: &mut [TrackWork],
+    ) {
+        lane.st.bands[wb] = lane.st.wheel_kg;
+        works[rb].observed.axle[i] = lane.axle as u32;
+        if self.keep_seen {
+            works[0].wheel_seen[lane.axle * self.d_m.len() + i] = m_kg;
+        }
+    }
+
+    /// One contact of `lane`'s wheel at point `i`, alone: at a special
+    /// point the events before it first.
+    fn step_line(
+        &self,
+        rail: usize,
+        lane: &mut Lane,
+        path: &mut LinePath<'_>,
+        i: usize,
+        states: &mut [TrackState],
+        works: &mut [TrackWork],
+    ) {
+        let Some(layout) = self.line else {
+            return;
+        };
+        let (wb, rb) = path.enter(layout, lane, i);
+        let m_kg = if self.special[rail * RAIL_BANDS][i] {
+            self.line_special_contact(rail, states, works, lane, i, rb)
+        } else {
+            self.contact(lane, &mut states[rb], &mut works[rb], i)
+        };
+        self.leave_line(lane, wb, rb, i, m_kg, works);
     }
 
     /// Axle `a`'s wheel on `rail` of a line, ready to roll.
@@ -242,7 +414,8 @@ impl RollContext<'_> {
     }
 
     /// Steps `steps` of `lane`'s path (step k is its k-th point in its
-    /// direction of travel): at each point the contact on the row's bands.
+    /// direction of travel) one contact at a time: at each point the
+    /// contact on the row's bands.
     fn roll_wheel_line(
         &self,
         record: &TrainRecord,
@@ -252,37 +425,12 @@ impl RollContext<'_> {
         states: &mut [TrackState],
         works: &mut [TrackWork],
     ) {
-        let Some(layout) = self.line else {
-            return;
-        };
         let points = self.d_m.len();
-        let rails = self.section.rails.len();
-        let segments = layout.segments();
         let up = enters_at_zero(record.passage.direction);
-        let crown = rail * RAIL_BANDS;
-        let a = lane.axle;
-        let trailing = record.passage.axles[a].bogie_position == BogiePosition::Trailing;
-        let wheels = &record.seg_wheels[(a * rails + rail) * segments..][..segments];
-        let mut segment = usize::MAX;
+        let mut path = self.line_path(record, rail, lane.axle);
         for step in steps {
             let i = if up { step } else { points - 1 - step };
-            let s = layout.segment_of(i);
-            if s != segment {
-                segment = s;
-                lane.roller.fp_fc = wheels[s].fp_fc;
-            }
-            let (wb, rb) = layout.row(rail, trailing, i);
-            lane.st.wheel_kg = lane.st.bands[wb];
-            let m_kg = if self.special[crown][i] {
-                self.line_special_contact(rail, states, works, lane, i, rb)
-            } else {
-                self.contact(lane, &mut states[rb], &mut works[rb], i)
-            };
-            lane.st.bands[wb] = lane.st.wheel_kg;
-            works[rb].observed.axle[i] = a as u32;
-            if self.keep_seen {
-                works[0].wheel_seen[a * points + i] = m_kg;
-            }
+            self.step_line(rail, lane, &mut path, i, states, works);
         }
     }
 
@@ -340,6 +488,39 @@ impl RollContext<'_> {
             });
         }
         m_kg
+    }
+}
+
+/// A wheel's way along a line: which rows it takes (its bogie position)
+/// and its contact conditions per segment.
+struct LinePath<'r> {
+    trailing: bool,
+    /// Per segment, the wheel with its axle's load and creepage there.
+    wheels: &'r [crate::WheelOnRail],
+    /// The segment of the last point entered.
+    segment: usize,
+    rail: usize,
+}
+
+impl LinePath<'_> {
+    /// Before the wheel's contact at point `i`: the segment's `fp fc`,
+    /// the row's wheel band in `WheelRoll::wheel_kg`; returns the row's
+    /// (wheel band, rail band).
+    #[inline(always)]
+    fn enter(
+        &mut self,
+        layout: &crate::line::LineLayout,
+        lane: &mut Lane,
+        i: usize,
+    ) -> (usize, usize) {
+        let s = layout.segment_of(i);
+        if s != self.segment {
+            self.segment = s;
+            lane.roller.fp_fc = self.wheels[s].fp_fc;
+        }
+        let (wb, rb) = layout.row(self.rail, self.trailing, i);
+        lane.st.wheel_kg = lane.st.bands[wb];
+        (wb, rb)
     }
 }
 
