@@ -982,7 +982,18 @@ mod synth {
         };
         let (serial, serial_state, serial_consumed) = run_with(&out, one_at_a_time);
         assert!(wave.measurements.len() > 10_000);
-        assert_eq!(bits(&wave.simulated()), bits(&serial.simulated()));
+        let (a, b) = (wave.simulated(), serial.simulated());
+        assert_eq!(a.len(), b.len());
+        let differ: Vec<usize> = (0..a.len())
+            .filter(|&k| a[k].to_bits() != b[k].to_bits())
+            .collect();
+        assert!(
+            differ.is_empty(),
+            "{} of {} measurements differ, the first {:?}",
+            differ.len(),
+            a.len(),
+            differ.first().map(|&k| (&wave.measurements[k], b[k]))
+        );
         assert_eq!(wave_state, serial_state, "the state after the day");
         assert_eq!(wave_consumed.to_bits(), serial_consumed.to_bits());
     }
