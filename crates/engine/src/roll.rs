@@ -1301,15 +1301,23 @@ impl RollContext<'_> {
             parts.map(|p| p.map_or(0.0, |(_, rise)| rise)),
             [SECONDS_PER_HOUR; LANES],
         );
-        let touch = |j: usize| {
-            let precip_mm = parts[j].map_or(0.0, |(at_since, _)| at_since + rises[j]);
-            r(j).touch_at(&states[tracks[j]], t[j], weather[j], precip_mm, is[j])
-        };
-        // Written out, not `from_fn`: the compiler outlines that helper for
-        // a `Touch` array, and an outlined call loses this function's AVX2
-        // and the inlining (7 % of a replay, measured 2026-11-28).
+        // Written out by a macro, not `from_fn` or a closure: the compiler
+        // outlines those for a `Touch` array, and an outlined call loses
+        // this function's AVX2 and the inlining (7 % of a replay, measured
+        // 2026-11-28; 10 % once the closure read each lane's track).
+        macro_rules! touch {
+            ($j:literal) => {
+                r($j).touch_at(
+                    &states[tracks[$j]],
+                    t[$j],
+                    weather[$j],
+                    parts[$j].map_or(0.0, |(at_since, _)| at_since + rises[$j]),
+                    is[$j],
+                )
+            };
+        }
         const _: () = assert!(LANES == 4);
-        [touch(0), touch(1), touch(2), touch(3)]
+        [touch!(0), touch!(1), touch!(2), touch!(3)]
     }
 
     /// Four ordinary contacts (no special point), one per lane, at the

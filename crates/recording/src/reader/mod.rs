@@ -265,7 +265,9 @@ impl RecordingReader {
             let location = self.queue.location(&message);
             return Err(InputError::at(self.queue.path(), location, e.message));
         }
-        let keep = |wire: Wire| keep_wire.then_some(wire);
+        // Built only when kept: a passage's or a measurement's wire message
+        // is cloned for it.
+        let keep = |wire: &dyn Fn() -> Wire| keep_wire.then(wire);
         let decoded = match topic {
             Topic::Section => Err(format!(
                 "a second /section message (the first is at log_time {} ns); \
@@ -278,24 +280,24 @@ impl RecordingReader {
                 .to_string()
                 .into()),
             Topic::Passage => decode::parse::<PassageMsg>(data).and_then(|msg| {
-                let wire = keep(Wire::Passage(msg.clone()));
+                let wire = keep(&|| Wire::Passage(msg.clone()));
                 decoder
                     .passage(msg, log_time_ns)
                     .map(|p| (EventKind::Passage(p), wire))
             }),
             Topic::Pulse => decode::parse::<PulseMsg>(data).and_then(|msg| {
                 let p = decoder.pulse(&msg)?;
-                Ok((EventKind::Pulse(p), keep(Wire::Pulse(msg))))
+                Ok((EventKind::Pulse(p), keep_wire.then_some(Wire::Pulse(msg))))
             }),
             Topic::Measurement => decode::parse::<MeasurementMsg>(data).and_then(|msg| {
-                let wire = keep(Wire::Measurement(msg.clone()));
+                let wire = keep(&|| Wire::Measurement(msg.clone()));
                 decoder
                     .measurement(msg)
                     .map(|m| (EventKind::Measurement(m), wire))
             }),
             Topic::Weather => decode::parse::<WeatherMsg>(data).and_then(|msg| {
                 let w = decoder.weather(&msg)?;
-                Ok((EventKind::Weather(w), keep(Wire::Weather(msg))))
+                Ok((EventKind::Weather(w), keep_wire.then_some(Wire::Weather(msg))))
             }),
         }
         .map_err(|e: decode::DecodeError| {
