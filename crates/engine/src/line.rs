@@ -84,12 +84,16 @@ impl LineLayout {
         self.segment_of[i] as usize
     }
 
-    /// The row of `rail`'s wheel of an axle at `bogie` at point `i`: the
-    /// wheel band's index (F, C, G) and the rail band's (C, G).
-    #[inline(always)]
-    pub(crate) fn row(&self, rail: usize, trailing: bool, i: usize) -> (usize, usize) {
-        let code = self.rows[rail * 2 + usize::from(trailing)][i] as usize;
-        (code / RAIL_BANDS, code % RAIL_BANDS)
+    /// The rows of `rail`'s wheels at `bogie` along the line, per point
+    /// `wheel band * RAIL_BANDS + rail band`: the wheel band's index (F,
+    /// C, G) and the rail band's (C, G).
+    pub(crate) fn rows_of(&self, rail: usize, trailing: bool) -> &[u8] {
+        &self.rows[rail * 2 + usize::from(trailing)]
+    }
+
+    /// Per point: its segment.
+    pub(crate) fn segments_of(&self) -> &[u32] {
+        &self.segment_of
     }
 
     /// Per rail: the tracks a pulse at grid point `point` lands on.

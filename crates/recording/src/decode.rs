@@ -24,8 +24,8 @@ use crate::limits::{self, Range};
 use crate::line::{axle_at_ends_s, Line};
 use crate::wire::json::FromJson;
 use crate::wire::{
-    AxleSegmentMsg, CreepageMsg, MeasurementMsg, PassageMsg, PerRail, PulseMsg, SectionMsg,
-    WeatherMsg,
+    AxleSegmentMsg, CreepageMsg, MeasurementMsg, PassageMsg, PerRail, PulseMsg, RawJson,
+    SectionMsg, WeatherMsg,
 };
 
 /// Why a message breaks the format: a sentence, and the field it is about
@@ -241,13 +241,14 @@ fn creepages(
 /// load, a creepage or both, each complete per rail; an entry with neither
 /// and an unknown segment id are input errors.
 fn axle_segments(
-    value: &Value,
+    value: &RawJson,
     line: &Line,
     rails: &[String],
     i: usize,
 ) -> Result<Vec<AxleSegment>, DecodeError> {
+    let mut json = serde_json::Deserializer::from_str(value.0.get());
     let entries: PerRail<AxleSegmentMsg> =
-        serde_path_to_error::deserialize(value).map_err(|e| {
+        serde_path_to_error::deserialize(&mut json).map_err(|e| {
             let path = e.path().to_string();
             let field = if path == "." {
                 format!("axles[{i}].segments")

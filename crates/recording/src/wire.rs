@@ -144,7 +144,20 @@ pub struct AxleMsg {
     /// it is an unknown extra field, ignored unchecked; with one the reader
     /// reads it as [`AxleSegmentMsg`]s.
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub segments: Option<serde_json::Value>,
+    pub segments: Option<RawJson>,
+}
+
+/// JSON kept as written and read when needed (an axle's `segments`: not
+/// built into a tree for a reader that ignores it, parsed once into its
+/// typed form by one that reads it).
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(transparent)]
+pub struct RawJson(pub Box<serde_json::value::RawValue>);
+
+impl PartialEq for RawJson {
+    fn eq(&self, other: &Self) -> bool {
+        self.0.get() == other.0.get()
+    }
 }
 
 /// An axle's load or creepage (or both) in one segment of a line, each

@@ -16,7 +16,7 @@ use tortwin_outputs::files::PartialFile;
 use tortwin_recording::line::Line;
 use tortwin_recording::wire::{
     ApplicatorMsg, AxleMsg, AxleSegmentMsg, CreepageMsg, MeasurementMsg, PassageMsg, PerRail,
-    SectionMsg, SiteMsg, WeatherMsg, WireMessage,
+    RawJson, SectionMsg, SiteMsg, WeatherMsg, WireMessage,
 };
 use tortwin_recording::{Creepage, Measurement, RecordingWriter, Section, Weather};
 use tortwin_study::{Error, Result};
@@ -192,10 +192,12 @@ pub(super) fn passage_msg(
                                     (line.segments[s.segment].id.clone(), entry)
                                 })
                                 .collect();
-                            serde_json::to_value(PerRail(entries)).map_err(|source| Error::Json {
-                                what: "an axle's segments",
-                                source,
-                            })
+                            serde_json::value::to_raw_value(&PerRail(entries))
+                                .map(RawJson)
+                                .map_err(|source| Error::Json {
+                                    what: "an axle's segments",
+                                    source,
+                                })
                         })
                         .transpose()?,
                 })

@@ -14,7 +14,7 @@ use super::{
     Div4, Engine, EngineError, Exp4, Lane, RollContext, SiteValue, TrackState, TrackWork,
     TrainRecord, Vector, LANES, NO_APPLICATOR, NO_AXLE, PARALLEL_MIN_CONTACTS,
 };
-use crate::line::RAIL_BANDS;
+use crate::line::{LineLayout, RAIL_BANDS};
 use crate::sink::Sink;
 use crate::{enters_at_zero, SnapshotKind};
 use tortwin_model::product;
@@ -313,7 +313,7 @@ impl RollContext<'_> {
             }
         });
         let mut paths: [LinePath<'_>; LANES] =
-            std::array::from_fn(|j| self.line_path(record, rail, lanes[j].axle));
+            std::array::from_fn(|j| self.line_path(layout, record, rail, lanes[j].axle));
         let special = &self.special[rail * RAIL_BANDS];
         for s in 0..points + n - 1 {
             let lo = s.saturating_sub(points - 1);
@@ -325,7 +325,7 @@ impl RollContext<'_> {
                     let mut wheel_bands = [0; LANES];
                     let mut rail_bands = [0; LANES];
                     for (j, (lane, path)) in lanes.iter_mut().zip(&mut paths).enumerate() {
-                        (wheel_bands[j], rail_bands[j]) = path.enter(layout, lane, is[j]);
+                        (wheel_bands[j], rail_bands[j]) = path.enter(lane, is[j]);
                     }
                     let seen = self.contacts4::<0>(&mut lanes, states, works, rail_bands, is, v);
                     for (j, lane) in lanes.iter_mut().enumerate() {
@@ -351,14 +351,21 @@ impl RollContext<'_> {
 
     /// What a wheel of axle `a` on `rail` meets along the line: its row's
     /// bogie position and its contact conditions per segment.
-    fn line_path<'r>(&self, record: &'r TrainRecord, rail: usize, a: usize) -> LinePath<'r> {
-        let segments = self.line.map_or(0, |l| l.segments());
+    fn line_path<'r>(
+        &self,
+        layout: &'r LineLayout,
+        record: &'r TrainRecord,
+        rail: usize,
+        a: usize,
+    ) -> LinePath<'r> {
+        let segments = layout.segments();
         let rails = self.section.rails.len();
+        let trailing = record.passage.axles[a].bogie_position == BogiePosition::Trailing;
         LinePath {
-            trailing: record.passage.axles[a].bogie_position == BogiePosition::Trailing,
+            rows: layout.rows_of(rail, trailing),
+            segment_of: layout.segments_of(),
             wheels: &record.seg_wheels[(a * rails + rail) * segments..][..segments],
-            segment: usize::MAX,
-            rail,
+            segment: u32::MAX,
         }
     }
 
@@ -394,10 +401,7 @@ impl RollContext<'_> {
         states: &mut [TrackState],
         works: &mut [TrackWork],
     ) {
-        let Some(layout) = self.line else {
-            return;
-        };
-        let (wb, rb) = path.enter(layout, lane, i);
+        let (wb, rb) = path.enter(lane, i);
         let m_kg = if self.special[rail * RAIL_BANDS][i] {
             self.line_special_contact(rail, states, works, lane, i, rb)
         } else {
@@ -425,9 +429,12 @@ impl RollContext<'_> {
         states: &mut [TrackState],
         works: &mut [TrackWork],
     ) {
+        let Some(layout) = self.line else {
+            return;
+        };
         let points = self.d_m.len();
         let up = enters_at_zero(record.passage.direction);
-        let mut path = self.line_path(record, rail, lane.axle);
+        let mut path = self.line_path(layout, record, rail, lane.axle);
         for step in steps {
             let i = if up { step } else { points - 1 - step };
             self.step_line(rail, lane, &mut path, i, states, works);
@@ -491,15 +498,17 @@ impl RollContext<'_> {
     }
 }
 
-/// A wheel's way along a line: which rows it takes (its bogie position)
-/// and its contact conditions per segment.
+/// A wheel's way along a line: the rows it takes (those of its rail and
+/// bogie position) and its contact conditions per segment.
 struct LinePath<'r> {
-    trailing: bool,
+    /// Per point, the row: `wheel band * RAIL_BANDS + rail band`.
+    rows: &'r [u8],
+    /// Per point, its segment.
+    segment_of: &'r [u32],
     /// Per segment, the wheel with its axle's load and creepage there.
     wheels: &'r [crate::WheelOnRail],
     /// The segment of the last point entered.
-    segment: usize,
-    rail: usize,
+    segment: u32,
 }
 
 impl LinePath<'_> {
@@ -507,18 +516,14 @@ impl LinePath<'_> {
     /// the row's wheel band in `WheelRoll::wheel_kg`; returns the row's
     /// (wheel band, rail band).
     #[inline(always)]
-    fn enter(
-        &mut self,
-        layout: &crate::line::LineLayout,
-        lane: &mut Lane,
-        i: usize,
-    ) -> (usize, usize) {
-        let s = layout.segment_of(i);
+    fn enter(&mut self, lane: &mut Lane, i: usize) -> (usize, usize) {
+        let s = self.segment_of[i];
         if s != self.segment {
             self.segment = s;
-            lane.roller.fp_fc = self.wheels[s].fp_fc;
+            lane.roller.fp_fc = self.wheels[s as usize].fp_fc;
         }
-        let (wb, rb) = layout.row(self.rail, self.trailing, i);
+        let code = usize::from(self.rows[i]);
+        let (wb, rb) = (code / RAIL_BANDS, code % RAIL_BANDS);
         lane.st.wheel_kg = lane.st.bands[wb];
         (wb, rb)
     }

@@ -297,7 +297,10 @@ impl RecordingReader {
             }),
             Topic::Weather => decode::parse::<WeatherMsg>(data).and_then(|msg| {
                 let w = decoder.weather(&msg)?;
-                Ok((EventKind::Weather(w), keep_wire.then_some(Wire::Weather(msg))))
+                Ok((
+                    EventKind::Weather(w),
+                    keep_wire.then_some(Wire::Weather(msg)),
+                ))
             }),
         }
         .map_err(|e: decode::DecodeError| {
