@@ -14,6 +14,7 @@ from pathlib import Path
 import pyarrow as pa
 import pyarrow.compute as pc
 import pytest
+from mcap.reader import make_reader
 
 import tortwin
 
@@ -22,7 +23,7 @@ if sys.version_info >= (3, 11):
     import tomllib
 else:
     import tomli as tomllib
-from conftest import RECORDINGS, REFERENCE, rewrite, run_cli, twin_measurements
+from conftest import RECORDINGS, REFERENCE, REPO, rewrite, run_cli, twin_measurements
 
 REFERENCE_CASES = [
     ("curve_2day.mcap", None),
@@ -268,3 +269,66 @@ def test_a_replay_lets_other_python_threads_run():
     # A Python loop counts millions a second; with the GIL held for the
     # whole replay it would count only until the call started.
     assert elapsed > 0.05 and during > 20_000 * elapsed, (during, elapsed)
+
+
+def test_a_line_replays_per_band_as_the_command_line(tmp_path, tortwin_bin):
+    """line_field.mcap (docs/spec/line.md's field line): the measurements
+    bit for bit as the command line's, and the field table per rail band
+    (C, G) equal to its /twin/field messages (which round), null exactly
+    where no wheel of the train used the band, as the MCAP's nulls."""
+    recording = REFERENCE / "line_field.mcap"
+    cli = run_cli(tortwin_bin, "replay", recording, "--out-mcap", tmp_path / "cli.mcap", "-q")
+    assert cli.returncode == 0, cli.stderr
+    expected = twin_measurements(tmp_path / "cli.mcap")
+    run = tortwin.replay(recording)
+    table = run.measurements
+    assert table.num_rows == len(expected) == 32
+    for i, s in zip(table["index_in_file"].to_pylist(), table["simulated"].to_pylist()):
+        assert s.hex() == float(expected[i]["simulated"]).hex()
+
+    fields = {}
+    with open(tmp_path / "cli.mcap", "rb") as f:
+        for _, _, message in make_reader(f).iter_messages(topics=["/twin/field"]):
+            m = json.loads(message.data)
+            fields[(m["train_id"], m["rail"], m["band"])] = m
+    field = run.field
+    assert sorted(set(field["band"].to_pylist())) == ["C", "G"]
+    assert field.num_rows == len(fields) * 1384
+    nulls = 0
+    for (train, rail, band), m in fields.items():
+        rows = field.filter(
+            pc.and_(
+                pc.and_(pc.equal(field["train_id"], train), pc.equal(field["rail"], rail)),
+                pc.equal(field["band"], band),
+            )
+        )
+        for column in ("mu", "adhesion", "wheel_mass_mg"):
+            got = rows[column].to_pylist()
+            want = m[column]
+            assert [g is None for g in got] == [w is None for w in want], (train, rail, band)
+            for g, w in zip(got, want):
+                # The MCAP's /twin/field rounds: mu and adhesion to 1e-4,
+                # masses to three significant digits (0 below 1e-4 mg).
+                if w is None:
+                    continue
+                if column == "wheel_mass_mg":
+                    assert abs(g - w) <= 5e-3 * abs(g) + 1e-4, (train, rail, band, column)
+                else:
+                    assert abs(g - w) <= 5.000001e-5, (train, rail, band, column)
+        nulls += rows["mu"].null_count
+    # The low rail's gauge corner is never used, the high rail's only in
+    # the curves' rows.
+    assert nulls > 0
+    assert field.schema.field("mu").nullable
+
+
+def test_synth_of_a_line_writes_what_the_command_line_writes(tmp_path, tortwin_bin):
+    layout = REPO / "docs" / "examples" / "line-10km.toml"
+    key = tortwin.synth(tmp_path / "py.mcap", layout=layout, trains_per_day=4, seed=2)
+    cli = run_cli(
+        tortwin_bin, "synth", "--out", tmp_path / "cli.mcap", "--layout", layout,
+        "--trains-per-day", "4", "--seed", "2", "-q",
+    )
+    assert cli.returncode == 0, cli.stderr
+    assert (tmp_path / "py.mcap").read_bytes() == (tmp_path / "cli.mcap").read_bytes()
+    assert key["params"]["line"]["line_id"] == "demo-10km"

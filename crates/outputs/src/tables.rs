@@ -121,9 +121,29 @@ enum Value<'a> {
     Time(u64),
     Text(Option<&'a str>),
     Float(f64),
+    /// A value that may be missing, NaN for missing: null in Parquet, an
+    /// empty cell in CSV (a line's band no wheel used at a point, and the
+    /// statistics over such a band's points).
+    Maybe(f64),
     Count(u64),
     Index(Option<u32>),
 }
+
+/// The columns that may hold nulls: ids a row may lack, and what a
+/// line's band holds where no wheel used it ([`Value::Maybe`]).
+const NULLABLE: [&str; 11] = [
+    "train_id",
+    "axle_index",
+    "mu",
+    "adhesion",
+    "wheel_mass_mg",
+    "mu_min",
+    "mu_mean",
+    "mu_max",
+    "share_in_band",
+    "share_below_band",
+    "wheel_mass_out_mg",
+];
 
 /// One table: its columns, the rows not yet written, and its files.
 struct Table {
@@ -148,7 +168,7 @@ impl Table {
             fields
                 .iter()
                 .map(|(n, t)| {
-                    let nullable = matches!(*n, "train_id" | "axle_index");
+                    let nullable = NULLABLE.contains(n);
                     Field::new(*n, t.clone(), nullable)
                 })
                 .collect::<Vec<_>>(),
@@ -214,6 +234,7 @@ impl Table {
                 }
                 (Column::Text(b), Value::Text(t)) => b.append_option(*t),
                 (Column::Float(b), Value::Float(x)) => b.append_value(*x),
+                (Column::Float(b), Value::Maybe(x)) => b.append_option((!x.is_nan()).then_some(*x)),
                 (Column::Count(b), Value::Count(n)) => b.append_value(*n),
                 (Column::Index(b), Value::Index(i)) => b.append_option(*i),
                 _ => unreachable!("a row of {} has its columns' types", self.name),
@@ -225,6 +246,8 @@ impl Table {
                 // Ids as no spreadsheet runs them (csv-tables.md).
                 Value::Text(t) => inert(t.unwrap_or_default()).into_owned(),
                 Value::Float(x) => format_number(*x),
+                Value::Maybe(x) if x.is_nan() => String::new(),
+                Value::Maybe(x) => format_number(*x),
                 Value::Count(n) => n.to_string(),
                 Value::Index(i) => i.map_or(String::new(), |i| i.to_string()),
             });
@@ -458,10 +481,10 @@ impl Sink for TableSink {
                     Value::Text(Some(&f.band)),
                     Value::Count(f.wheel_pass),
                     Value::Float(f.d_m[i]),
-                    Value::Float(f.mu[i]),
-                    Value::Float(f.adhesion[i]),
+                    Value::Maybe(f.mu[i]),
+                    Value::Maybe(f.adhesion[i]),
                     Value::Float(f.rail_mass_kg[i] * 1e6),
-                    Value::Float(f.wheel_mass_kg[i] * 1e6),
+                    Value::Maybe(f.wheel_mass_kg[i] * 1e6),
                 ])?;
             }
         }
@@ -508,13 +531,13 @@ impl Sink for TableSink {
             Value::Text(Some(&f.rail_name)),
             Value::Text(Some(&f.band)),
             Value::Count(f.wheel_pass),
-            Value::Float(min),
-            Value::Float(sum / n),
-            Value::Float(max),
-            Value::Float(inside as f64 / n),
-            Value::Float(below as f64 / n),
+            Value::Maybe(min),
+            Value::Maybe(sum / n),
+            Value::Maybe(max),
+            Value::Maybe(inside as f64 / n),
+            Value::Maybe(below as f64 / n),
             Value::Float(f.rail_mass_kg.iter().sum::<f64>() * 1e3),
-            Value::Float(out_mg),
+            Value::Maybe(out_mg),
         ])?;
         Ok(())
     }
