@@ -10,6 +10,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pyarrow.compute as pc
 import pyarrow.dataset as ds
 import pytest
 from mcap.reader import make_reader
@@ -243,3 +244,46 @@ def test_a_bad_manifest_is_exit_2_naming_the_key(tmp_path):
     done = subprocess.run([sys.executable, "-m", "tortwin.fleet", str(m)], capture_output=True, text=True)
     assert done.returncode == 2
     assert f"{m}: section[0].run" in done.stderr, done.stderr
+
+
+def test_a_line_is_a_section_of_the_fleet(tmp_path, local_ray, tortwin_bin):
+    """A line (docs/examples/line-10km.toml, two days) in a fleet beside a
+    section: its days replay as the command line replays them day by day
+    with the state carried, its per-train rows are per rail; discover,
+    which needs a section in this version, fails by name for the line
+    alone."""
+    layout = Path(__file__).resolve().parents[2] / "docs" / "examples" / "line-10km.toml"
+    whole = tmp_path / "L.mcap"
+    tortwin.synth(whole, layout=layout, days=2, seed=3, trains_per_day=8)
+    days = {"L": fleet.split_by_day(whole, tmp_path / "L")}
+    section = tmp_path / "S.mcap"
+    tortwin.synth(section, days=2, seed=4, trains_per_day=8, length_m=300.0)
+    days["S"] = fleet.split_by_day(section, tmp_path / "S")
+    out = tmp_path / "out"
+    m = manifest(tmp_path / "fleet.toml", out, days, ["L", "S"], L={"run": ["replay", "discover"]})
+    run = fleet.run(m, summary=False)
+    assert [(d.section, d.status) for d in run.days] == [("L", "done")] * 2 + [("S", "done")] * 2
+    [(what, study)] = run.studies
+    assert (what, study.section, study.status) == ("discover", "L", "failed")
+    assert "line" in study.error and "section" in study.error, study.error
+    state = None
+    for date in sorted(days["L"]):
+        cli_out = tmp_path / "cli" / f"{date}.mcap"
+        cli_out.parent.mkdir(parents=True, exist_ok=True)
+        args = ["replay", days["L"][date], "--out-mcap", cli_out, "-q",
+                "--state-out", cli_out.with_suffix(".state.json")]
+        if state:
+            args += ["--state-in", state]
+        done = run_cli(tortwin_bin, *args)
+        assert done.returncode == 0, done.stderr
+        state = cli_out.with_suffix(".state.json")
+        expected = messages(cli_out)
+        assert len(expected) > 100
+        assert messages(out / "mcap" / "L" / f"{date}.mcap") == expected, date
+        assert (out / "_state" / "L" / f"{date}.state.json").read_text() == state.read_text()
+    trains = ds.dataset(out / "trains", format="parquet", partitioning="hive").to_table()
+    line_rows = trains.filter(pc.equal(trains["section"], "L"))
+    assert sorted(set(line_rows["rail"].to_pylist())) == ["left", "right"]
+    days_table = ds.dataset(out / "days", format="parquet", partitioning="hive").to_table()
+    line_trains = pc.sum(days_table.filter(pc.equal(days_table["section"], "L"))["trains"]).as_py()
+    assert line_trains > 0 and line_rows.num_rows == 2 * line_trains
