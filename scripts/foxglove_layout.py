@@ -25,9 +25,18 @@ recordings/demo_day.mcap --out-mcap out/demo.mcap`); tests/cli_foxglove.rs
 checks that they are current and that every topic they name is in that
 output.
 
+The 3D view frames the plan as drawn in the output's first `/foxglove/track`
+message, its labels included (each about 0.6 of its font size wide per
+character and centred on its position): seen from above, orthographic, the
+view shows about `distance` metres top to bottom, and a panel about 0.7 as
+wide as tall (the layouts' 55 % of a 16:10 window beside the sidebar) shows
+0.7 of that across; the distance leaves a tenth more around both. A line
+(docs/spec/line.md) is framed the same way.
+
 Studio 1.48 centres its 3D view on `cameraState.targetOffset` and ignores
 `target`: the Studio layout puts the plan's middle there (and `target` at
-the origin, so that no app adds the two). Its plot palette has 7 colours, so every series there sets
+the origin, so that no app adds the two); its far plane is put beyond the
+plan. Its plot palette has 7 colours, so every series there sets
 its own.
 """
 
@@ -42,23 +51,59 @@ QUANTITY_LABELS = {"mu": "mu", "adhesion": "adhesion T/N", "rail_mu": "rail mu (
 
 
 def section_and_measured(mcap_path: Path) -> tuple[dict, dict]:
-    """/twin/section, and per site the (rail, quantity) pairs measured there."""
+    """/twin/section with the plan's box as drawn (`"plan_box"`: x and y
+    ranges of the first /foxglove/track's lines and labels), and per site
+    the (rail, quantity) pairs measured there."""
     from mcap.reader import make_reader
 
     section = None
+    box = None
     measured: dict[str, set] = {}
     with mcap_path.open("rb") as f:
         for _, channel, message in make_reader(f).iter_messages(
-            topics=["/twin/section", "/twin/measurement"]
+            topics=["/twin/section", "/twin/measurement", "/foxglove/track"]
         ):
             doc = json.loads(message.data)
             if channel.topic == "/twin/section":
                 section = doc
+            elif channel.topic == "/foxglove/track":
+                if box is None:
+                    box = plan_box(doc)
             else:
                 measured.setdefault(doc["site_id"], set()).add((doc["rail"], doc["quantity"]))
     if section is None:
         raise SystemExit(f"{mcap_path}: no /twin/section message: not a tortwin output")
+    section["plan_box"] = box
     return section, measured
+
+
+# A character of a 3D label is about this share of its font size wide.
+CHARACTER_WIDTH = 0.6
+# The 3D panel's width over its height in the layouts (55 % of a 16:10
+# window beside the app's sidebar).
+PANEL_ASPECT = 0.7
+
+
+def plan_box(scene: dict) -> tuple[tuple[float, float], tuple[float, float]] | None:
+    """The x and y ranges of a SceneUpdate's lines and labels (a label
+    centred on its position, CHARACTER_WIDTH of its font size wide per
+    character, a font size tall)."""
+    xs: list[float] = []
+    ys: list[float] = []
+    for entity in scene.get("entities", []):
+        for line in entity.get("lines", []):
+            for p in line.get("points", []):
+                xs.append(p["x"])
+                ys.append(p["y"])
+        for text in entity.get("texts", []):
+            p = text["pose"]["position"]
+            half_w = CHARACTER_WIDTH * text["font_size"] * len(text["text"]) / 2
+            half_h = text["font_size"] / 2
+            xs += [p["x"] - half_w, p["x"] + half_w]
+            ys += [p["y"] - half_h, p["y"] + half_h]
+    if not xs:
+        return None
+    return (min(xs), max(xs)), (min(ys), max(ys))
 
 
 TRACK_TITLE = "Track: mu along the section (blue < 0.30 too much product, green band, yellow-red dry)"
@@ -79,19 +124,26 @@ SERIES_COLOURS = [
 def describe(section: dict, measured: dict) -> dict:
     """The panels, in neither app's format: the 3D view's centre and size,
     a plot per measurement site (title, series), the log."""
-    length = float(section["length_m"])
-    # The plan's middle and extent (docs/spec/interfaces.md, "The section
-    # on a plan": on a curve of radius R it bends to the right).
-    radius = section.get("curve_radius_m")
-    points = []
-    for k in range(101):
-        d = length * k / 100
-        points.append(
-            (d, 0.0) if radius is None else (radius * math.sin(d / radius), radius * math.cos(d / radius) - radius)
+    box = section.get("plan_box")
+    if box is None:
+        # No train drew the plan: the centre line (docs/spec/interfaces.md,
+        # "The section on a plan": on a curve of radius R it bends to the
+        # right).
+        length = float(section["length_m"])
+        radius = section.get("curve_radius_m")
+        points = []
+        for k in range(101):
+            d = length * k / 100
+            points.append(
+                (d, 0.0) if radius is None else (radius * math.sin(d / radius), radius * math.cos(d / radius) - radius)
+            )
+        box = (min(p[0] for p in points), max(p[0] for p in points)), (
+            min(p[1] for p in points),
+            max(p[1] for p in points),
         )
-    xs, ys = [p[0] for p in points], [p[1] for p in points]
-    middle = ((min(xs) + max(xs)) / 2, (min(ys) + max(ys)) / 2, 0.0)
-    extent = max(max(xs) - min(xs), max(ys) - min(ys), 1.0)
+    (x0, x1), (y0, y1) = box
+    middle = ((x0 + x1) / 2, (y0 + y1) / 2, 0.0)
+    distance = 1.1 * max(y1 - y0, (x1 - x0) / PANEL_ASPECT, 1.0)
     sites = []
     for site in section["sites"]:
         site_id = site["id"]
@@ -115,7 +167,8 @@ def describe(section: dict, measured: dict) -> dict:
             )
     return {
         "middle": tuple(round(c, 1) for c in middle),
-        "distance": round(1.5 * extent, 1),
+        "distance": round(distance, 1),
+        "far": round(max(5000.0, 4 * distance), 1),
         "sites": sites,
         "log_topic": "/foxglove/log",
         "track_topic": "/foxglove/track",
@@ -192,7 +245,7 @@ def studio_layout(section: dict, measured: dict) -> dict:
                 "targetOrientation": [0.0, 0.0, 0.0, 1.0],
                 "fovy": 45,
                 "near": 0.5,
-                "far": 5000,
+                "far": d["far"],
             },
             "followTf": "section",
             "followMode": "follow-pose",

@@ -150,6 +150,7 @@ fn write_synthetic(sink: &mut McapSink) -> tortwin_engine::sink::SinkResult {
         applicator_points: (&[2][..]).into(),
         site_points: (&[7][..]).into(),
         origin_ns: ORIGIN_NS as i64,
+        line: None,
     })?;
     for (k, rail_name) in ["high", "low"].into_iter().enumerate() {
         sink.pulse(&PulseEvent {

@@ -109,6 +109,7 @@ fn feed(sink: &mut dyn Sink, trains: u64) -> Result<Logged, tortwin_engine::sink
         applicator_points: (&[20][..]).into(),
         site_points: (&[120][..]).into(),
         origin_ns: ORIGIN_NS as i64,
+        line: None,
     })?;
 
     for train in 1..=trains {

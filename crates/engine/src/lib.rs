@@ -605,6 +605,10 @@ impl Engine {
                 applicator_points: self.applicator_points.as_slice().into(),
                 site_points: self.site_points.as_slice().into(),
                 origin_ns: self.origin_ns,
+                line: self
+                    .line
+                    .as_ref()
+                    .map(|l| std::borrow::Cow::Borrowed(&l.line)),
             })?;
         }
         Ok(())

@@ -34,6 +34,8 @@ pub struct SectionInfo<'a> {
     pub site_points: Cow<'a, [usize]>,
     /// log_time of the first recording's `/section`: time_s = 0.
     pub origin_ns: i64,
+    /// The recording's `/line` (docs/spec/line.md), when it is a line.
+    pub line: Option<Cow<'a, tortwin_recording::line::Line>>,
 }
 
 /// One surface of one rail.
@@ -224,6 +226,7 @@ impl Event<'_> {
                 applicator_points: owned(i.applicator_points),
                 site_points: owned(i.site_points),
                 origin_ns: i.origin_ns,
+                line: i.line.map(owned),
             }),
             Event::Train(t) => Event::Train(TrainEvent {
                 log_time_ns: t.log_time_ns,

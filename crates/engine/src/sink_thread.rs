@@ -271,6 +271,7 @@ mod tests {
             applicator_points: (&[0][..]).into(),
             site_points: (&[1][..]).into(),
             origin_ns: 0,
+            line: None,
         })?;
         for k in 0..trains {
             let id = format!("T{}", k / 2);

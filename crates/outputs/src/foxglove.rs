@@ -205,10 +205,10 @@ pub(crate) struct TrackScene {
     classes: Vec<Vec<u16>>,
     /// Per track, the train and wheel pass of the last snapshot.
     last: Vec<Option<(String, u64)>>,
-    /// Labels at the sites and applicators, and the colour key.
-    labels: Vec<(Vector3, String)>,
+    /// Labels at the sites and applicators (and a line's segments), and
+    /// the colour key, each with its font size in m.
+    labels: Vec<(Vector3, String, f64)>,
     thickness_m: f64,
-    font_size_m: f64,
 }
 
 /// A site or applicator to label: `(position_m, text)`.
@@ -220,6 +220,7 @@ impl TrackScene {
         grid_d_m: &[f64],
         tracks: &[(String, String)],
         labels: &[Label],
+        segments: &[Label],
     ) -> TrackScene {
         let points = plan
             .track_offsets_m
@@ -247,7 +248,7 @@ impl TrackScene {
             [a, b, ..] => (b - a).max(1e-9),
             _ => 1.0,
         };
-        let max_step = match plan.curve_radius_m {
+        let max_step = match plan.min_radius_m() {
             Some(radius) => ((8.0 * radius.abs() * plan.gauge_m / 40.0).sqrt() / spacing).floor(),
             None => f64::INFINITY,
         }
@@ -262,31 +263,42 @@ impl TrackScene {
             .iter()
             .map(|(rail, band)| format!("track/{rail}/{band}"))
             .collect();
-        // Labels outside the leftmost rail, the colour key before d = 0.
+        // Labels outside the leftmost rail (a line's segment names outside
+        // the rightmost), the colour key centred below the plan, no wider
+        // than it: a view that frames the plan frames the key
+        // (scripts/foxglove_layout.py frames the labels too).
+        let font_size_m = plan.gauge_m / 2.0;
         let outside = plan.rail_offsets_m.iter().copied().fold(0.0, f64::max) + plan.gauge_m;
-        let mut placed: Vec<(Vector3, String)> = labels
+        let at = |[x, y]: [f64; 2]| Vector3 {
+            x: mm(x),
+            y: mm(y),
+            z: 0.0,
+        };
+        let mut placed: Vec<(Vector3, String, f64)> = labels
             .iter()
-            .map(|(d, text)| {
-                let [x, y] = plan.xy(*d, outside);
-                (
-                    Vector3 {
-                        x: mm(x),
-                        y: mm(y),
-                        z: 0.0,
-                    },
-                    text.clone(),
-                )
-            })
+            .map(|(d, text)| (at(plan.xy(*d, outside)), text.clone(), font_size_m))
             .collect();
-        let [x, y] = plan.xy(0.0, -outside);
+        placed.extend(
+            segments
+                .iter()
+                .map(|(d, text)| (at(plan.xy(*d, -outside)), text.clone(), font_size_m)),
+        );
+        let (mut x, mut y) = ([f64::INFINITY, f64::NEG_INFINITY], f64::INFINITY);
+        for &offset in &plan.rail_offsets_m {
+            for &d in grid_d_m {
+                let [px, py] = plan.xy(d, offset);
+                x = [x[0].min(px), x[1].max(px)];
+                y = y.min(py);
+            }
+        }
+        let key = "mu: blue < 0.30 too much product | green 0.30-0.40 target band | yellow-red > 0.40 dry";
+        // A character is about 0.6 of the font size wide.
+        let width_m = (x[1] - x[0]).max(plan.gauge_m);
+        let key_font_m = font_size_m.min(width_m / (0.6 * key.len() as f64));
         placed.push((
-            Vector3 {
-                x: mm(x - 2.0 * plan.gauge_m),
-                y: mm(y),
-                z: 0.0,
-            },
-            "mu: blue < 0.30 too much product | green 0.30-0.40 target band | yellow-red > 0.40 dry"
-                .to_owned(),
+            at([(x[0] + x[1]) / 2.0, y - 2.0 * plan.gauge_m]),
+            key.to_owned(),
+            key_font_m,
         ));
         TrackScene {
             points,
@@ -297,7 +309,6 @@ impl TrackScene {
             last: vec![None; tracks.len()],
             labels: placed,
             thickness_m: plan.gauge_m / 6.0,
-            font_size_m: plan.gauge_m / 2.0,
         }
     }
 
@@ -347,13 +358,13 @@ impl TrackScene {
             texts: self
                 .labels
                 .iter()
-                .map(|(at, text)| TextPrimitive {
+                .map(|(at, text, font_size)| TextPrimitive {
                     pose: Pose {
                         position: *at,
                         orientation: IDENTITY.orientation,
                     },
                     billboard: true,
-                    font_size: self.font_size_m,
+                    font_size: *font_size,
                     scale_invariant: false,
                     color: Color::rgb([30, 30, 30]),
                     text: text.clone(),

@@ -4,6 +4,7 @@
 //
 //   node tests/js/studio/open.js --mcap FILE --layout LAYOUT.json --time RFC3339
 //        [--screenshots DIR] [--timeout-s 240] [--problems-only]
+//        [--expect-problem TEXT]
 //
 // It serves the app, React 17, the layout and the file from one local HTTP
 // server that answers byte ranges (as Studio's remote-file source needs),
@@ -13,7 +14,9 @@
 // a Tab panel in turn) the pixels of each series' colour on its canvas, the
 // 3D panel's coloured pixels and where they lie, and the Log panel's rows.
 // With --problems-only (a file the layout was not made for, such as an
-// input recording) only the Problems list and errors are judged. Prints one
+// input recording) only the Problems list and errors are judged. With
+// --expect-problem, a problem containing TEXT is expected (the file has it
+// by design): it must be listed, and is no failure. Prints one
 // JSON object; exits 0 when nothing is wrong, 1 when something
 // is (the object's `failures` say what), 2 when it could not run.
 "use strict";
@@ -30,6 +33,10 @@ const MODULES = path.join(HERE, "..", "node_modules");
 const MIN_SERIES_PIXELS = 5;
 /// Share of the 3D canvas that the coloured track must cover.
 const MIN_TRACK_SHARE = 0.003;
+/// Width of the 3D canvas's edge strips (pixels) where no label's ink may
+/// lie: a label there is cut off by the panel. The strips leave out the
+/// top fifth, where the app's own buttons and hints sit.
+const EDGE_PX = 10;
 
 function parseArgs(argv) {
   const args = { timeoutS: 240 };
@@ -46,6 +53,7 @@ function parseArgs(argv) {
     else if (key === "--time") args.time = value;
     else if (key === "--screenshots") args.screenshots = path.resolve(value);
     else if (key === "--timeout-s") args.timeoutS = Number(value);
+    else if (key === "--expect-problem") args.expectProblem = value;
     else throw new Error(`unknown argument ${key}`);
   }
   for (const k of ["mcap", "layout", "time"]) {
@@ -124,10 +132,12 @@ function serve(args) {
 /// each series colour (`#rrggbb`), the pixels that are that colour blended
 /// with the background (the most common pixel) at an opacity of 30 % or
 /// more (antialiased lines), each pixel counted for the nearest colour;
-/// and the saturated ("coloured") pixels with their centroid.
+/// the saturated ("coloured") pixels with their centroid; and the dark
+/// pixels (labels' ink) in the edge strips (EDGE_PX wide: left, right and
+/// bottom, below the top fifth).
 async function pixels(page, png, colours) {
   return page.evaluate(
-    async (b64, colours) => {
+    async (b64, colours, edgePx) => {
       const img = new Image();
       img.src = "data:image/png;base64," + b64;
       await img.decode();
@@ -146,6 +156,7 @@ async function pixels(page, png, colours) {
       const rgb = colours.map((c) => [1, 3, 5].map((k) => parseInt(c.slice(k, k + 2), 16)));
       const near = colours.map(() => 0);
       let coloured = 0;
+      let edgeInk = 0;
       let [sx, sy] = [0, 0];
       for (let i = 0; i < d.length; i += 4) {
         const p = [d[i], d[i + 1], d[i + 2]];
@@ -168,6 +179,11 @@ async function pixels(page, png, colours) {
           sx += q % img.width;
           sy += Math.floor(q / img.width);
         }
+        const [x, y] = [(i / 4) % img.width, Math.floor(i / 4 / img.width)];
+        const inStrip =
+          y >= img.height / 5 && (x < edgePx || x >= img.width - edgePx || y >= img.height - edgePx);
+        // Grey to black: a label's antialiased strokes, not the track's colours.
+        if (inStrip && Math.max(...p) < 200 && Math.max(...p) - Math.min(...p) < 40) edgeInk += 1;
       }
       return {
         width: img.width,
@@ -175,10 +191,12 @@ async function pixels(page, png, colours) {
         near,
         coloured,
         centroid: coloured ? [sx / coloured / img.width, sy / coloured / img.height] : null,
+        edgeInk,
       };
     },
     png.toString("base64"),
     colours,
+    EDGE_PX,
   );
 }
 
@@ -284,11 +302,14 @@ async function look(page, layout, shots, settleMs) {
     const element = await panel(page, id);
     const canvas = element && (await element.$("canvas"));
     if (!canvas) continue;
-    const counted = await pixels(page, await canvas.screenshot(), []);
+    const png = await canvas.screenshot();
+    const counted = await pixels(page, png, []);
+    if (shots) fs.writeFileSync(path.join(shots, `studio-${id.replace("!", "-")}.png`), png);
     seen.threeD = {
       id,
       share: counted.coloured / (counted.width * counted.height),
       centroid: counted.centroid,
+      edgeInk: counted.edgeInk,
     };
   }
   for (const id of Object.keys(configs).filter((id) => id.startsWith("RosOut!"))) {
@@ -299,11 +320,16 @@ async function look(page, layout, shots, settleMs) {
   return seen;
 }
 
-function judge(seen, problemList, appErrors, problemsOnly) {
+function judge(seen, problemList, appErrors, problemsOnly, expectProblem) {
   const failures = [];
+  const expected = (p) => expectProblem !== undefined && p.includes(expectProblem);
+  const unexpected = problemList.items.filter((p) => !expected(p));
   if (!problemList.found) failures.push("the Problems tab was not found");
-  else if (problemList.items.length > 0 || !problemList.empty) {
+  else if (unexpected.length > 0 || (!problemList.empty && problemList.items.length === 0)) {
     failures.push(`Problems: ${JSON.stringify(problemList.items)}`);
+  }
+  if (expectProblem !== undefined && !problemList.items.some(expected)) {
+    failures.push(`the expected problem "${expectProblem}" is not listed`);
   }
   for (const id of seen.panelErrors) failures.push(`panel error: ${id}`);
   for (const e of appErrors) failures.push(`app error: ${e.split("\n")[0]}`);
@@ -330,11 +356,12 @@ function judge(seen, problemList, appErrors, problemsOnly) {
   }
   if (!seen.threeD) failures.push("3D: no canvas");
   else {
-    const { share, centroid } = seen.threeD;
+    const { share, centroid, edgeInk } = seen.threeD;
     if (share < MIN_TRACK_SHARE) failures.push(`3D: the track is not shown (${(share * 100).toFixed(2)} % coloured)`);
     else if (centroid.some((c) => c < 0.2 || c > 0.8)) {
       failures.push(`3D: the track is off-centre (centroid at ${centroid.map((c) => c.toFixed(2))} of the panel)`);
     }
+    if (edgeInk > 0) failures.push(`3D: labels cut off by the panel's edges (${edgeInk} dark pixels at its edges)`);
   }
   if (seen.log.length === 0) failures.push("Log: no rows");
   return failures;
@@ -381,7 +408,7 @@ async function main() {
       },
       { timeout: args.timeoutS * 1000 },
     );
-    let seen, problemList, failures, appErrors;
+    let seen, problemList, failures, appErrors, expectedOnly;
     // A Tab panel draws a tab's plot anew when it opens: each pass waits
     // longer for it (a slow machine gets more time, not the same again).
     let settleMs = 1500;
@@ -391,10 +418,11 @@ async function main() {
       seen = await look(page, layout, null, settleMs);
       settleMs = Math.min(2 * settleMs, 20000);
       appErrors = await page.evaluate(() => window.__studioErrors);
-      failures = judge(seen, problemList, appErrors, args.problemsOnly);
+      failures = judge(seen, problemList, appErrors, args.problemsOnly, args.expectProblem);
       // Problems with the file's channels do not go away: no need to wait
-      // for the plots then.
-    } while (failures.length > 0 && problemList.items.length === 0 && Date.now() < deadline);
+      // for the plots then (an expected one aside).
+      expectedOnly = problemList.items.every((p) => args.expectProblem !== undefined && p.includes(args.expectProblem));
+    } while (failures.length > 0 && expectedOnly && Date.now() < deadline);
     if (args.screenshots) {
       await look(page, layout, args.screenshots, settleMs);
       // Back to the first tab for the overview.

@@ -530,12 +530,21 @@ impl Sink for McapSink {
                 format!("site {} ({:.0} m)", s.id, s.position_m),
             )
         }));
+
         let tracks: Vec<(String, String)> = info
             .tracks
             .iter()
             .map(|t| (t.rail_name.clone(), t.band.clone()))
             .collect();
-        self.scene = Some(TrackScene::new(&plan, &info.grid_d_m, &tracks, &labels));
+        // A line's segments by name, at their middles.
+        let segments = Plan::segment_labels(info);
+        self.scene = Some(TrackScene::new(
+            &plan,
+            &info.grid_d_m,
+            &tracks,
+            &labels,
+            &segments,
+        ));
         self.scene_dirty = vec![false; tracks.len()];
         self.grid_d_m = info.grid_d_m.to_vec();
         let single_band = |rail: usize| info.tracks.iter().filter(|t| t.rail == rail).count() == 1;

@@ -265,6 +265,23 @@ pub(super) fn log_static(
             entity(&["curve", layer, "sites"]),
             &labelled(positions, labels, Color::from_rgb(90, 90, 90), marker),
         )?;
+        // A line's segments by name, at their middles, on the other side.
+        let segments = Plan::segment_labels(info);
+        if !segments.is_empty() {
+            let (positions, labels): (Vec<[f32; 2]>, Vec<String>) = segments
+                .into_iter()
+                .map(|(d, id)| (xy(d, -outside), id))
+                .unzip();
+            rec.log_static(
+                entity(&["curve", layer, "segments"]),
+                &labelled(
+                    positions,
+                    labels,
+                    Color::from_rgb(60, 90, 160),
+                    Radius::new_scene_units((gauge / 5.0) as f32),
+                ),
+            )?;
+        }
     }
     log_legends(rec, frames)?;
     log_profile_frames(rec, info, frames)?;
