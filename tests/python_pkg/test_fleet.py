@@ -80,6 +80,27 @@ def messages(path: Path, topics=("/twin/measurement", "/twin/field", "/twin/puls
         return [(c.topic, m.log_time, m.data) for _, c, m in make_reader(f).iter_messages(topics=list(topics))]
 
 
+def assert_days_as_the_command_line(tortwin_bin, days: dict, cli_dir: Path, out: Path, sid: str) -> None:
+    """Replays `days` (date -> recording) with the command line one after
+    another, the state carried, and asserts the fleet's MCAP output and
+    state of each day in `out` are the same."""
+    state = None
+    for date in sorted(days):
+        cli_out = cli_dir / sid / f"{date}.mcap"
+        cli_out.parent.mkdir(parents=True, exist_ok=True)
+        args = ["replay", days[date], "--out-mcap", cli_out, "-q",
+                "--state-out", cli_out.with_suffix(".state.json")]
+        if state:
+            args += ["--state-in", state]
+        done = run_cli(tortwin_bin, *args)
+        assert done.returncode == 0, done.stderr
+        state = cli_out.with_suffix(".state.json")
+        expected = messages(cli_out)
+        assert len(expected) > 100
+        assert messages(out / "mcap" / sid / f"{date}.mcap") == expected, (sid, date)
+        assert (out / "_state" / sid / f"{date}.state.json").read_text() == state.read_text()
+
+
 def test_a_fleet_equals_the_command_line_day_by_day(tmp_path, recordings, local_ray, tortwin_bin):
     out = tmp_path / "out"
     space = tmp_path / "space.toml"
@@ -105,22 +126,7 @@ def test_a_fleet_equals_the_command_line_day_by_day(tmp_path, recordings, local_
 
     # Per section: the command line, day after day with the state carried.
     for sid in SECTIONS:
-        state = None
-        for date in DATES:
-            cli_out = tmp_path / "cli" / sid / f"{date}.mcap"
-            cli_out.parent.mkdir(parents=True, exist_ok=True)
-            args = ["replay", recordings[sid][date], "--out-mcap", cli_out, "-q",
-                    "--state-out", cli_out.with_suffix(".state.json")]
-            if state:
-                args += ["--state-in", state]
-            done = run_cli(tortwin_bin, *args)
-            assert done.returncode == 0, done.stderr
-            state = cli_out.with_suffix(".state.json")
-            ours = out / "mcap" / sid / f"{date}.mcap"
-            expected = messages(cli_out)
-            assert len(expected) > 100
-            assert messages(ours) == expected, (sid, date)
-            assert (out / "_state" / sid / f"{date}.state.json").read_text() == state.read_text()
+        assert_days_as_the_command_line(tortwin_bin, recordings[sid], tmp_path / "cli", out, sid)
 
     # The dataset: per-train metrics, RMSE and days, partitioned by section and date.
     trains = ds.dataset(out / "trains", format="parquet", partitioning="hive").to_table()
@@ -266,21 +272,7 @@ def test_a_line_is_a_section_of_the_fleet(tmp_path, local_ray, tortwin_bin):
     [(what, study)] = run.studies
     assert (what, study.section, study.status) == ("discover", "L", "failed")
     assert "line" in study.error and "section" in study.error, study.error
-    state = None
-    for date in sorted(days["L"]):
-        cli_out = tmp_path / "cli" / f"{date}.mcap"
-        cli_out.parent.mkdir(parents=True, exist_ok=True)
-        args = ["replay", days["L"][date], "--out-mcap", cli_out, "-q",
-                "--state-out", cli_out.with_suffix(".state.json")]
-        if state:
-            args += ["--state-in", state]
-        done = run_cli(tortwin_bin, *args)
-        assert done.returncode == 0, done.stderr
-        state = cli_out.with_suffix(".state.json")
-        expected = messages(cli_out)
-        assert len(expected) > 100
-        assert messages(out / "mcap" / "L" / f"{date}.mcap") == expected, date
-        assert (out / "_state" / "L" / f"{date}.state.json").read_text() == state.read_text()
+    assert_days_as_the_command_line(tortwin_bin, days["L"], tmp_path / "cli", out, "L")
     trains = ds.dataset(out / "trains", format="parquet", partitioning="hive").to_table()
     line_rows = trains.filter(pc.equal(trains["section"], "L"))
     assert sorted(set(line_rows["rail"].to_pylist())) == ["left", "right"]
