@@ -1068,3 +1068,138 @@ mod synth {
         assert!(String::from_utf8_lossy(&o.stderr).contains("effects.rail_ageing"));
     }
 }
+
+/// The watched axles' view in rerun (issue 45: "mu per rail band along the
+/// line ..., the wheel's band masses along the line for a chosen axle"):
+/// the engine's [`tortwin_engine::sink::LineWheels`] for axles 4 and 5 of
+/// the field line's last train equal the reference's mu (line_field.csv)
+/// to 1e-9, `rail_mu` is eq. (4) of the crown's mass after the train, the
+/// tread bands carry product; and the command's .rrd
+/// (`--line-axle 4`) holds each as a line within 5e-4 of mu (5e-3 decades
+/// of mg) with a view per rail in its layout (tests/python/check_rrd.py).
+#[test]
+fn rerun_shows_a_chosen_axle_along_the_line() {
+    use tortwin_engine::sink::{FieldSnapshot, LineWheels};
+    #[derive(Default)]
+    struct Watch {
+        last: Vec<LineWheels<'static>>,
+        wheel_pass: u64,
+    }
+    impl Sink for Watch {
+        fn field(&mut self, f: &FieldSnapshot<'_>) -> SinkResult {
+            self.wheel_pass = self.wheel_pass.max(f.wheel_pass);
+            Ok(())
+        }
+        fn line_wheels(&mut self, w: &LineWheels<'_>) -> SinkResult {
+            if w.rail == 0 {
+                self.last.clear();
+            }
+            let owned = tortwin_engine::sink::Event::LineWheels(w.clone()).into_owned();
+            if let tortwin_engine::sink::Event::LineWheels(w) = owned {
+                self.last.push(w);
+            }
+            Ok(())
+        }
+    }
+    let path = recordings().join("line_field.mcap");
+    let reader = RecordingReader::open(&path, ReaderContext::default()).unwrap();
+    let opts = EngineOptions {
+        line_axle: Some(4),
+        ..EngineOptions::default()
+    };
+    let mut watch = Watch::default();
+    let mut engine = Engine::on_line(
+        reader.section().clone(),
+        reader.line().cloned(),
+        ModelConfig::default(),
+        opts,
+        reader.origin_ns(),
+    );
+    let rails = reader.section().rails.clone();
+    let length_m = reader.section().length_m;
+    for event in reader {
+        engine.push(event.unwrap(), &mut watch).unwrap();
+    }
+    engine.finish(&mut watch, 0).unwrap();
+    assert_eq!(watch.last.len(), 2, "one per rail after the last train");
+
+    let p = ModelConfig::default().product;
+    let table = std::fs::read_to_string(common::reference("line_field.csv")).unwrap();
+    // Columns: d_m, segment, rows_left, rows_right, then mu_lead_left,
+    // mu_trail_left, mu_lead_right, mu_trail_right.
+    let rows: Vec<Vec<f64>> = table
+        .lines()
+        .skip(1)
+        .filter(|l| !l.is_empty())
+        .map(|l| l.split(',').skip(4).map(|f| f.parse().unwrap()).collect())
+        .collect();
+    let state = engine.state();
+    let mut expected_rails = serde_json::Map::new();
+    for w in &watch.last {
+        assert_eq!(w.axles, [4, 5]);
+        for (k, mu) in w.mu.iter().enumerate() {
+            assert_eq!(mu.len(), rows.len());
+            for (i, row) in rows.iter().enumerate() {
+                let want = row[2 * w.rail + k];
+                let rel = relative(mu[i], want);
+                assert!(
+                    rel <= 1e-9,
+                    "axle {} rail {}: {} at {i}, want {want}",
+                    w.axles[k],
+                    w.rail,
+                    mu[i]
+                );
+            }
+        }
+        let crown = &state.tracks[2 * w.rail].rail_mass_kg;
+        for (i, &m) in crown.iter().enumerate() {
+            assert_eq!(w.rail_mu[i], product::friction(&p, m), "rail_mu at {i}");
+        }
+        // The tread's bands: never negative, and product on them somewhere
+        // (the wheels pick it up where the rows let them: line.md's table).
+        let [f, c, g] = &w.bands_kg;
+        let all = || f.iter().chain(c.iter()).chain(g.iter());
+        assert!(all().all(|m| m.is_finite() && *m >= 0.0));
+        assert!(
+            all().any(|&m| m > 0.0),
+            "axle 4 carries product on rail {}",
+            w.rail
+        );
+        let mg = |v: &[f64]| v.iter().map(|m| m * 1e6).collect::<Vec<_>>();
+        expected_rails.insert(
+            rails[w.rail].clone(),
+            serde_json::json!({
+                "axle": w.mu[0], "next_axle": w.mu[1], "rail_mu": w.rail_mu,
+                "F": mg(f), "C": mg(c), "G": mg(g),
+            }),
+        );
+    }
+
+    let dir = tempfile::tempdir().unwrap();
+    let rrd = dir.path().join("line.rrd");
+    let args = ReplayArgs {
+        out_rrd: Some(rrd.clone()),
+        line_axle: 4,
+        ..ReplayArgs::new(&path)
+    };
+    replay(&args, None, &mut [], &tortwin_study::Silent).unwrap();
+    let expected = serde_json::json!({
+        "blueprint": true,
+        "line_wheels": {
+            "wheel_pass": watch.wheel_pass,
+            "length_m": length_m,
+            "d_m": engine.grid().d_m,
+            "rails": expected_rails,
+        },
+    });
+    let expected_path = dir.path().join("expected.json");
+    std::fs::write(&expected_path, expected.to_string()).unwrap();
+    let output = common::python("check_rrd.py", &[&rrd, &expected_path]);
+    let stdout = String::from_utf8_lossy(&output.stdout);
+    assert!(
+        output.status.success(),
+        "check_rrd.py failed:\n{stdout}{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    println!("{stdout}");
+}

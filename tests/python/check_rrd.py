@@ -24,6 +24,14 @@ the crate's rerun dependency).
 5. Pulses and site measurements (`/applicator/**`, `/sites/**`) are on the
    `time` timeline only (on `wheel_pass` a train's measurements would stack).
 6. With "blueprint": the layout the viewer opens (see `blueprint_checks`).
+7. With "line_wheels" (a line): at the snapshot, per rail, the mu that the
+   watched axle and the next saw and what rail_mu reads
+   (`/line/mu/<rail>/{axle,next_axle,rail_mu}`, y = -mu * length) and the
+   axle's tread bands (`/line/tread/<rail>/{F,C,G}`, decades of mg from
+   1e-4 to 1e2 over 0.8 * length) are each one line through grid points
+   within 5e-4 of mu (5e-3 decades) at every grid point; with "blueprint",
+   a 2D view per rail shows each with its profile's frame. Without "rail",
+   the section's checks 3-4 are skipped (a line is not on an arc).
 
 EXPECTED.json:
 
@@ -43,6 +51,11 @@ EXPECTED.json:
                                            #   at which the track's history was logged
       "blueprint": true,                   # optional: require a blueprint store
                                            #   laid out as `blueprint_checks` says
+      "line_wheels": {                     # optional, a line: the watched axles
+        "wheel_pass": 96, "length_m": 4300.0, "d_m": [...],
+        "rails": {"right": {"axle": [mu, ...], "next_axle": [...], "rail_mu": [...],
+                            "F": [mg, ...], "C": [...], "G": [...]}}
+      },
       "series": {                          # optional: per Scalars entity, every
         "/applicator/A1/high": [[t, [v]], ...]   # (time in ns, values) it holds on
       }                                    #   `time`, exactly, none missing or extra
@@ -262,6 +275,65 @@ def curve_checks(store, expected: dict) -> list[str]:
     return done
 
 
+def one_line_checks(entity: str, strips, d_m: list[float], values: list[float], y_of, tolerance: float, length: float) -> int:
+    """`strips` is one line through grid points at y_of(value) that stays
+    within `tolerance` of the values between them. Returns its points."""
+    if len(strips) != 1:
+        raise CheckFailed(f"{entity}: {len(strips)} strips, expected one line")
+    grid = {to_f32(d): i for i, d in enumerate(d_m)}
+    kept = []
+    for x, y in strips[0]:
+        if x not in grid:
+            raise CheckFailed(f"{entity}: point at x = {x} is not a grid point")
+        i = grid[x]
+        if abs(y - to_f32(y_of(values[i]))) > 1e-6 * length:
+            raise CheckFailed(f"{entity}: point {i} at y = {y}, the value there is {values[i]}")
+        kept.append(i)
+    if not kept or kept[0] != 0 or kept[-1] != len(values) - 1:
+        raise CheckFailed(f"{entity}: the line does not run from the first to the last grid point")
+    for a, b in zip(kept, kept[1:]):
+        for i in range(a, b + 1):
+            t = (d_m[i] - d_m[a]) / (d_m[b] - d_m[a])
+            between = values[a] + t * (values[b] - values[a])
+            if abs(values[i] - between) > tolerance:
+                raise CheckFailed(f"{entity}: the line is {abs(values[i] - between):.2e} off at grid point {i}")
+    return len(kept)
+
+
+def line_wheel_checks(store, expected: dict) -> list[str]:
+    d_m = [float(d) for d in expected["d_m"]]
+    length = float(expected["length_m"])
+    wheel_pass = int(expected["wheel_pass"])
+
+    def mu_y(mu: float) -> float:
+        return -min(max(mu, -0.05), 0.85) * length
+
+    def decades(mg: float) -> float:
+        return math.log10(max(mg, 1e-4))
+
+    def product_y(v: float) -> float:
+        return -(min(max(v, -4.0), 2.0) + 4.0) / 6.0 * 0.8 * length
+
+    done = []
+    for rail, wheels in expected["rails"].items():
+        for name in ("axle", "next_axle", "rail_mu", "F", "C", "G"):
+            is_mu = name in ("axle", "next_axle", "rail_mu")
+            entity = f"/line/{'mu' if is_mu else 'tread'}/{rail}/{name}"
+            values = [float(v) for v in wheels[name]]
+            if len(values) != len(d_m):
+                raise CheckFailed(f"expected {rail}/{name}: {len(values)} values for {len(d_m)} points")
+            if not is_mu:
+                values = [decades(v) for v in values]
+            table = store.reader(index="wheel_pass", contents=entity).to_arrow_table()
+            strips = last_cell_at(table, f"{entity}:LineStrips2D:strips", "wheel_pass", wheel_pass)
+            if is_mu:
+                kept = one_line_checks(entity, strips, d_m, values, mu_y, 5e-4 + 1e-6, length)
+            else:
+                kept = one_line_checks(entity, strips, d_m, values, product_y, 5e-3 + 1e-6, length)
+            done.append(f"{entity} at wheel_pass {wheel_pass}: a line through {kept} of {len(d_m)} points")
+    return done
+
+
 def history_checks(store, expected: dict) -> list[str]:
     rail, band = expected["rail"], expected["band"]
     root = f"/history/{rail}/{band}"
@@ -329,7 +401,9 @@ def check(rrd: Path, expected: dict) -> list[str]:
         if name not in schema_text:
             raise CheckFailed(f"timeline {name!r} missing; schema:\n{schema_text}")
 
-    done = curve_checks(store, expected)
+    done = curve_checks(store, expected) if "rail" in expected else []
+    if "line_wheels" in expected:
+        done += line_wheel_checks(store, expected["line_wheels"])
     if expected.get("check_history") or "history_logged_at" in expected:
         done += history_checks(store, expected)
     done += time_only_checks(store, schema_text)
@@ -477,20 +551,53 @@ def blueprint_checks(reader, blueprints, store, expected: dict) -> list[str]:
         if class_ not in KNOWN_VIEW_CLASSES:
             raise CheckFailed(f"blueprint: view {name!r} has unknown class {class_!r}")
 
-    rail, band = expected["rail"], expected["band"]
     done = []
-    for query, what in [
-        ("+ /curve/mu/**", "the curve coloured by mu"),
-        ("+ /curve/product/**", "the curve coloured by product"),
-        ("+ /profiles/mu/**", "the mu profiles"),
-        ("+ /profiles/product/**", "the product profiles"),
-        (f"+ /history/{rail}/{band}/**", "the track's mu history"),
-    ]:
-        views = [name for class_, name, queries in infos.values() if class_ == "2D" and query in queries]
+    wanted = [
+        (["+ /curve/mu/**"], "the curve coloured by mu"),
+        (["+ /curve/product/**"], "the curve coloured by product"),
+        (["+ /profiles/mu/**"], "the mu profiles"),
+        (["+ /profiles/product/**"], "the product profiles"),
+    ]
+    if "rail" in expected:
+        rail, band = expected["rail"], expected["band"]
+        wanted.append(([f"+ /history/{rail}/{band}/**"], "the track's mu history"))
+    for rail in expected.get("line_wheels", {}).get("rails", {}):
+        wanted.append(([f"+ /line/mu/{rail}/**", "+ /profiles/mu/frame/**"], f"the watched axles' mu on {rail}"))
+        wanted.append(([f"+ /line/tread/{rail}/**", "+ /profiles/product/frame/**"], f"the watched axle's tread on {rail}"))
+    for queries_wanted, what in wanted:
+        views = [
+            name
+            for class_, name, queries in infos.values()
+            if class_ == "2D" and all(q in queries for q in queries_wanted)
+        ]
         if not views:
             shown = sorted(q for _, _, qs in infos.values() for q in qs)
-            raise CheckFailed(f"blueprint: no 2D view shows {what} ({query}); view queries: {shown}")
+            raise CheckFailed(f"blueprint: no 2D view shows {what} ({queries_wanted}); view queries: {shown}")
         done.append(f"blueprint: {what} in {views[0]!r}")
+
+    if expected.get("line_wheels"):
+        # The watched axles' tab opens (a Tabs container's active tab).
+        def views_under(path: str) -> list[str]:
+            if path.startswith("/view/"):
+                return [path]
+            found = []
+            for child in cells.get(path, {}).get("ContainerBlueprint:contents", []):
+                found += views_under("/" + child.lstrip("/"))
+            return found
+
+        active = [
+            "/" + str(cell[0]).lstrip("/")
+            for path, columns in cells.items()
+            for name, cell in columns.items()
+            if name == "ContainerBlueprint:active_tab"
+        ]
+        opened = [
+            tab for tab in active
+            if any(q.startswith("+ /line/") for v in views_under(tab) for q in infos.get(v, ("", "", []))[2])
+        ]
+        if not opened:
+            raise CheckFailed(f"blueprint: no tab of the watched axles is active (active tabs: {active})")
+        done.append("blueprint: the watched axles' tab is the active one")
 
     series_views = [path for path, (class_, _, _) in infos.items() if class_ == "TimeSeries"]
     for path in series_views:

@@ -177,6 +177,11 @@ pub struct EngineOptions {
     /// is the default. The two give the same bits (crates/engine/tests/
     /// kernel.rs checks it); this is for checking that, and for timing it.
     pub portable_kernel: bool,
+    /// On a line: after each train, give [`Sink::line_wheels`] what axle
+    /// `K` and the next saw along each rail and axle `K`'s tread bands
+    /// (the train's last two axles when it has no axle `K + 1`). Ignored
+    /// on a section.
+    pub line_axle: Option<usize>,
 }
 
 /// The calculation grid: `d_i = i * C`, `C = pi * nominal wheel diameter`,

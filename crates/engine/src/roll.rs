@@ -670,6 +670,19 @@ pub(crate) struct TrackWork {
     /// With tangents ([`crate::EngineOptions::tangents`]): the tangent of
     /// the rail mass at every point (else empty).
     pub(crate) rail_tan: Vec<Tangent>,
+    /// On a line with [`crate::EngineOptions::line_axle`], in the rail's
+    /// crown track: what the two watched axles saw (else empty).
+    pub(crate) watched: Watched,
+}
+
+/// What two chosen axles of a train saw along a rail of a line
+/// ([`crate::sink::LineWheels`]).
+#[derive(Debug, Clone, Default)]
+pub(crate) struct Watched {
+    /// Each axle's step-2 mass at every point.
+    pub(crate) seen_kg: [Vec<f64>; 2],
+    /// The first axle's tread bands F, C, G after its contact at every point.
+    pub(crate) bands_kg: [Vec<f64>; 3],
 }
 
 /// A tribometer reading's simulated value, the rail mass it read and that
@@ -693,6 +706,7 @@ impl TrackWork {
             sites: Vec::new(),
             wheel_seen: Vec::new(),
             rail_tan: Vec::new(),
+            watched: Watched::default(),
         }
     }
 }
@@ -799,6 +813,9 @@ pub(crate) struct RollContext<'a> {
     observe_every_wheel: bool,
     /// Keep every wheel's step-2 masses in [`TrackWork::wheel_seen`].
     keep_seen: bool,
+    /// On a line: the axles whose contacts go to [`TrackWork::watched`]
+    /// (`usize::MAX`: none).
+    watch: [usize; 2],
     /// The effect parameters the tangents' effect slots follow.
     effect_params: [Option<EffectParam>; EFFECT_SLOTS],
     /// How many of a tangent's slots the contacts step: 0 without tangents
@@ -858,6 +875,7 @@ impl Engine {
                 last_axle: &self.last_axle,
                 observe_every_wheel: self.opts.snapshot_every_wheel,
                 keep_seen: self.opts.every_wheel_contacts && !self.opts.snapshot_every_wheel,
+                watch: [usize::MAX; 2],
                 effect_params: self.opts.effect_tangents,
                 tangent_width: match (self.opts.tangents, self.opts.effect_tangents) {
                     (false, _) => 0,
@@ -1800,6 +1818,9 @@ impl Engine {
         if self.line.is_some() {
             for track in 0..self.tracks.len() {
                 self.emit_line_field(record, track, kind, record.end_ns, sink)?;
+            }
+            if kind == SnapshotKind::Train {
+                self.emit_line_wheels(record, sink)?;
             }
             return Ok(());
         }

@@ -142,6 +142,32 @@ pub struct WheelContacts<'a> {
     pub mu: Option<Cow<'a, [f64]>>,
 }
 
+/// On a line, after each train, per rail: what the chosen axle and the
+/// next one saw along the line, and the chosen axle's tread, given to
+/// [`Sink::line_wheels`] when `EngineOptions::line_axle` is set.
+#[derive(Debug, Clone)]
+pub struct LineWheels<'a> {
+    /// When the train's last wheel left the line.
+    pub log_time_ns: u64,
+    pub train_id: Cow<'a, str>,
+    pub rail: usize,
+    pub rail_name: Cow<'a, str>,
+    /// The two axles (0-based, in the train): the chosen one and the next,
+    /// or the train's last two when it has fewer axles; one twice for a
+    /// train of one axle.
+    pub axles: [usize; 2],
+    pub bogie_positions: [tortwin_recording::BogiePosition; 2],
+    /// mu of each axle's contact at every grid point (eq. (4) of its step-2
+    /// mass), whichever bands met there.
+    pub mu: [Cow<'a, [f64]>; 2],
+    /// What `rail_mu` reads after the train: eq. (4) of the crown's (`C`)
+    /// rail mass at every point.
+    pub rail_mu: Cow<'a, [f64]>,
+    /// The first axle's tread bands F, C, G after its contact at every
+    /// point (kg).
+    pub bands_kg: [Cow<'a, [f64]>; 3],
+}
+
 /// The end-of-run figures.
 #[derive(Debug, Clone, Default, serde::Serialize)]
 pub struct RunSummary {
@@ -207,6 +233,7 @@ pub enum Event<'a> {
     Measurement(MeasurementOutput<'a>),
     Field(FieldSnapshot<'a>),
     WheelContacts(WheelContacts<'a>),
+    LineWheels(LineWheels<'a>),
     Finish(RunSummary),
 }
 
@@ -281,6 +308,17 @@ impl Event<'_> {
                 seen_mass_kg: owned(w.seen_mass_kg),
                 mu: w.mu.map(owned),
             }),
+            Event::LineWheels(w) => Event::LineWheels(LineWheels {
+                log_time_ns: w.log_time_ns,
+                train_id: owned(w.train_id),
+                rail: w.rail,
+                rail_name: owned(w.rail_name),
+                axles: w.axles,
+                bogie_positions: w.bogie_positions,
+                mu: w.mu.map(owned),
+                rail_mu: owned(w.rail_mu),
+                bands_kg: w.bands_kg.map(owned),
+            }),
             Event::Finish(summary) => Event::Finish(summary),
         }
     }
@@ -294,6 +332,7 @@ impl Event<'_> {
             Event::Measurement(m) => sink.measurement(m),
             Event::Field(f) => sink.field(f),
             Event::WheelContacts(w) => sink.wheel_contacts(w),
+            Event::LineWheels(w) => sink.line_wheels(w),
             Event::Finish(summary) => sink.finish(summary),
         }
     }
@@ -310,6 +349,13 @@ impl Event<'_> {
                     + f.wheel_mass_kg.len()
             }
             Event::WheelContacts(w) => w.seen_mass_kg.len() + w.mu.as_ref().map_or(0, |m| m.len()),
+            Event::LineWheels(w) => {
+                w.mu.iter()
+                    .chain(&w.bands_kg)
+                    .map(|v| v.len())
+                    .sum::<usize>()
+                    + w.rail_mu.len()
+            }
             Event::Train(_) | Event::Pulse(_) | Event::Measurement(_) | Event::Finish(_) => 0,
         };
         f64s * std::mem::size_of::<f64>()
@@ -339,6 +385,11 @@ pub trait Sink {
         Ok(())
     }
     fn wheel_contacts(&mut self, _w: &WheelContacts<'_>) -> SinkResult {
+        Ok(())
+    }
+    /// On a line, after each train's fields (only when
+    /// `EngineOptions::line_axle` is set).
+    fn line_wheels(&mut self, _w: &LineWheels<'_>) -> SinkResult {
         Ok(())
     }
     /// Completes the output (e.g. renames the temporary file into place).
@@ -385,6 +436,9 @@ where
     }
     fn wheel_contacts(&mut self, w: &WheelContacts<'_>) -> SinkResult {
         self.sinks.iter_mut().try_for_each(|s| s.wheel_contacts(w))
+    }
+    fn line_wheels(&mut self, w: &LineWheels<'_>) -> SinkResult {
+        self.sinks.iter_mut().try_for_each(|s| s.line_wheels(w))
     }
     fn finish(&mut self, summary: &RunSummary) -> SinkResult {
         self.sinks.iter_mut().try_for_each(|s| s.finish(summary))

@@ -20,8 +20,8 @@ use std::thread::JoinHandle;
 use tortwin_handover::{Filler, Taker};
 
 use crate::sink::{
-    Event, FieldSnapshot, MeasurementOutput, PulseEvent, RunSummary, SectionInfo, Sink, SinkError,
-    SinkResult, TrainEvent, WheelContacts,
+    Event, FieldSnapshot, LineWheels, MeasurementOutput, PulseEvent, RunSummary, SectionInfo, Sink,
+    SinkError, SinkResult, TrainEvent, WheelContacts,
 };
 
 /// Calls in one hand-over.
@@ -137,6 +137,10 @@ impl Sink for SinkThread {
 
     fn wheel_contacts(&mut self, w: &WheelContacts<'_>) -> SinkResult {
         self.push(Event::WheelContacts(w.clone()))
+    }
+
+    fn line_wheels(&mut self, w: &LineWheels<'_>) -> SinkResult {
+        self.push(Event::LineWheels(w.clone()))
     }
 
     fn finish(&mut self, summary: &RunSummary) -> SinkResult {

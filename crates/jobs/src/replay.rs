@@ -44,6 +44,11 @@ pub struct ReplayArgs {
     /// (default: after every train).
     #[cfg_attr(feature = "cli", arg(long))]
     pub every_wheel: bool,
+    /// On a line: the axle (0-based) whose view the rerun recording has,
+    /// with the next one: the mu both saw along each rail and the axle's
+    /// tread bands F, C, G.
+    #[cfg_attr(feature = "cli", arg(long, default_value_t = 0, value_name = "K"))]
+    pub line_axle: usize,
     /// Do not print the summary.
     #[cfg_attr(feature = "cli", arg(long, short))]
     pub quiet: bool,
@@ -66,6 +71,7 @@ impl ReplayArgs {
             state_in: None,
             state_out: None,
             every_wheel: false,
+            line_axle: 0,
             quiet: true,
             per_train: false,
         }
@@ -203,6 +209,7 @@ fn run(
     let opts = EngineOptions {
         snapshot_every_wheel: args.every_wheel,
         every_wheel_contacts: args.per_train,
+        line_axle: args.out_rrd.is_some().then_some(args.line_axle),
         ..EngineOptions::default()
     };
     let section = reader.section().clone();

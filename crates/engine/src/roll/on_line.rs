@@ -39,6 +39,16 @@ impl Engine {
             observed.axle.clear();
             observed.axle.resize(points, NO_AXLE);
         }
+        let watch = self.watched_axles(record);
+        if watch[0] != usize::MAX {
+            for work in self.work.iter_mut().step_by(RAIL_BANDS) {
+                let watched = &mut work.watched;
+                for v in watched.seen_kg.iter_mut().chain(&mut watched.bands_kg) {
+                    v.clear();
+                    v.resize(points, f64::NAN);
+                }
+            }
+        }
         let keep_seen = self.opts.every_wheel_contacts;
         if keep_seen {
             for work in self.work.iter_mut().step_by(RAIL_BANDS) {
@@ -49,6 +59,7 @@ impl Engine {
         if !self.opts.snapshot_every_wheel {
             let (mut ctx, states, works) = self.split();
             ctx.keep_seen = keep_seen;
+            ctx.watch = watch;
             let record_ref: &TrainRecord = record;
             let parallel = rails > 1
                 && rayon::current_num_threads() > 1
@@ -76,6 +87,7 @@ impl Engine {
                 for r in 0..rails {
                     let (mut ctx, states, works) = self.split();
                     ctx.keep_seen = keep_seen;
+                    ctx.watch = watch;
                     let tracks = r * RAIL_BANDS..(r + 1) * RAIL_BANDS;
                     ctx.roll_rail_line(
                         record,
@@ -103,6 +115,57 @@ impl Engine {
                     result?;
                 }
             }
+        }
+        Ok(())
+    }
+
+    /// The axles [`crate::EngineOptions::line_axle`] asks to watch in this
+    /// train (`usize::MAX` twice when none): the chosen one and the next,
+    /// the last two when the train is shorter.
+    fn watched_axles(&self, record: &TrainRecord) -> [usize; 2] {
+        let axles = record.passage.axles.len();
+        match self.opts.line_axle {
+            Some(k) if axles > 0 => {
+                let first = k.min(axles.saturating_sub(2));
+                [first, (first + 1).min(axles - 1)]
+            }
+            _ => [usize::MAX; 2],
+        }
+    }
+
+    /// What the watched axles saw along each rail of the line, to
+    /// [`Sink::line_wheels`] after the train's fields.
+    pub(crate) fn emit_line_wheels(
+        &mut self,
+        record: &TrainRecord,
+        sink: &mut dyn Sink,
+    ) -> Result<(), EngineError> {
+        let axles = self.watched_axles(record);
+        if axles[0] == usize::MAX || self.line.is_none() {
+            return Ok(());
+        }
+        let product = &self.cfg.product;
+        let friction = |masses: &[f64]| -> Vec<f64> {
+            masses
+                .iter()
+                .map(|&m| product::friction(product, m))
+                .collect()
+        };
+        for (rail, rail_name) in self.section.rails.iter().enumerate() {
+            let crown = rail * RAIL_BANDS;
+            let watched = &self.work[crown].watched;
+            let wheels = crate::sink::LineWheels {
+                log_time_ns: record.end_ns,
+                train_id: std::borrow::Cow::Borrowed(&record.passage.train_id),
+                rail,
+                rail_name: std::borrow::Cow::Borrowed(rail_name),
+                axles,
+                bogie_positions: axles.map(|a| record.passage.axles[a].bogie_position),
+                mu: [0, 1].map(|k| friction(&watched.seen_kg[k]).into()),
+                rail_mu: friction(&self.tracks[crown].rail_mass_kg).into(),
+                bands_kg: [0, 1, 2].map(|b| std::borrow::Cow::Borrowed(&watched.bands_kg[b][..])),
+            };
+            sink.line_wheels(&wheels)?;
         }
         Ok(())
     }
@@ -385,6 +448,16 @@ impl RollContext<'_> {
     ) {
         lane.st.bands[wb] = lane.st.wheel_kg;
         works[rb].observed.axle[i] = lane.axle as u32;
+        if lane.axle == self.watch[0] {
+            let watched = &mut works[0].watched;
+            watched.seen_kg[0][i] = m_kg;
+            for (band, &kg) in watched.bands_kg.iter_mut().zip(&lane.st.bands) {
+                band[i] = kg;
+            }
+        }
+        if lane.axle == self.watch[1] {
+            works[0].watched.seen_kg[1][i] = m_kg;
+        }
         if self.keep_seen {
             works[0].wheel_seen[lane.axle * self.d_m.len() + i] = m_kg;
         }

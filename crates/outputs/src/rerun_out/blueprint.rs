@@ -6,8 +6,9 @@ use crate::rerun_sdk;
 use std::collections::{BTreeMap, BTreeSet};
 
 use crate::rerun_sdk::blueprint::components::{
-    AutoLayout, AutoViews, ColumnShare, ContainerKind, Corner2D, Fps, IncludedContent, PanelState,
-    PlayState, PlaybackSpeed, QueryExpression, RootContainer, RowShare, TimelineName, ViewClass,
+    ActiveTab, AutoLayout, AutoViews, ColumnShare, ContainerKind, Corner2D, Fps, IncludedContent,
+    PanelState, PlayState, PlaybackSpeed, QueryExpression, RootContainer, RowShare, TimelineName,
+    ViewClass,
 };
 use crate::rerun_sdk::components::Name;
 use crate::rerun_sdk::datatypes::{TimeRange, VisibleTimeRange};
@@ -24,7 +25,7 @@ use re_sdk_types::external::uuid::Uuid;
 use tortwin_recording::Quantity;
 
 use super::curve::Bounds;
-use super::entities::{entity, quantity_label, TrackEntities};
+use super::entities::{entity, quantity_label, TrackEntities, TREAD_BANDS};
 use super::{TIMELINE_TIME, TIMELINE_WHEEL_PASS};
 
 /// Playback (should the user rewind and press play) covers the run in this.
@@ -58,6 +59,8 @@ pub(super) struct Run<'a> {
     pub(super) time_span_ns: Option<[u64; 2]>,
     /// Wheel passes of the whole run.
     pub(super) wheel_pass: u64,
+    /// On a line: the watched axle and the rails its views show.
+    pub(super) line_wheels: Option<&'a (usize, BTreeSet<usize>)>,
 }
 
 pub(super) fn blueprint(run: &Run<'_>) -> Result<Vec<LogMsg>, RecordingStreamError> {
@@ -110,11 +113,23 @@ pub(super) fn blueprint(run: &Run<'_>) -> Result<Vec<LogMsg>, RecordingStreamErr
     for view in [&profile_mu, &profile_product] {
         bp.property(view, &bounds(layout.profile_bounds))?;
     }
+    let mut along = vec![profile_mu, profile_product];
+    // On a line the watched axles' tab opens: what the wheels carry from
+    // curve to curve.
+    let mut active = None;
+    if let Some((axle, rails)) = run.line_wheels {
+        let tab = line_wheel_views(&bp, layout, *axle, rails)?;
+        active = Some(ActiveTab(tab.path.as_str().into()));
+        along.push(tab);
+    }
     let profiles = bp.container(
         ContainerKind::Tabs,
         "Along the section",
-        vec![profile_mu, profile_product],
-        |c| c,
+        along,
+        |c| match active {
+            Some(tab) => c.with_active_tab(tab),
+            None => c,
+        },
     )?;
     let left = bp.container(
         ContainerKind::Vertical,
@@ -222,6 +237,63 @@ pub(super) fn blueprint(run: &Run<'_>) -> Result<Vec<LogMsg>, RecordingStreamErr
             .with_fps(Fps::from((run.wheel_pass as f64 / PLAYBACK_S).max(30.0))),
     )?;
     Ok(storage.take())
+}
+
+/// On a line, a tab with a row per rail: the mu the watched axle and the
+/// next saw along it with what `rail_mu` reads, and the axle's tread bands.
+fn line_wheel_views(
+    bp: &BlueprintWriter<'_>,
+    layout: &Layout,
+    axle: usize,
+    rails: &BTreeSet<usize>,
+) -> Result<BlueprintItem, RecordingStreamError> {
+    let bands = TREAD_BANDS
+        .iter()
+        .map(|(band, _, colour)| format!("{band}: {colour}"))
+        .collect::<Vec<_>>()
+        .join(", ");
+    let mut rows = Vec::new();
+    for &rail in rails {
+        let Some(name) = layout.rails.get(rail) else {
+            continue;
+        };
+        let mu = bp.view(
+            "2D",
+            &format!(
+                "{name} rail: mu seen by axle {axle} (solid), axle {} (paler), rail_mu on the crown (grey), along d [m]",
+                axle + 1
+            ),
+            [
+                format!("+ {}/**", entity(&["line", "mu", name])),
+                "+ /profiles/mu/frame/**".to_owned(),
+            ],
+        )?;
+        let tread = bp.view(
+            "2D",
+            &format!(
+                "{name} rail: axle {axle}'s tread bands ({bands}), mg on decades, along d [m]"
+            ),
+            [
+                format!("+ {}/**", entity(&["line", "tread", name])),
+                "+ /profiles/product/frame/**".to_owned(),
+            ],
+        )?;
+        for view in [&mu, &tread] {
+            bp.property(view, &bounds(layout.profile_bounds))?;
+        }
+        rows.push(bp.container(
+            ContainerKind::Horizontal,
+            &format!("{name} rail"),
+            vec![mu, tread],
+            |c| c,
+        )?);
+    }
+    bp.container(
+        ContainerKind::Vertical,
+        &format!("Along the line: axle {axle}"),
+        rows,
+        |c| c,
+    )
 }
 
 /// A 2D view's visible range.

@@ -52,6 +52,63 @@ impl TrackEntities {
     }
 }
 
+/// A rail's entities of a line's watched axles ([`LineWheels`]): the mu
+/// the chosen axle and the next saw and what `rail_mu` reads, in the mu
+/// profile's coordinates; the chosen axle's tread bands in the product's.
+///
+/// [`LineWheels`]: tortwin_engine::sink::LineWheels
+pub(super) struct LineWheelEntities {
+    pub(super) mu: [EntityPath; 2],
+    pub(super) rail_mu: EntityPath,
+    /// F, C, G.
+    pub(super) bands: [EntityPath; 3],
+}
+
+/// The tread bands' names and colours (the same on every rail: a view
+/// shows one rail).
+pub(super) const TREAD_BANDS: [(&str, (u8, u8, u8), &str); 3] = [
+    ("F", (60, 170, 90), "green"),
+    ("C", (66, 135, 245), "blue"),
+    ("G", (235, 87, 70), "red"),
+];
+
+impl LineWheelEntities {
+    pub(super) fn new(rail: &str) -> Self {
+        LineWheelEntities {
+            mu: [
+                entity(&["line", "mu", rail, "axle"]),
+                entity(&["line", "mu", rail, "next_axle"]),
+            ],
+            rail_mu: entity(&["line", "mu", rail, "rail_mu"]),
+            bands: TREAD_BANDS.map(|(band, _, _)| entity(&["line", "tread", rail, band])),
+        }
+    }
+
+    /// Each entity's static style: the rail's colour for the chosen axle, a
+    /// paler one for the next, grey for `rail_mu`; the bands' colours.
+    pub(super) fn styles(&self, rail: usize) -> Vec<(EntityPath, crate::rerun_sdk::LineStrips2D)> {
+        use crate::rerun_sdk::components::Radius;
+        let color = rail_color(rail);
+        let style = |color: Color, width: f32| {
+            crate::rerun_sdk::LineStrips2D::update_fields()
+                .with_colors([color])
+                .with_radii([Radius::new_ui_points(width)])
+        };
+        let mut styles = vec![
+            (self.mu[0].clone(), style(color, 1.5)),
+            (self.mu[1].clone(), style(lighten(color, 0.5), 1.5)),
+            (
+                self.rail_mu.clone(),
+                style(Color::from_rgb(110, 110, 110), 1.0),
+            ),
+        ];
+        for (path, (_, (r, g, b), _)) in self.bands.iter().zip(TREAD_BANDS) {
+            styles.push((path.clone(), style(Color::from_rgb(r, g, b), 1.5)));
+        }
+        styles
+    }
+}
+
 /// An entity path from verbatim names (rail names may hold any character).
 pub(super) fn entity(parts: &[&str]) -> EntityPath {
     EntityPath::new(parts.iter().map(|p| EntityPathPart::new(*p)).collect())
@@ -96,11 +153,13 @@ pub(super) fn rail_color(rail: usize) -> Color {
     Color::from_rgb(r, g, b)
 }
 
-/// The rail's colour for its `top` band (or its only one), a second shade
-/// for another band: the same rail reads alike in every plot. With its name.
+/// The rail's colour for its `top` band (a line's `C`, or its only one), a
+/// second shade for another band: the same rail reads alike in every plot. With its name.
 pub(super) fn track_color(track: &TrackInfo, tracks: &[TrackInfo]) -> (Color, &'static str) {
     let single_band = tracks.iter().filter(|t| t.rail == track.rail).count() == 1;
-    let ((r, g, b), name) = if track.band == "top" || single_band {
+    // A section's `top` band, a line's crown `C`.
+    let first = track.band == "top" || track.band == "C";
+    let ((r, g, b), name) = if first || single_band {
         RAIL_COLORS[track.rail % RAIL_COLORS.len()]
     } else {
         BAND_COLORS[track.rail % BAND_COLORS.len()]

@@ -54,6 +54,8 @@
 //! | `profiles/mu/<rail>/<band>/mu`, `…/adhesion`   | `LineStrips2D` (x = d in m, y = -mu x L) | every snapshot |
 //! | `profiles/product/<rail>/<band>/rail`, `…/wheel` | `LineStrips2D` (decades of mg) | every snapshot |
 //! | `profiles/<view>/frame/**`                     | grid lines, labels, target band, applicators | static |
+//! | `line/mu/<rail>/axle`, `…/next_axle`, `…/rail_mu` | `LineStrips2D` (as the mu profiles): on a line, mu the watched axle (`--line-axle`) and the next saw, what `rail_mu` reads on the crown | every train |
+//! | `line/tread/<rail>/F`, `…/C`, `…/G`           | `LineStrips2D` (as the product profiles): the watched axle's tread bands | every train |
 //! | `history/<rail>/<band>/block_NNNN`             | `SegmentationImage` (u8 mu classes), `Transform3D` (static: d in m across) | every `E` trains |
 //! | `history/<rail>/<band>/distance`               | `Points2D` labelled every 100 m | static |
 //! | `sites/<site>/<rail>/<quantity>`               | `Scalars` [measured, simulated] + `SeriesPoints` | measurement (`time`) |
@@ -71,6 +73,8 @@
 //! It is sent at [`Sink::finish`], when the run is known:
 //! - left, tabs "curve: mu" and "curve: product" (the plan, coloured, with
 //!   its legend) above the profiles (mu and adhesion; the product);
+//!   On a line a third tab, open, shows per rail what the watched axles saw
+//!   and the watched axle's tread bands;
 //! - right, a tab per site (a plot per quantity and rail), the mu history
 //!   per track, and tabs with the trains, pulses, section and run summary;
 //! - the time panel on `time`, following the data (the viewer opens at the

@@ -12,15 +12,15 @@ use crate::rerun_sdk::{
     ApplicationId, AsComponents, EntityPath, RecordingStream, RecordingStreamBuilder, TimeCell,
 };
 use tortwin_engine::sink::{
-    FieldSnapshot, MeasurementOutput, PulseEvent, RunSummary, SectionInfo, Sink, SinkResult,
-    SnapshotKind, TrainEvent,
+    FieldSnapshot, LineWheels, MeasurementOutput, PulseEvent, RunSummary, SectionInfo, Sink,
+    SinkResult, SnapshotKind, TrainEvent,
 };
 use tortwin_recording::{Direction, Quantity};
 
 use super::batch::{block_path, log_block, send_rows, send_series, Series, TrackState};
 use super::blueprint::{blueprint, send_blueprint, Layout, Measured, Run};
 use super::curve::{self, Frames, DECADE_TOLERANCE, MU_TOLERANCE};
-use super::entities::{entity, lighten, rail_color, TrackEntities, QUANTITIES};
+use super::entities::{entity, lighten, rail_color, LineWheelEntities, TrackEntities, QUANTITIES};
 use super::error::{sdk_error, RerunError};
 use super::section::log_description;
 use super::summary::summarize;
@@ -71,6 +71,9 @@ pub struct RerunSink {
     scratch: Vec<f64>,
     /// First and last log_time of anything logged on `time`.
     time_span_ns: Option<[u64; 2]>,
+    /// On a line: the axle the first [`Sink::line_wheels`] watched, and the
+    /// rails it was given for.
+    line_wheels: Option<(usize, BTreeSet<usize>)>,
 }
 
 impl RerunSink {
@@ -132,6 +135,7 @@ impl RerunSink {
             grid_d_m: Vec::new(),
             scratch: Vec::new(),
             time_span_ns: None,
+            line_wheels: None,
         })
     }
 
@@ -351,6 +355,7 @@ impl RerunSink {
                 history_rows: self.options.history_rows,
                 time_span_ns: self.time_span_ns,
                 wheel_pass: self.wheel_pass,
+                line_wheels: self.line_wheels.as_ref(),
             })
             .map_err(sdk_error(self.path(), || "blueprint".to_owned()))?;
             if !send_blueprint(rec, blueprint) {
@@ -612,6 +617,88 @@ impl Sink for RerunSink {
                 track.block.clear();
                 track.block_index += 1;
             }
+        }
+        Ok(())
+    }
+
+    fn line_wheels(&mut self, w: &LineWheels<'_>) -> SinkResult {
+        let grid_len = self.grid_len;
+        let lengths = [
+            ("mu", w.mu[0].len()),
+            ("mu", w.mu[1].len()),
+            ("rail_mu", w.rail_mu.len()),
+            ("bands_kg", w.bands_kg[0].len()),
+            ("bands_kg", w.bands_kg[1].len()),
+            ("bands_kg", w.bands_kg[2].len()),
+        ];
+        if let Some(&(field, len)) = lengths.iter().find(|(_, len)| *len != grid_len) {
+            return Err(RerunError::SnapshotLength {
+                path: self.path().to_path_buf(),
+                train_id: w.train_id.to_string(),
+                track: format!("{} (line wheels)", w.rail_name),
+                field,
+                len,
+                grid: grid_len,
+            }
+            .into());
+        }
+        let entities = LineWheelEntities::new(&w.rail_name);
+        if !self.styled.contains(&entities.mu[0]) {
+            let styles = entities.styles(w.rail);
+            for (path, style) in &styles {
+                self.style_once(path, &[style])?;
+            }
+            let (_, rails) = self
+                .line_wheels
+                .get_or_insert_with(|| (w.axles[0], BTreeSet::new()));
+            rails.insert(w.rail);
+        }
+        self.set_time(w.log_time_ns, Some(self.wheel_pass))?;
+        let frames = self.frames.as_ref().ok_or_else(|| RerunError::NotBegun {
+            path: self.path().to_path_buf(),
+        })?;
+        let d = &self.grid_d_m;
+        let line = |values: &[f64], tolerance: f64, y: &dyn Fn(f64) -> f64| {
+            curve::runs(values)
+                .map(|run| {
+                    curve::simplify(&d[run.clone()], &values[run.clone()], tolerance)
+                        .into_iter()
+                        .map(|k| [d[run.start + k] as f32, y(values[run.start + k]) as f32])
+                        .collect::<Vec<_>>()
+                })
+                .collect::<Vec<_>>()
+        };
+        let mu_y = |v: f64| frames.mu_y(v);
+        let from_decades = |v: f64| frames.product_y(10f64.powf(v));
+        let decades = |masses_kg: &[f64]| -> Vec<f64> {
+            masses_kg
+                .iter()
+                .map(|&m| match m.is_nan() {
+                    true => f64::NAN,
+                    false => (m * MG_PER_KG).max(1e-4).log10(),
+                })
+                .collect()
+        };
+        let mut strips = vec![
+            (&entities.mu[0], line(&w.mu[0], MU_TOLERANCE, &mu_y)),
+            (&entities.mu[1], line(&w.mu[1], MU_TOLERANCE, &mu_y)),
+            (&entities.rail_mu, line(&w.rail_mu, MU_TOLERANCE, &mu_y)),
+        ];
+        for (path, band) in entities.bands.iter().zip(&w.bands_kg) {
+            strips.push((path, line(&decades(band), DECADE_TOLERANCE, &from_decades)));
+        }
+        let rec = self.rec()?;
+        for (path, strips) in strips {
+            rec.log(
+                path.clone(),
+                &rerun_sdk::LineStrips2D::update_fields().with_strips(strips),
+            )
+            .map_err(sdk_error(self.path(), || {
+                format!(
+                    "line wheels of train {} on {} rail",
+                    w.train_id, w.rail_name
+                )
+            }))?;
         }
         Ok(())
     }
