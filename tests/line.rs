@@ -1117,11 +1117,19 @@ fn rerun_shows_a_chosen_axle_along_the_line() {
     );
     let rails = reader.section().rails.clone();
     let length_m = reader.section().length_m;
+    let line = reader.line().unwrap().clone();
+    let mut last = None;
     for event in reader {
-        engine.push(event.unwrap(), &mut watch).unwrap();
+        let event = event.unwrap();
+        if let tortwin_recording::EventKind::Passage(p) = &event.kind {
+            last = Some((p.direction, p.axles[4].bogie_position));
+        }
+        engine.push(event, &mut watch).unwrap();
     }
     engine.finish(&mut watch, 0).unwrap();
     assert_eq!(watch.last.len(), 2, "one per rail after the last train");
+    let (direction, bogie) = last.unwrap();
+    let up = direction == tortwin_recording::Direction::Up;
 
     let p = ModelConfig::default().product;
     let table = std::fs::read_to_string(common::reference("line_field.csv")).unwrap();
@@ -1165,6 +1173,18 @@ fn rerun_shows_a_chosen_axle_along_the_line() {
             "axle 4 carries product on rail {}",
             w.rail
         );
+        // A band changes only at a point whose row puts it in contact
+        // (after the contact at each point, in the direction of travel).
+        let d = &engine.grid().d_m;
+        for (b, band) in w.bands_kg.iter().enumerate() {
+            for i in 1..d.len() {
+                let (before, at) = if up { (i - 1, i) } else { (i, i - 1) };
+                let row = tortwin_engine::rows::row(&line, w.rail, bogie, d[at]);
+                if band[at] != band[before] {
+                    assert_eq!(row.wheel as usize, b, "rail {} band {b} changed at {at}", w.rail);
+                }
+            }
+        }
         let mg = |v: &[f64]| v.iter().map(|m| m * 1e6).collect::<Vec<_>>();
         expected_rails.insert(
             rails[w.rail].clone(),
