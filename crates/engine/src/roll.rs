@@ -816,6 +816,11 @@ pub(crate) struct RollContext<'a> {
     /// On a line: the axles whose contacts go to [`TrackWork::watched`]
     /// (`usize::MAX`: none).
     watch: [usize; 2],
+    /// On a line: the train's last leading and last trailing axle
+    /// (`usize::MAX`: none), the only wheels that can be the last to use a
+    /// rail band at a point (the rows depend on the point and the bogie
+    /// position alone): they alone fill [`Observed`].
+    observers: [usize; 2],
     /// The effect parameters the tangents' effect slots follow.
     effect_params: [Option<EffectParam>; EFFECT_SLOTS],
     /// How many of a tangent's slots the contacts step: 0 without tangents
@@ -876,6 +881,7 @@ impl Engine {
                 observe_every_wheel: self.opts.snapshot_every_wheel,
                 keep_seen: self.opts.every_wheel_contacts && !self.opts.snapshot_every_wheel,
                 watch: [usize::MAX; 2],
+                observers: [usize::MAX; 2],
                 effect_params: self.opts.effect_tangents,
                 tangent_width: match (self.opts.tangents, self.opts.effect_tangents) {
                     (false, _) => 0,

@@ -49,6 +49,12 @@ impl Engine {
                 }
             }
         }
+        let last_at = |position: BogiePosition| {
+            let axles = &record.passage.axles;
+            axles.iter().rposition(|a| a.bogie_position == position)
+        };
+        let observers = [BogiePosition::Leading, BogiePosition::Trailing]
+            .map(|position| last_at(position).unwrap_or(usize::MAX));
         let keep_seen = self.opts.every_wheel_contacts;
         if keep_seen {
             for work in self.work.iter_mut().step_by(RAIL_BANDS) {
@@ -60,6 +66,7 @@ impl Engine {
             let (mut ctx, states, works) = self.split();
             ctx.keep_seen = keep_seen;
             ctx.watch = watch;
+            ctx.observers = observers;
             let record_ref: &TrainRecord = record;
             let parallel = rails > 1
                 && rayon::current_num_threads() > 1
@@ -88,6 +95,7 @@ impl Engine {
                     let (mut ctx, states, works) = self.split();
                     ctx.keep_seen = keep_seen;
                     ctx.watch = watch;
+                    ctx.observers = observers;
                     let tracks = r * RAIL_BANDS..(r + 1) * RAIL_BANDS;
                     ctx.roll_rail_line(
                         record,
@@ -447,7 +455,9 @@ impl RollContext<'_> {
         works: &mut [TrackWork],
     ) {
         lane.st.bands[wb] = lane.st.wheel_kg;
-        works[rb].observed.axle[i] = lane.axle as u32;
+        if lane.roller.observe {
+            works[rb].observed.axle[i] = lane.axle as u32;
+        }
         if lane.axle == self.watch[0] {
             let watched = &mut works[0].watched;
             watched.seen_kg[0][i] = m_kg;
@@ -486,7 +496,7 @@ impl RollContext<'_> {
     /// Axle `a`'s wheel on `rail` of a line, ready to roll.
     fn line_lane(&self, record: &TrainRecord, rail: usize, a: usize) -> Lane {
         let mut lane = self.lane(record, rail * RAIL_BANDS, a, a);
-        lane.roller.observe = true;
+        lane.roller.observe = self.observe_every_wheel || self.observers.contains(&a);
         lane
     }
 
