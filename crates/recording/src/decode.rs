@@ -246,9 +246,12 @@ fn axle_segments(
     rails: &[String],
     i: usize,
 ) -> Result<Vec<AxleSegment>, DecodeError> {
+    // As [`parse`]: the path is tracked only when the plain parse fails.
+    let plain = serde_json::from_str::<PerRail<AxleSegmentMsg>>(value.0.get());
     let mut json = serde_json::Deserializer::from_str(value.0.get());
-    let entries: PerRail<AxleSegmentMsg> =
-        serde_path_to_error::deserialize(&mut json).map_err(|e| {
+    let entries: PerRail<AxleSegmentMsg> = match plain {
+        Ok(entries) => entries,
+        Err(_) => serde_path_to_error::deserialize(&mut json).map_err(|e| {
             let path = e.path().to_string();
             let field = if path == "." {
                 format!("axles[{i}].segments")
@@ -256,7 +259,8 @@ fn axle_segments(
                 format!("axles[{i}].segments.{path}")
             };
             DecodeError::at(field.clone(), format!("field `{field}`: {}", e.inner()))
-        })?;
+        })?,
+    };
     let mut segments: Vec<AxleSegment> = Vec::with_capacity(entries.0.len());
     for (id, entry) in &entries.0 {
         let field = || format!("axles[{i}].segments.{id}");
