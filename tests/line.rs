@@ -39,11 +39,21 @@ impl Sink for Contacts {
 /// Replays `path` on the engine (as a line when it has a `/line`) with
 /// every wheel's contacts handed to `sink`.
 fn replay_engine(path: &Path, sink: &mut dyn Sink) -> Engine {
-    let reader = RecordingReader::open(path, ReaderContext::default()).unwrap();
     let opts = EngineOptions {
         every_wheel_contacts: true,
         ..EngineOptions::default()
     };
+    replay_engine_with(path, opts, sink, |_| ())
+}
+
+/// Replays `path` on the engine with `opts`, showing `seen` each event.
+fn replay_engine_with(
+    path: &Path,
+    opts: EngineOptions,
+    sink: &mut dyn Sink,
+    mut seen: impl FnMut(&tortwin_recording::Event),
+) -> Engine {
+    let reader = RecordingReader::open(path, ReaderContext::default()).unwrap();
     let mut engine = Engine::on_line(
         reader.section().clone(),
         reader.line().cloned(),
@@ -52,7 +62,9 @@ fn replay_engine(path: &Path, sink: &mut dyn Sink) -> Engine {
         reader.origin_ns(),
     );
     for event in reader {
-        engine.push(event.unwrap(), sink).unwrap();
+        let event = event.unwrap();
+        seen(&event);
+        engine.push(event, sink).unwrap();
     }
     engine.finish(sink, 0).unwrap();
     engine
@@ -1103,30 +1115,20 @@ fn rerun_shows_a_chosen_axle_along_the_line() {
     }
     let path = recordings().join("line_field.mcap");
     let reader = RecordingReader::open(&path, ReaderContext::default()).unwrap();
+    let rails = reader.section().rails.clone();
+    let length_m = reader.section().length_m;
+    let line = reader.line().unwrap().clone();
     let opts = EngineOptions {
         line_axle: Some(4),
         ..EngineOptions::default()
     };
     let mut watch = Watch::default();
-    let mut engine = Engine::on_line(
-        reader.section().clone(),
-        reader.line().cloned(),
-        ModelConfig::default(),
-        opts,
-        reader.origin_ns(),
-    );
-    let rails = reader.section().rails.clone();
-    let length_m = reader.section().length_m;
-    let line = reader.line().unwrap().clone();
     let mut last = None;
-    for event in reader {
-        let event = event.unwrap();
+    let engine = replay_engine_with(&path, opts, &mut watch, |event| {
         if let tortwin_recording::EventKind::Passage(p) = &event.kind {
             last = Some((p.direction, p.axles[4].bogie_position));
         }
-        engine.push(event, &mut watch).unwrap();
-    }
-    engine.finish(&mut watch, 0).unwrap();
+    });
     assert_eq!(watch.last.len(), 2, "one per rail after the last train");
     let (direction, bogie) = last.unwrap();
     let up = direction == tortwin_recording::Direction::Up;
@@ -1181,7 +1183,11 @@ fn rerun_shows_a_chosen_axle_along_the_line() {
                 let (before, at) = if up { (i - 1, i) } else { (i, i - 1) };
                 let row = tortwin_engine::rows::row(&line, w.rail, bogie, d[at]);
                 if band[at] != band[before] {
-                    assert_eq!(row.wheel as usize, b, "rail {} band {b} changed at {at}", w.rail);
+                    assert_eq!(
+                        row.wheel as usize, b,
+                        "rail {} band {b} changed at {at}",
+                        w.rail
+                    );
                 }
             }
         }

@@ -504,6 +504,48 @@ pub(super) fn classes(
     mass_ids.extend(rail_mass_mg.map(mass_class));
 }
 
+impl Frames {
+    /// A mu profile (mu, adhesion) as the lines the mu view draws: through
+    /// the fewest grid points within [`MU_TOLERANCE`], broken where a value
+    /// is missing (NaN: no wheel on a line's band there).
+    pub(super) fn mu_strips(&self, d_m: &[f64], values: &[f64]) -> Vec<Vec<[f32; 2]>> {
+        strips(d_m, values, MU_TOLERANCE, &|v| self.mu_y(v))
+    }
+
+    /// Masses in kg as the lines the product view draws: decades of mg
+    /// (1e-4 mg at least) within [`DECADE_TOLERANCE`], broken at NaN.
+    pub(super) fn product_strips(&self, d_m: &[f64], masses_kg: &[f64]) -> Vec<Vec<[f32; 2]>> {
+        let decades: Vec<f64> = masses_kg
+            .iter()
+            .map(|&m| match m.is_nan() {
+                true => f64::NAN,
+                false => (m * super::MG_PER_KG).max(1e-4).log10(),
+            })
+            .collect();
+        strips(d_m, &decades, DECADE_TOLERANCE, &|v| {
+            self.product_y(10f64.powf(v))
+        })
+    }
+}
+
+/// A line per run of values that are not NaN, through the fewest grid
+/// points within `tolerance`, at `(d, y(value))`.
+fn strips(
+    d_m: &[f64],
+    values: &[f64],
+    tolerance: f64,
+    y: &dyn Fn(f64) -> f64,
+) -> Vec<Vec<[f32; 2]>> {
+    runs(values)
+        .map(|run| {
+            simplify(&d_m[run.clone()], &values[run.clone()], tolerance)
+                .into_iter()
+                .map(|k| [d_m[run.start + k] as f32, y(values[run.start + k]) as f32])
+                .collect()
+        })
+        .collect()
+}
+
 /// The runs of consecutive values that are not NaN: the whole profile on
 /// a section, the stretches a line's band was in contact otherwise.
 pub(super) fn runs(values: &[f64]) -> impl Iterator<Item = std::ops::Range<usize>> + '_ {

@@ -19,7 +19,7 @@ use tortwin_recording::{Direction, Quantity};
 
 use super::batch::{block_path, log_block, send_rows, send_series, Series, TrackState};
 use super::blueprint::{blueprint, send_blueprint, Layout, Measured, Run};
-use super::curve::{self, Frames, DECADE_TOLERANCE, MU_TOLERANCE};
+use super::curve::{self, Frames};
 use super::entities::{entity, lighten, rail_color, LineWheelEntities, TrackEntities, QUANTITIES};
 use super::error::{sdk_error, RerunError};
 use super::section::log_description;
@@ -552,33 +552,11 @@ impl Sink for RerunSink {
         // The profile lines, through fewer points where they are straight,
         // broken where a value is missing (NaN: no wheel on a line's band).
         let d = &self.grid_d_m;
-        let line = |values: &[f64], tolerance: f64, y: &dyn Fn(f64) -> f64| {
-            curve::runs(values)
-                .map(|run| {
-                    curve::simplify(&d[run.clone()], &values[run.clone()], tolerance)
-                        .into_iter()
-                        .map(|k| [d[run.start + k] as f32, y(values[run.start + k]) as f32])
-                        .collect::<Vec<_>>()
-                })
-                .collect::<Vec<_>>()
-        };
-        let mu_y = |v: f64| frames.mu_y(v);
-        let product_y = |v: f64| frames.product_y(v);
-        let decades = |masses_kg: &[f64]| -> Vec<f64> {
-            masses_kg
-                .iter()
-                .map(|&m| match m.is_nan() {
-                    true => f64::NAN,
-                    false => (m * MG_PER_KG).max(1e-4).log10(),
-                })
-                .collect()
-        };
-        let from_decades = |v: f64| product_y(10f64.powf(v));
         let profiles = [
-            line(&f.mu, MU_TOLERANCE, &mu_y),
-            line(&f.adhesion, MU_TOLERANCE, &mu_y),
-            line(&decades(&f.rail_mass_kg), DECADE_TOLERANCE, &from_decades),
-            line(&decades(&f.wheel_mass_kg), DECADE_TOLERANCE, &from_decades),
+            frames.mu_strips(d, &f.mu),
+            frames.mu_strips(d, &f.adhesion),
+            frames.product_strips(d, &f.rail_mass_kg),
+            frames.product_strips(d, &f.wheel_mass_kg),
         ];
         for (k, strips) in profiles.into_iter().enumerate() {
             pending.strips_per_row[k].push(strips.len());
@@ -658,34 +636,13 @@ impl Sink for RerunSink {
             path: self.path().to_path_buf(),
         })?;
         let d = &self.grid_d_m;
-        let line = |values: &[f64], tolerance: f64, y: &dyn Fn(f64) -> f64| {
-            curve::runs(values)
-                .map(|run| {
-                    curve::simplify(&d[run.clone()], &values[run.clone()], tolerance)
-                        .into_iter()
-                        .map(|k| [d[run.start + k] as f32, y(values[run.start + k]) as f32])
-                        .collect::<Vec<_>>()
-                })
-                .collect::<Vec<_>>()
-        };
-        let mu_y = |v: f64| frames.mu_y(v);
-        let from_decades = |v: f64| frames.product_y(10f64.powf(v));
-        let decades = |masses_kg: &[f64]| -> Vec<f64> {
-            masses_kg
-                .iter()
-                .map(|&m| match m.is_nan() {
-                    true => f64::NAN,
-                    false => (m * MG_PER_KG).max(1e-4).log10(),
-                })
-                .collect()
-        };
         let mut strips = vec![
-            (&entities.mu[0], line(&w.mu[0], MU_TOLERANCE, &mu_y)),
-            (&entities.mu[1], line(&w.mu[1], MU_TOLERANCE, &mu_y)),
-            (&entities.rail_mu, line(&w.rail_mu, MU_TOLERANCE, &mu_y)),
+            (&entities.mu[0], frames.mu_strips(d, &w.mu[0])),
+            (&entities.mu[1], frames.mu_strips(d, &w.mu[1])),
+            (&entities.rail_mu, frames.mu_strips(d, &w.rail_mu)),
         ];
         for (path, band) in entities.bands.iter().zip(&w.bands_kg) {
-            strips.push((path, line(&decades(band), DECADE_TOLERANCE, &from_decades)));
+            strips.push((path, frames.product_strips(d, band)));
         }
         let rec = self.rec()?;
         for (path, strips) in strips {
