@@ -202,6 +202,7 @@ def replay(
     out_rrd: PathLike | None = None,
     state_out: PathLike | None = None,
     every_wheel: bool = False,
+    line_axle: int = 0,
     field: bool = True,
     per_train: bool = False,
 ) -> Replay:
@@ -225,6 +226,9 @@ def replay(
     every_wheel
         Snapshot the field after every wheel pass in the .rrd (default:
         after every train).
+    line_axle
+        On a line, the axle whose view the .rrd opens on, with the next one
+        (``--line-axle``).
     field
         Keep the field table (the largest: grid points x trains x rails);
         ``False`` leaves ``Replay.field`` as ``None``.
@@ -246,6 +250,7 @@ def replay(
             argv += [flag, os.fspath(value)]
     if every_wheel:
         argv.append("--every-wheel")
+    argv += ["--line-axle", str(line_axle)]
     summary, state, measurements, field_ipc, trains, per_train_ipc = _native.replay(
         argv, _config(config), state_json, field, per_train
     )

@@ -271,6 +271,37 @@ def test_a_replay_lets_other_python_threads_run():
     assert elapsed > 0.05 and during > 20_000 * elapsed, (during, elapsed)
 
 
+def test_a_line_rrd_opens_on_the_axle_asked_for(tmp_path, tortwin_bin):
+    """``line_axle`` reaches the .rrd as ``--line-axle`` does: the watched
+    axles' views name axle 4 and 5, and the axle's tread is logged per
+    rail, as in the command line's .rrd. (Run where rerun-sdk is installed:
+    .ci/run's first Python, not the bare 3.10 one.)"""
+    RrdReader = pytest.importorskip("rerun.experimental").RrdReader
+
+    recording = REFERENCE / "line_field.mcap"
+    cli = run_cli(
+        tortwin_bin, "replay", recording, "--out-rrd", tmp_path / "cli.rrd", "--line-axle", "4", "-q"
+    )
+    assert cli.returncode == 0, cli.stderr
+    tortwin.replay(recording, out_rrd=tmp_path / "py.rrd", line_axle=4, field=False)
+
+    def seen(path):
+        reader = RrdReader(path)
+        names = set()
+        for chunk in reader.stream(store=reader.blueprints()[0]):
+            for name, column in chunk.to_record_batch().to_pydict().items():
+                if name == "ViewBlueprint:display_name":
+                    names.update(v[0] for v in column if v)
+        schema = str(reader.store().stream().collect().schema())
+        entities = {e for e in ("/line/tread/left/F", "/line/tread/right/G", "/line/mu/right/next_axle") if e in schema}
+        return sorted(n for n in names if n.endswith("along d [m]") and "axle" in n), entities
+
+    py, cli = seen(tmp_path / "py.rrd"), seen(tmp_path / "cli.rrd")
+    assert py == cli
+    assert len(py[0]) == 4 and all("axle 4" in n for n in py[0]), py[0]
+    assert len(py[1]) == 3, py[1]
+
+
 def test_a_line_replays_per_band_as_the_command_line(tmp_path, tortwin_bin):
     """line_field.mcap (docs/spec/line.md's field line): the measurements
     bit for bit as the command line's, and the field table per rail band
