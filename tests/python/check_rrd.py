@@ -249,35 +249,21 @@ def curve_checks(store, expected: dict) -> list[str]:
     entity = f"/profiles/mu/{rail}/{band}/mu"
     table = store.reader(index="wheel_pass", contents=entity).to_arrow_table()
     strips = last_cell_at(table, f"{entity}:LineStrips2D:strips", "wheel_pass", int(expected["wheel_pass"]))
-    if len(strips) != 1:
-        raise CheckFailed(f"{entity}: {len(strips)} strips, expected one line")
-    line = strips[0]
     length = float(section["length_m"])
-    grid = {to_f32(d): i for i, d in enumerate(d_m)}
-    kept = []
-    for x, y in line:
-        if x not in grid:
-            raise CheckFailed(f"{entity}: point at x = {x} is not a grid point")
-        i = grid[x]
-        if abs(y - to_f32(-mu[i] * length)) > (1e-6 + rounded) * length:
-            raise CheckFailed(f"{entity}: point {i} at y = {y}, mu there is {mu[i]}")
-        kept.append(i)
-    if not kept or kept[0] != 0 or kept[-1] != len(mu) - 1:
-        raise CheckFailed(f"{entity}: the line does not run from the first to the last grid point")
-    tolerance = 5e-4 + rounded + 1e-6
-    for a, b in zip(kept, kept[1:]):
-        for i in range(a, b + 1):
-            t = (d_m[i] - d_m[a]) / (d_m[b] - d_m[a])
-            between = mu[a] + t * (mu[b] - mu[a])
-            if abs(mu[i] - between) > tolerance:
-                raise CheckFailed(f"{entity}: the line is {abs(mu[i] - between):.2e} off mu at grid point {i}")
-    done.append(f"{entity}: a line through {len(kept)} of {len(mu)} points within 5e-4 of mu")
+    kept = one_line_checks(
+        entity, strips, d_m, mu, lambda m: -m * length, 5e-4 + rounded + 1e-6, length, y_slack=rounded
+    )
+    done.append(f"{entity}: a line through {kept} of {len(mu)} points within 5e-4 of mu")
     return done
 
 
-def one_line_checks(entity: str, strips, d_m: list[float], values: list[float], y_of, tolerance: float, length: float) -> int:
-    """`strips` is one line through grid points at y_of(value) that stays
-    within `tolerance` of the values between them. Returns its points."""
+def one_line_checks(
+    entity: str, strips, d_m: list[float], values: list[float], y_of, tolerance: float, length: float,
+    y_slack: float = 0.0,
+) -> int:
+    """`strips` is one line through grid points at y_of(value) (within
+    (1e-6 + y_slack) * length) that stays within `tolerance` of the values
+    between them. Returns its points."""
     if len(strips) != 1:
         raise CheckFailed(f"{entity}: {len(strips)} strips, expected one line")
     grid = {to_f32(d): i for i, d in enumerate(d_m)}
@@ -286,7 +272,7 @@ def one_line_checks(entity: str, strips, d_m: list[float], values: list[float], 
         if x not in grid:
             raise CheckFailed(f"{entity}: point at x = {x} is not a grid point")
         i = grid[x]
-        if abs(y - to_f32(y_of(values[i]))) > 1e-6 * length:
+        if abs(y - to_f32(y_of(values[i]))) > (1e-6 + y_slack) * length:
             raise CheckFailed(f"{entity}: point {i} at y = {y}, the value there is {values[i]}")
         kept.append(i)
     if not kept or kept[0] != 0 or kept[-1] != len(values) - 1:
