@@ -55,7 +55,7 @@ pub(super) const KEPT_CHUNK_BYTES: u64 = 16 << 20;
 pub const MAX_MESSAGE_BYTES: u64 = 16 << 20;
 
 /// A Channel (or other small) record larger than this is refused.
-const MAX_SMALL_RECORD_BYTES: u64 = 16 << 20;
+pub(super) const MAX_SMALL_RECORD_BYTES: u64 = 16 << 20;
 
 /// Bytes of a Message record's header: channel_id u16, sequence u32,
 /// log_time u64, publish_time u64.
@@ -324,7 +324,7 @@ fn walk(
                 }
                 let body = read_exact_vec(file, body_len).map_err(io_error)?;
                 match record::parse(opcode, &body) {
-                    Ok(Record::Channel(channel)) => add_channel(layout, channel)
+                    Ok(Record::Channel(channel)) => add_channel(&mut layout.channels, channel)
                         .map_err(|e| corrupt(format!("record at byte {offset}: {e}")))?,
                     Ok(_) => {}
                     Err(e) => return Err(corrupt(format!("corrupt record at byte {offset}: {e}"))),
@@ -542,7 +542,7 @@ fn add_chunk(
     for entry in contents.records {
         match entry {
             ChunkEntry::Channel(channel) => {
-                if let Err(e) = add_channel(layout, channel) {
+                if let Err(e) = add_channel(&mut layout.channels, channel) {
                     failure.get_or_insert(e);
                 }
             }
@@ -569,19 +569,22 @@ fn add_chunk(
     }
 }
 
-fn add_channel(layout: &mut Layout, channel: mcap::records::Channel) -> Result<(), String> {
+pub(super) fn add_channel(
+    channels: &mut HashMap<u16, ChannelInfo>,
+    channel: mcap::records::Channel,
+) -> Result<(), String> {
     let info = ChannelInfo {
         topic: channel.topic,
         message_encoding: channel.message_encoding,
     };
-    match layout.channels.get(&channel.id) {
+    match channels.get(&channel.id) {
         Some(known) if *known != info => Err(format!(
             "channel {} is defined twice, as `{}` and as `{}`",
             channel.id, known.topic, info.topic
         )),
         Some(_) => Ok(()),
         None => {
-            layout.channels.insert(channel.id, info);
+            channels.insert(channel.id, info);
             Ok(())
         }
     }
@@ -643,7 +646,7 @@ pub(super) fn message_header(head: &[u8]) -> mcap::records::MessageHeader {
 }
 
 /// Refuses a message of the format larger than [`MAX_MESSAGE_BYTES`].
-fn check_message_size(key: ReplayKey, data_len: u64) -> Result<(), String> {
+pub(super) fn check_message_size(key: ReplayKey, data_len: u64) -> Result<(), String> {
     if key.topic != TopicRank::Unknown && data_len > MAX_MESSAGE_BYTES {
         return Err(format!(
             "message {} (log_time {} ns) is {data_len} bytes long; a message of the \

@@ -25,6 +25,7 @@
 //! index in the file, and ends the iteration.
 
 mod layout;
+mod live;
 mod record;
 mod replay;
 
@@ -39,6 +40,8 @@ use crate::topic::Topic;
 use crate::wire::{LineMsg, MeasurementMsg, PassageMsg, PulseMsg, SectionMsg, WeatherMsg};
 use layout::{ReplayKey, TopicRank};
 pub use layout::{MAX_CHUNK_BYTES, MAX_MESSAGE_BYTES};
+pub use live::Follow;
+use live::LiveQueue;
 use replay::{PendingMessage, ReplayQueue};
 
 /// What a recording needs from the replay before it: a recording continues
@@ -67,7 +70,10 @@ impl Default for ReaderContext {
 /// documentation for how it bounds memory. The iterator stops after the first
 /// error.
 pub struct RecordingReader {
-    queue: ReplayQueue,
+    queue: Queue,
+    /// A message taken after the `/section` to look for a `/line`, not yet
+    /// decoded (a followed file).
+    taken: Option<PendingMessage>,
     decoder: Decoder,
     /// The `/section` message as written (g, rail names).
     section_msg: SectionMsg,
@@ -101,10 +107,12 @@ impl RecordingReader {
             .map_err(|e| InputError::file(path, format!("cannot open the recording: {e}")))?;
         let mut file = BufReader::new(file);
         let layout = layout::scan_layout(path, &mut file)?;
-        let no_section = || InputError::file(path, "the recording has no /section message");
-        let Some(&first_section) = layout.sections.first() else {
-            return Err(no_section());
-        };
+        if layout.sections.is_empty() {
+            return Err(InputError::file(
+                path,
+                "the recording has no /section message",
+            ));
+        }
         let loose_messages = layout.loose.iter().map(|r| r.message_count).sum::<u64>();
         let summary = LayoutSummary {
             messages: layout.chunks.iter().map(|c| c.message_count).sum::<u64>() + loose_messages,
@@ -112,53 +120,98 @@ impl RecordingReader {
             loose_messages,
             loose_runs: layout.loose.len() as u64,
         };
-        let mut queue = ReplayQueue::new(
+        let keys = Keys {
+            sections: layout.sections,
+            lines: layout.lines,
+        };
+        let queue = Queue::Replay(ReplayQueue::new(
             path,
             file,
             layout.channels,
             layout.chunks,
             layout.loose,
             false,
-        );
+        ));
+        Self::start(path, queue, Some(&keys), summary, ctx)
+    }
 
+    /// Follows a recording another process is still writing
+    /// ([`Follow`]; the module `live`): the same events as [`Self::open`]
+    /// of the finished file, each once it can be known to be next. Waits
+    /// here for the `/section` message (and a `/line`).
+    pub fn follow(path: &Path, ctx: ReaderContext, follow: Follow) -> Result<Self, InputError> {
+        let queue = Queue::Live(LiveQueue::open(path, follow)?);
+        Self::start(path, queue, None, LayoutSummary::default(), ctx)
+    }
+
+    /// Reads and checks the `/section` (and `/line`) from `queue`: with the
+    /// file's `layout` where it was laid out, else as they come.
+    fn start(
+        path: &Path,
+        mut queue: Queue,
+        layout: Option<&Keys>,
+        summary: LayoutSummary,
+        ctx: ReaderContext,
+    ) -> Result<Self, InputError> {
+        let no_section = || InputError::file(path, "the recording has no /section message");
         let Some(first) = queue.next_message()? else {
             return Err(no_section());
         };
         let first_location = queue.location(&first);
         let at_first = |message: String| InputError::at(path, first_location.clone(), message);
-        if first.key != first_section {
-            return Err(at_first(format!(
-                "log_time {} ns is earlier than the /section message's ({} ns); \
-                 /section must be the first message of a recording",
-                first.key.log_time_ns, first_section.log_time_ns
-            )));
+        match layout {
+            Some(keys) => {
+                let first_section = keys.sections[0];
+                if first.key != first_section {
+                    return Err(at_first(format!(
+                        "log_time {} ns is earlier than the /section message's ({} ns); \
+                         /section must be the first message of a recording",
+                        first.key.log_time_ns, first_section.log_time_ns
+                    )));
+                }
+                if let Some(second) = keys.sections.get(1) {
+                    return Err(InputError::at(
+                        path,
+                        MessageLocation {
+                            topic: Topic::Section.name().to_string(),
+                            log_time_ns: second.log_time_ns,
+                            index_in_file: second.index_in_file,
+                        },
+                        format!(
+                            "a second /section message (the first is message {} at log_time {} ns); \
+                             a recording has exactly one",
+                            first_section.index_in_file, first_section.log_time_ns
+                        ),
+                    ));
+                }
+            }
+            None => {
+                if first.key.topic != TopicRank::Known(Topic::Section) {
+                    return Err(at_first(
+                        "the first message in replay order is not the /section message; \
+                         /section must be the first message of a recording"
+                            .to_string(),
+                    ));
+                }
+            }
         }
         queue.check_json(&first)?;
         let msg: SectionMsg =
             decode::parse(first.data.as_slice()).map_err(|e| at_first(e.message))?;
-        if let Some(second) = layout.sections.get(1) {
-            return Err(InputError::at(
-                path,
-                MessageLocation {
-                    topic: Topic::Section.name().to_string(),
-                    log_time_ns: second.log_time_ns,
-                    index_in_file: second.index_in_file,
-                },
-                format!(
-                    "a second /section message (the first is message {} at log_time {} ns); \
-                     a recording has exactly one",
-                    first_section.index_in_file, first_section.log_time_ns
-                ),
-            ));
-        }
         let section = decode::section(&msg).map_err(|e| at_first(e.message))?;
-        let line = read_line(
-            path,
-            &mut queue,
-            &layout.lines,
-            &section,
-            first.key.log_time_ns,
-        )?;
+        let (line, taken) = match layout {
+            Some(keys) => (
+                read_line(
+                    path,
+                    &mut queue,
+                    &keys.lines,
+                    &section,
+                    first.key.log_time_ns,
+                )?,
+                None,
+            ),
+            None => follow_line(path, &mut queue, &section, first.key.log_time_ns)?,
+        };
         let origin_ns = match ctx.origin_ns {
             Some(origin_ns) => origin_ns,
             None => i64::try_from(first.key.log_time_ns).map_err(|_| {
@@ -167,6 +220,7 @@ impl RecordingReader {
         };
         Ok(Self {
             queue,
+            taken,
             decoder: Decoder::new(section, line, origin_ns, ctx.occupied_until_s),
             section_msg: msg,
             section_log_time_ns: first.key.log_time_ns,
@@ -228,7 +282,7 @@ impl RecordingReader {
     /// an event's kg back to g need not give the same number).
     pub fn next_with_wire(&mut self) -> Option<Result<(Event, Wire), InputError>> {
         while !self.finished {
-            let step = match self.queue.next_message() {
+            let step = match self.next_pending() {
                 Ok(Some(message)) => self.decode(message, true),
                 Ok(None) => {
                     self.finished = true;
@@ -246,6 +300,14 @@ impl RecordingReader {
             }
         }
         None
+    }
+
+    /// The next message: one taken while looking for a `/line` first.
+    fn next_pending(&mut self) -> Result<Option<PendingMessage>, InputError> {
+        match self.taken.take() {
+            Some(message) => Ok(Some(message)),
+            None => self.queue.next_message(),
+        }
     }
 
     fn decode(
@@ -276,6 +338,12 @@ impl RecordingReader {
             )
             .into()),
             // The one `/line` was read with the section (`read_line`).
+            Topic::Line if decoder.line().is_none() => Err(
+                "the /line message is not next after the /section in replay order; \
+                 a line is given with its section"
+                    .to_string()
+                    .into(),
+            ),
             Topic::Line => Err("a second /line message; a recording has at most one"
                 .to_string()
                 .into()),
@@ -323,7 +391,7 @@ impl RecordingReader {
 /// log_time (so the next message in replay order), at most one.
 fn read_line(
     path: &Path,
-    queue: &mut ReplayQueue,
+    queue: &mut Queue,
     lines: &[ReplayKey],
     section: &Section,
     section_log_time_ns: u64,
@@ -377,6 +445,90 @@ fn read_line(
     line::decode(&msg, section)
         .map(Some)
         .map_err(|e| at(&first, e.message))
+}
+
+/// Where a laid-out file's first two `/section` and `/line` messages are.
+struct Keys {
+    sections: Vec<ReplayKey>,
+    lines: Vec<ReplayKey>,
+}
+
+/// The messages a reader takes: a finished file's, laid out, or a file's
+/// being written, as they come.
+enum Queue {
+    Replay(ReplayQueue),
+    Live(LiveQueue),
+}
+
+impl Queue {
+    fn next_message(&mut self) -> Result<Option<PendingMessage>, InputError> {
+        match self {
+            Queue::Replay(q) => q.next_message(),
+            Queue::Live(q) => q.next_message(),
+        }
+    }
+
+    fn location(&self, message: &PendingMessage) -> MessageLocation {
+        match self {
+            Queue::Replay(q) => q.location(message),
+            Queue::Live(q) => q.location(message),
+        }
+    }
+
+    fn check_json(&self, message: &PendingMessage) -> Result<(), InputError> {
+        match self {
+            Queue::Replay(q) => q.check_json(message),
+            Queue::Live(q) => {
+                let channel = q.channels().get(&message.channel_id);
+                match channel {
+                    Some(c) if c.message_encoding == "json" => Ok(()),
+                    _ => Err(InputError::at(
+                        q.path(),
+                        q.location(message),
+                        format!(
+                            "message encoding is `{}`; this topic must be `json`",
+                            channel.map_or("", |c| c.message_encoding.as_str())
+                        ),
+                    )),
+                }
+            }
+        }
+    }
+
+    fn path(&self) -> &Path {
+        match self {
+            Queue::Replay(q) => q.path(),
+            Queue::Live(q) => q.path(),
+        }
+    }
+}
+
+/// A followed file's `/line`: the message after the `/section` in replay
+/// order, if it is one (then at the section's log_time); else that message
+/// is handed back, to be decoded first.
+fn follow_line(
+    path: &Path,
+    queue: &mut Queue,
+    section: &Section,
+    section_log_time_ns: u64,
+) -> Result<(Option<Line>, Option<PendingMessage>), InputError> {
+    let Some(message) = queue.next_message()? else {
+        return Ok((None, None));
+    };
+    if message.key.topic != TopicRank::Known(Topic::Line) {
+        return Ok((None, Some(message)));
+    }
+    let at = |text: String| InputError::at(path, queue.location(&message), text);
+    if message.key.log_time_ns != section_log_time_ns {
+        return Err(at(format!(
+            "the /line message is not at the /section's log_time ({section_log_time_ns} ns); \
+             a line is given with its section"
+        )));
+    }
+    queue.check_json(&message)?;
+    let msg: LineMsg = decode::parse(message.data.as_slice()).map_err(|e| at(e.message))?;
+    let line = line::decode(&msg, section).map_err(|e| at(e.message))?;
+    Ok((Some(line), None))
 }
 
 /// A batch of [`read_ahead`] is handed over once its events weigh this
@@ -585,7 +737,7 @@ impl Iterator for RecordingReader {
 
     fn next(&mut self) -> Option<Self::Item> {
         while !self.finished {
-            let step = match self.queue.next_message() {
+            let step = match self.next_pending() {
                 Ok(Some(message)) => self.decode(message, false),
                 Ok(None) => {
                     self.finished = true;

@@ -53,10 +53,18 @@ pub(super) struct MessageData {
 }
 
 impl MessageData {
-    fn whole(bytes: Vec<u8>) -> Self {
+    pub(super) fn whole(bytes: Vec<u8>) -> Self {
         let range = 0..bytes.len();
         Self {
             buffer: Arc::new(bytes),
+            range,
+        }
+    }
+
+    /// `range` of a buffer shared with other messages (a chunk's).
+    pub(super) fn shared(buffer: &Arc<Vec<u8>>, range: Range<usize>) -> Self {
+        Self {
+            buffer: Arc::clone(buffer),
             range,
         }
     }

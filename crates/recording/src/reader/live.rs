@@ -1,0 +1,371 @@
+//! Following a recording while another process writes it (`tortwin live`).
+//!
+//! A logger appends to its MCAP file record by record: the magic and the
+//! Header, then Channel records, Chunks (or Messages outside chunks) as they
+//! fill, and only at the end the DataEnd, the summary and the Footer. The
+//! follower reads each record once it is whole (its framing says how long it
+//! is), waits for more where the file ends, and is finished at the DataEnd
+//! (or a Footer). A half-written record is not an error: it is waited for.
+//!
+//! The replay order (log_time, topic, index in the file) is kept without the
+//! whole file: a message is handed out once a message with a later log_time
+//! has been read (a message written later may still share its log_time and
+//! go before it by topic), and every message at the end of the file. A
+//! message read after one that follows it in replay order has been handed
+//! out cannot be put back in its place: such a file was not written in time
+//! order, and the follower refuses it (`tortwin replay` reads it once it is
+//! finished). So what the follower hands out is exactly what the replay of
+//! the finished file reads, or an error.
+
+use std::cmp::Reverse;
+use std::collections::{BinaryHeap, HashMap};
+use std::fs::File;
+use std::io::{Read, Seek, SeekFrom};
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::Duration;
+
+use mcap::records::{op, Record};
+
+use super::layout::{
+    add_channel, check_message_size, chunk_header, for_each_chunk_record, message_header,
+    record_frame, ChannelInfo, ReplayKey, TopicRank, MAX_SMALL_RECORD_BYTES, MESSAGE_HEADER_BYTES,
+    RECORD_HEADER_BYTES,
+};
+use super::record;
+use super::replay::{MessageData, PendingMessage};
+use super::MAX_CHUNK_BYTES;
+use crate::error::{InputError, MessageLocation};
+
+/// How a follower waits for a file to grow.
+#[derive(Debug, Clone)]
+pub struct Follow {
+    /// How long to sleep when the file has nothing new.
+    pub poll: Duration,
+    /// Set by another thread to stop the follow: the reader then ends with
+    /// an error that says so ([`Follow::STOPPED`]).
+    pub stop: Arc<AtomicBool>,
+}
+
+impl Follow {
+    /// The message of the error a stopped follow ends with.
+    pub const STOPPED: &'static str = "stopped while following the recording";
+
+    pub fn new(poll: Duration) -> Self {
+        Self {
+            poll,
+            stop: Arc::new(AtomicBool::new(false)),
+        }
+    }
+}
+
+/// A message read and not yet handed out, ordered by its replay key.
+#[derive(Debug)]
+struct Held(PendingMessage);
+
+impl PartialEq for Held {
+    fn eq(&self, other: &Self) -> bool {
+        self.0.key == other.0.key
+    }
+}
+impl Eq for Held {}
+impl PartialOrd for Held {
+    fn partial_cmp(&self, other: &Self) -> Option<std::cmp::Ordering> {
+        Some(self.cmp(other))
+    }
+}
+impl Ord for Held {
+    fn cmp(&self, other: &Self) -> std::cmp::Ordering {
+        self.0.key.cmp(&other.0.key)
+    }
+}
+
+/// The messages of a file being written, in replay order (see the module
+/// documentation).
+pub(super) struct LiveQueue {
+    path: PathBuf,
+    file: File,
+    follow: Follow,
+    /// The next record's offset; 0 before the opening magic was read.
+    offset: u64,
+    /// The DataEnd (or Footer) was read.
+    finished: bool,
+    channels: HashMap<u16, ChannelInfo>,
+    /// Messages read so far (chunks expanded): the next one's index.
+    next_index: u64,
+    held: BinaryHeap<Reverse<Held>>,
+    /// The latest log_time read.
+    latest_ns: Option<u64>,
+    /// The last message handed out.
+    last_out: Option<ReplayKey>,
+}
+
+impl LiveQueue {
+    pub(super) fn open(path: &Path, follow: Follow) -> Result<Self, InputError> {
+        let file = tortwin_files::open_input(path)
+            .map_err(|e| InputError::file(path, format!("cannot open the recording: {e}")))?;
+        Ok(Self {
+            path: path.to_path_buf(),
+            file,
+            follow,
+            offset: 0,
+            finished: false,
+            channels: HashMap::new(),
+            next_index: 0,
+            held: BinaryHeap::new(),
+            latest_ns: None,
+            last_out: None,
+        })
+    }
+
+    fn corrupt(&self, what: String) -> InputError {
+        InputError::file(&self.path, what)
+    }
+
+    /// The next message in replay order, waiting for the file to grow;
+    /// `None` once the file is finished and every message handed out.
+    pub(super) fn next_message(&mut self) -> Result<Option<PendingMessage>, InputError> {
+        loop {
+            if let Some(message) = self.release() {
+                return Ok(Some(message));
+            }
+            if self.finished {
+                return Ok(None);
+            }
+            if !self.read_more()? {
+                if self.follow.stop.load(Ordering::Relaxed) {
+                    return Err(self.corrupt(Follow::STOPPED.to_string()));
+                }
+                std::thread::sleep(self.follow.poll);
+            }
+        }
+    }
+
+    /// The first message held, if nothing read later can go before it.
+    fn release(&mut self) -> Option<PendingMessage> {
+        let Reverse(Held(first)) = self.held.peek()?;
+        let due = self.finished || self.latest_ns.is_some_and(|t| first.key.log_time_ns < t);
+        if !due {
+            return None;
+        }
+        let Reverse(Held(message)) = self.held.pop()?;
+        self.last_out = Some(message.key);
+        Some(message)
+    }
+
+    /// Reads the whole records the file has gained; `false` if none.
+    fn read_more(&mut self) -> Result<bool, InputError> {
+        let io_error =
+            |e: std::io::Error| InputError::file(&self.path, format!("cannot read: {e}"));
+        let len = self.file.metadata().map_err(io_error)?.len();
+        let magic_len = mcap::MAGIC.len() as u64;
+        let mut progressed = false;
+        if self.offset == 0 {
+            if len < magic_len {
+                return Ok(false);
+            }
+            let magic = self.read_at(0, magic_len)?;
+            if magic != mcap::MAGIC {
+                return Err(
+                    self.corrupt("not an MCAP file: bad magic bytes at the start".to_string())
+                );
+            }
+            self.offset = magic_len;
+            progressed = true;
+        }
+        while !self.finished && len - self.offset >= RECORD_HEADER_BYTES {
+            let frame = self.read_at(self.offset, RECORD_HEADER_BYTES)?;
+            let (opcode, body_len) = record_frame(&frame);
+            // The longest record tortwin accepts is a chunk of at most
+            // MAX_CHUNK_BYTES (compressed no longer than that, or stored):
+            // a longer length is corrupt, not a record still being written.
+            let longest = MAX_CHUNK_BYTES + (1 << 20);
+            if body_len > longest {
+                return Err(self.corrupt(format!(
+                    "the record at byte {} (opcode {opcode:#04x}) claims {body_len} bytes \
+                     (at most {longest} are accepted)",
+                    self.offset
+                )));
+            }
+            let end = self.offset + RECORD_HEADER_BYTES + body_len;
+            if end > len {
+                // Half written: wait for the rest.
+                break;
+            }
+            let at = self.offset;
+            match opcode {
+                op::DATA_END | op::FOOTER => self.finished = true,
+                op::CHANNEL => {
+                    if body_len > MAX_SMALL_RECORD_BYTES {
+                        return Err(self.corrupt(format!(
+                            "the Channel record at byte {at} claims {body_len} bytes (at most \
+                             {MAX_SMALL_RECORD_BYTES} are accepted)"
+                        )));
+                    }
+                    let body = self.read_at(at + RECORD_HEADER_BYTES, body_len)?;
+                    match record::parse(opcode, &body) {
+                        Ok(Record::Channel(channel)) => add_channel(&mut self.channels, channel)
+                            .map_err(|e| self.corrupt(format!("record at byte {at}: {e}")))?,
+                        Ok(_) => {}
+                        Err(e) => {
+                            return Err(self.corrupt(format!("corrupt record at byte {at}: {e}")))
+                        }
+                    }
+                }
+                op::CHUNK => {
+                    let record = self.read_at(at, RECORD_HEADER_BYTES + body_len)?;
+                    self.add_chunk(&record)
+                        .map_err(|e| self.corrupt(format!("unreadable chunk at byte {at}: {e}")))?;
+                }
+                op::MESSAGE => {
+                    if body_len < MESSAGE_HEADER_BYTES {
+                        return Err(self.corrupt(format!(
+                            "corrupt record at byte {at}: a Message record of {body_len} bytes \
+                             (its header alone is {MESSAGE_HEADER_BYTES})"
+                        )));
+                    }
+                    let body = self.read_at(at + RECORD_HEADER_BYTES, body_len)?;
+                    let header = message_header(&body);
+                    let data = body[MESSAGE_HEADER_BYTES as usize..].to_vec();
+                    self.add_message(header, MessageData::whole(data))
+                        .map_err(|e| self.corrupt(format!("record at byte {at}: {e}")))?;
+                }
+                _ => {}
+            }
+            self.offset = end;
+            progressed = true;
+        }
+        self.check_order()?;
+        Ok(progressed)
+    }
+
+    /// A chunk's channels and messages, in file order.
+    fn add_chunk(&mut self, record: &[u8]) -> Result<(), String> {
+        let header = chunk_header(record)?;
+        if header.uncompressed_size > MAX_CHUNK_BYTES {
+            return Err(format!(
+                "it claims {} bytes uncompressed (at most {MAX_CHUNK_BYTES} are accepted)",
+                header.uncompressed_size
+            ));
+        }
+        let (start, end) = (header.message_start_time, header.message_end_time);
+        let mut bytes = Vec::new();
+        let mut channels = Vec::new();
+        let mut messages = Vec::new();
+        for_each_chunk_record(record, &header, |opcode, body| {
+            match record::parse(opcode, body)? {
+                Record::Channel(channel) => channels.push((messages.len(), channel)),
+                Record::Message { header, data } => {
+                    let from = bytes.len();
+                    bytes.extend_from_slice(&data);
+                    messages.push((header, from..bytes.len()));
+                }
+                _ => {}
+            }
+            Ok(())
+        })?;
+        let buffer = Arc::new(bytes);
+        let mut channels = channels.into_iter().peekable();
+        for (k, (header, range)) in messages.into_iter().enumerate() {
+            // The chunk's channels before this message.
+            while let Some((_, channel)) = channels.next_if(|(before, _)| *before <= k) {
+                add_channel(&mut self.channels, channel)?;
+            }
+            if header.log_time < start || header.log_time > end {
+                return Err(format!(
+                    "message {} has log_time {} ns, outside the chunk's \
+                     message_start_time..message_end_time ({start}..{end})",
+                    self.next_index, header.log_time
+                ));
+            }
+            self.add_message(header, MessageData::shared(&buffer, range))?;
+        }
+        for (_, channel) in channels {
+            add_channel(&mut self.channels, channel)?;
+        }
+        Ok(())
+    }
+
+    fn add_message(
+        &mut self,
+        header: mcap::records::MessageHeader,
+        data: MessageData,
+    ) -> Result<(), String> {
+        let index_in_file = self.next_index;
+        let channel = self.channels.get(&header.channel_id).ok_or_else(|| {
+            format!(
+                "message {index_in_file} (log_time {} ns) refers to channel {}, \
+                 which no Channel record before it defines",
+                header.log_time, header.channel_id
+            )
+        })?;
+        let key = ReplayKey {
+            log_time_ns: header.log_time,
+            topic: TopicRank::of(&channel.topic),
+            index_in_file,
+        };
+        check_message_size(key, data.as_slice().len() as u64)?;
+        self.next_index += 1;
+        self.latest_ns = Some(
+            self.latest_ns
+                .map_or(key.log_time_ns, |t| t.max(key.log_time_ns)),
+        );
+        self.held.push(Reverse(Held(PendingMessage {
+            key,
+            channel_id: header.channel_id,
+            sequence: header.sequence,
+            publish_time_ns: header.publish_time,
+            data,
+        })));
+        Ok(())
+    }
+
+    /// Refuses a message read after one that follows it was handed out.
+    fn check_order(&self) -> Result<(), InputError> {
+        let (Some(last), Some(Reverse(Held(first)))) = (self.last_out, self.held.peek()) else {
+            return Ok(());
+        };
+        if first.key > last {
+            return Ok(());
+        }
+        Err(InputError::at(
+            &self.path,
+            self.location(first),
+            format!(
+                "written after message {} at log_time {} ns, which goes after it in replay \
+                 order and was already stepped: a recording followed live must be written in \
+                 time order (`tortwin replay` reads it in any order once it is finished)",
+                last.index_in_file, last.log_time_ns
+            ),
+        ))
+    }
+
+    fn read_at(&mut self, offset: u64, len: u64) -> Result<Vec<u8>, InputError> {
+        let mut buf = vec![0u8; len as usize];
+        self.file
+            .seek(SeekFrom::Start(offset))
+            .and_then(|_| self.file.read_exact(&mut buf))
+            .map_err(|e| InputError::file(&self.path, format!("cannot read: {e}")))?;
+        Ok(buf)
+    }
+
+    pub(super) fn location(&self, message: &PendingMessage) -> MessageLocation {
+        MessageLocation {
+            topic: self
+                .channels
+                .get(&message.channel_id)
+                .map_or_else(String::new, |c| c.topic.clone()),
+            log_time_ns: message.key.log_time_ns,
+            index_in_file: message.key.index_in_file,
+        }
+    }
+
+    pub(super) fn channels(&self) -> &HashMap<u16, ChannelInfo> {
+        &self.channels
+    }
+
+    pub(super) fn path(&self) -> &Path {
+        &self.path
+    }
+}
