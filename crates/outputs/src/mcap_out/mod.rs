@@ -124,13 +124,16 @@ impl McapError {
     }
 }
 
-/// Writes the twin's output channels to an MCAP file (see the module docs).
+/// Writes the twin's output channels to an MCAP file (see the module docs),
+/// or to one file per UTC day ([`McapSink::daily`]).
 pub struct McapSink {
-    // Declared before `temp` so that on drop the writer closes the file
-    // before the guard deletes it.
-    writer: WriterThread,
-    temp: PartialFile,
-    channel_ids: [u16; Topic::ALL.len()],
+    /// The file being written; `None` while a day already written before a
+    /// restart is stepped again ([`McapSink::daily`]).
+    file: Option<McapFile>,
+    /// The file messages go to (for errors): the current day's.
+    path: PathBuf,
+    /// Per UTC day: where the days go.
+    daily: Option<Daily>,
     /// The coloured track of `/foxglove/track`, from [`Sink::begin`].
     scene: Option<TrackScene>,
     /// log_time of track snapshots not yet written as a scene update.
@@ -148,6 +151,31 @@ pub struct McapSink {
     /// Pulses since the last train snapshot, per applicator and rail.
     pulses: Vec<PulseTally>,
 }
+
+/// An MCAP file being written: under a temporary name until it is finished.
+struct McapFile {
+    // Declared before `temp` so that on drop the writer closes the file
+    // before the guard deletes it.
+    writer: WriterThread,
+    temp: PartialFile,
+    channel_ids: [u16; Topic::ALL.len()],
+}
+
+/// How a daily output names and opens its files.
+struct Daily {
+    folder: PathBuf,
+    stem: String,
+    provenance: Option<Provenance>,
+    line: bool,
+    /// The UTC day (days since the epoch) of the file being written.
+    day: Option<u64>,
+    /// `/twin/section` and its log_time (the origin's), to open every day
+    /// with: the first at that log_time, later ones at their first
+    /// message's (the origin may be days before).
+    section: Option<(Vec<u8>, u64)>,
+}
+
+const NS_PER_DAY: u64 = 86_400_000_000_000;
 
 /// An applicator's pulses on one rail since the last train snapshot.
 #[derive(Debug, Clone)]
@@ -195,6 +223,104 @@ impl McapSink {
         compression: McapCompression,
         line: bool,
     ) -> Result<McapSink, McapError> {
+        let file = McapFile::create(path, provenance, compression, line)?;
+        Ok(Self::with_file(Some(file), path.to_path_buf(), None))
+    }
+
+    /// The output of a replay as one file per UTC day of the messages'
+    /// log_times, `folder/STEM.YYYY-MM-DD.mcap`, each complete on its own
+    /// (it opens with `/twin/section`) and moved into place when the next
+    /// day's first message comes (the last at [`Sink::finish`]). A day whose
+    /// file is there already is not written again: `tortwin live` steps
+    /// the messages since its last checkpoint again after a restart, and
+    /// the days finished before it are kept as they were written.
+    pub fn daily(
+        folder: &Path,
+        stem: &str,
+        provenance: Option<&Provenance>,
+        line: bool,
+    ) -> McapSink {
+        let daily = Daily {
+            folder: folder.to_path_buf(),
+            stem: stem.to_string(),
+            provenance: provenance.cloned(),
+            line,
+            day: None,
+            section: None,
+        };
+        Self::with_file(None, folder.to_path_buf(), Some(daily))
+    }
+
+    /// The file of UTC day `day` of a daily output.
+    pub fn daily_path(folder: &Path, stem: &str, day_start_ns: u64) -> PathBuf {
+        let date = chrono::DateTime::from_timestamp_nanos(day_start_ns as i64)
+            .format("%Y-%m-%d")
+            .to_string();
+        folder.join(format!("{stem}.{date}.mcap"))
+    }
+
+    fn with_file(file: Option<McapFile>, path: PathBuf, daily: Option<Daily>) -> McapSink {
+        McapSink {
+            file,
+            path,
+            daily,
+            scene: None,
+            scene_pending: None,
+            scene_dirty: Vec::new(),
+            grid_d_m: Vec::new(),
+            track_labels: Vec::new(),
+            text: String::new(),
+            last_log_time_ns: 0,
+            pulses: Vec::new(),
+        }
+    }
+
+    /// A daily output's next file: the day of `log_time_ns`, opened with
+    /// the `/twin/section` message at that time (unless it is the first).
+    fn next_day(&mut self, log_time_ns: u64) -> Result<(), McapError> {
+        let Some(daily) = self.daily.as_mut() else {
+            return Ok(());
+        };
+        let day = log_time_ns / NS_PER_DAY;
+        if daily.day.is_some_and(|d| d >= day) {
+            return Ok(());
+        }
+        let section = daily.section.as_ref().map(|(json, at)| {
+            let at = if daily.day.is_none() {
+                *at
+            } else {
+                log_time_ns
+            };
+            (json.clone(), at)
+        });
+        daily.day = Some(day);
+        let path = Self::daily_path(&daily.folder, &daily.stem, day * NS_PER_DAY);
+        let (provenance, line) = (daily.provenance.clone(), daily.line);
+        if let Some(file) = self.file.take() {
+            file.finish()?;
+        }
+        self.path = path.clone();
+        if path.exists() {
+            return Ok(());
+        }
+        let mut file = McapFile::create(&path, provenance.as_ref(), McapCompression::Fast, line)?;
+        if let Some((json, at)) = section {
+            file.write_raw(Topic::Section, at, &json)?;
+        }
+        self.file = Some(file);
+        Ok(())
+    }
+}
+
+impl McapFile {
+    /// Opens `.NAME.partial-XXXXXX` next to `path` and registers every
+    /// channel (see [`McapSink::create`]).
+    fn create(
+        path: &Path,
+        provenance: Option<&Provenance>,
+        compression: McapCompression,
+        line: bool,
+    ) -> Result<McapFile, McapError> {
         let temp = PartialFile::beside(path)?;
         let file = File::create(temp.temp_path()).map_err(|source| McapError::Io {
             path: path.to_path_buf(),
@@ -272,21 +398,52 @@ impl McapSink {
                 .map_err(mcap_error(&format!("adding channel {}", topic.name())))?;
         }
 
-        Ok(McapSink {
+        Ok(McapFile {
             writer: WriterThread::start(writer, path)?,
             temp,
             channel_ids,
-            scene: None,
-            scene_pending: None,
-            scene_dirty: Vec::new(),
-            grid_d_m: Vec::new(),
-            track_labels: Vec::new(),
-            text: String::new(),
-            last_log_time_ns: 0,
-            pulses: Vec::new(),
         })
     }
 
+    /// Writes a message already serialized.
+    fn write_raw(&mut self, topic: Topic, log_time_ns: u64, json: &[u8]) -> Result<(), McapError> {
+        let header = mcap::records::MessageHeader {
+            channel_id: self.channel_ids[topic as usize],
+            sequence: 0,
+            log_time: log_time_ns,
+            publish_time: log_time_ns,
+        };
+        self.writer.push(header, topic.name(), |bytes| {
+            bytes.extend_from_slice(json);
+            Ok(())
+        })
+    }
+
+    /// Writes the summary, flushes and syncs the file, moves it into place.
+    fn finish(mut self) -> Result<(), McapError> {
+        let path = self.temp.final_path().to_path_buf();
+        let mut writer = self.writer.close()?;
+        writer.finish().map_err(|source| McapError::Mcap {
+            path: path.clone(),
+            what: "finishing".to_owned(),
+            source,
+        })?;
+        let io_error = |what| {
+            let path = path.clone();
+            move |source| McapError::Io { path, what, source }
+        };
+        let file = writer
+            .into_inner()
+            .into_inner()
+            .map_err(|e| e.into_error())
+            .map_err(io_error("flushing"))?;
+        file.sync_all().map_err(io_error("syncing"))?;
+        drop(file);
+        Ok(self.temp.commit()?)
+    }
+}
+
+impl McapSink {
     /// Serializes `message` into the reused buffer and writes it with
     /// log_time = publish_time = `log_time_ns`.
     fn write<T: Serialize>(
@@ -295,17 +452,22 @@ impl McapSink {
         log_time_ns: u64,
         message: &T,
     ) -> Result<(), McapError> {
-        let path = self.temp.final_path();
         self.last_log_time_ns = self.last_log_time_ns.max(log_time_ns);
+        self.next_day(log_time_ns)?;
+        let path = &self.path;
+        let Some(file) = self.file.as_mut() else {
+            // A day written before a restart.
+            return Ok(());
+        };
         // Sequence 0, "not used" (MCAP spec): a file has no gaps to detect,
         // and counters in every header cost a year's file 5 %.
         let header = mcap::records::MessageHeader {
-            channel_id: self.channel_ids[topic as usize],
+            channel_id: file.channel_ids[topic as usize],
             sequence: 0,
             log_time: log_time_ns,
             publish_time: log_time_ns,
         };
-        self.writer.push(header, topic.name(), |bytes| {
+        file.writer.push(header, topic.name(), |bytes| {
             serde_json::to_writer(bytes, message).map_err(|source| McapError::Json {
                 path: path.to_path_buf(),
                 topic: topic.name(),
@@ -317,7 +479,7 @@ impl McapSink {
     /// An error for what the engine handed over on `topic`.
     fn inconsistent(&self, topic: Topic, problem: String) -> McapError {
         McapError::Inconsistent {
-            path: self.temp.final_path().to_path_buf(),
+            path: self.path.clone(),
             topic: topic.name(),
             problem,
         }
@@ -388,27 +550,21 @@ impl McapSink {
         written
     }
 
-    /// Writes the summary, flushes and syncs the file, moves it into place.
+    /// Finishes the file being written (the last day's; a daily output of
+    /// nothing but the section: the section's day).
     fn finish_file(&mut self) -> Result<(), McapError> {
-        let path = self.temp.final_path().to_path_buf();
-        let mut writer = self.writer.close()?;
-        writer.finish().map_err(|source| McapError::Mcap {
-            path: path.clone(),
-            what: "finishing".to_owned(),
-            source,
-        })?;
-        let io_error = |what| {
-            let path = path.clone();
-            move |source| McapError::Io { path, what, source }
-        };
-        let file = writer
-            .into_inner()
-            .into_inner()
-            .map_err(|e| e.into_error())
-            .map_err(io_error("flushing"))?;
-        file.sync_all().map_err(io_error("syncing"))?;
-        drop(file);
-        Ok(self.temp.commit()?)
+        if let Some((_, at)) = self
+            .daily
+            .as_ref()
+            .filter(|d| d.day.is_none())
+            .and_then(|d| d.section.as_ref())
+        {
+            self.next_day(*at)?;
+        }
+        match self.file.take() {
+            Some(file) => file.finish(),
+            None => Ok(()),
+        }
     }
 }
 
@@ -516,7 +672,18 @@ impl Sink for McapSink {
             applicators,
             sites,
         };
-        self.write(topic, log_time_ns, &message)?;
+        match self.daily.as_mut() {
+            // Written when the first day's file opens, at its log_time.
+            Some(daily) => {
+                let json = serde_json::to_vec(&message).map_err(|source| McapError::Json {
+                    path: self.path.clone(),
+                    topic: topic.name(),
+                    source,
+                })?;
+                daily.section = Some((json, log_time_ns));
+            }
+            None => self.write(topic, log_time_ns, &message)?,
+        }
 
         let plan = Plan::new(info);
         let mut labels: Vec<Label> = section
