@@ -14,7 +14,7 @@ use clap::Parser as _;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
 use tortwin_jobs::{
-    self as jobs, discover, paper, recordings, replay, strategy, summary, synth, tables,
+    self as jobs, discover, live, paper, recordings, replay, strategy, summary, synth, tables,
 };
 use tortwin_jobs::{Cli, Command};
 use tortwin_study::Progress;
@@ -59,6 +59,16 @@ fn run(command: Command) -> Result<()> {
                 say(&summary::render(&args.recording, &run))?;
                 say(&replay::render_outputs(&args))?;
             }
+        }
+        Command::Live(args) => {
+            let quiet = args.quiet;
+            let mut said = Ok(());
+            live::live(&args, &mut |followed| {
+                if !quiet && said.is_ok() {
+                    said = say(&live::render_followed(followed));
+                }
+            })?;
+            said?;
         }
         Command::Import(args) => {
             let display = Display::new(args.quiet);

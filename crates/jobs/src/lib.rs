@@ -6,6 +6,7 @@
 //! adds only argument parsing, the progress display and exit codes.
 
 pub mod discover;
+pub mod live;
 pub mod paper;
 mod printable;
 pub mod recordings;
@@ -46,6 +47,10 @@ pub enum Command {
     /// Replay a recording of a track section and publish the friction field
     /// (rerun recording, MCAP for Foxglove).
     Replay(crate::replay::ReplayArgs),
+    /// Follow a recording while a logger writes it (or a folder in which
+    /// its files appear) and write what a replay of the finished files
+    /// writes, as it goes, with checkpoints to continue from.
+    Live(crate::live::LiveArgs),
     /// Build a recording from CSV tables (section.toml, passages.csv,
     /// pulses.csv, weather.csv, measurements.csv; docs/spec/csv-tables.md).
     Import(crate::tables::ImportArgs),

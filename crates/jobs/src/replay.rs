@@ -212,25 +212,12 @@ fn run(
         line_axle: args.out_rrd.is_some().then_some(args.line_axle),
         ..EngineOptions::default()
     };
-    let section = reader.section().clone();
-    let source = args.config.as_ref().map_or_else(
-        || "built-in defaults".to_string(),
-        super::ConfigSource::name,
-    );
-    tortwin_engine::terms::check_terms_against(&cfg.effects.generic, &section, &source)?;
+    let source = config_name(args.config.as_ref());
     let mut per_train = args
         .per_train
-        .then(|| PerTrain::new(&section, &cfg, &Target::default()))
+        .then(|| PerTrain::new(reader.section(), &cfg, &Target::default()))
         .transpose()?;
-    let line = reader.line().cloned();
-    if line.is_some() {
-        tortwin_engine::line::check_config(&cfg, &source)?;
-    }
-    let mut engine = match &start {
-        Some(s) => Engine::from_state(section, line, cfg, opts, s.state)
-            .map_err(|e| InputError::file(Path::new(&s.name), e.to_string()))?,
-        None => Engine::on_line(section, line, cfg, opts, reader.origin_ns()),
-    };
+    let mut engine = engine_for(&reader, cfg, opts, start.as_ref(), &source)?;
 
     let mcap = args
         .out_mcap
@@ -316,6 +303,37 @@ fn run(
         summary,
         state: engine.state(),
         per_train: per_train.map(|p| p.rows().to_vec()),
+    })
+}
+
+/// What error messages call the configuration.
+pub(crate) fn config_name(config: Option<&super::ConfigSource>) -> String {
+    config.map_or_else(
+        || "built-in defaults".to_string(),
+        super::ConfigSource::name,
+    )
+}
+
+/// The engine that replays `reader`'s recording with `cfg` (called `source`
+/// in errors), from `start` or a fresh section: the generic terms and, on a
+/// line, the configuration checked against the recording.
+pub(crate) fn engine_for(
+    reader: &RecordingReader,
+    cfg: tortwin_model::config::ModelConfig,
+    opts: EngineOptions,
+    start: Option<&SavedState<'_>>,
+    source: &str,
+) -> Result<Engine> {
+    let section = reader.section().clone();
+    tortwin_engine::terms::check_terms_against(&cfg.effects.generic, &section, source)?;
+    let line = reader.line().cloned();
+    if line.is_some() {
+        tortwin_engine::line::check_config(&cfg, source)?;
+    }
+    Ok(match start {
+        Some(s) => Engine::from_state(section, line, cfg, opts, s.state)
+            .map_err(|e| InputError::file(Path::new(&s.name), e.to_string()))?,
+        None => Engine::on_line(section, line, cfg, opts, reader.origin_ns()),
     })
 }
 

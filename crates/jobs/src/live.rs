@@ -1,0 +1,344 @@
+//! `tortwin live`: the twin beside the track. Follows a recording while a
+//! logger writes it, or a folder in which the logger's hour or day files
+//! appear, and writes what `tortwin replay` of the finished files writes,
+//! as it goes.
+//!
+//! **Inputs.** A file is followed record by record until its end (the
+//! reader's `Follow`: a half-written chunk is waited for, a summary is not
+//! needed). A folder's `*.mcap` files are taken in name order, each followed
+//! to its end and continuing the state of the one before (as `tortwin
+//! replay --state-in` does); then the follower waits for the next one.
+//!
+//! **Outputs.** In `--out-dir`: the MCAP output of each recording per UTC
+//! day, `STEM.YYYY-MM-DD.mcap` (McapSink::daily), each complete on its own
+//! and moved into place when the next day begins or the recording ends; the
+//! messages of all of them, in order, are those of the replay's output (each
+//! later day opens with the `/twin/section` message again).
+//!
+//! **Checkpoints.** After each finished recording, `live-checkpoint.json`
+//! (which recordings are done and the section's state after them) and
+//! `--state-out`, both written atomically. A follower killed at any moment
+//! and started again with the same command continues from the checkpoint:
+//! the finished recordings are not read again; the one it was in is stepped
+//! again from the checkpoint's state, and of its outputs only the days not
+//! yet in place are written (those in place were complete, and the same
+//! messages would be written again). So no train is in the outputs twice or
+//! missing, and the state is the replay's.
+
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+use serde::{Deserialize, Serialize};
+
+use tortwin_engine::sink::Sink;
+use tortwin_engine::{EngineOptions, EngineState};
+use tortwin_files::usage::UsageError;
+use tortwin_outputs::mcap_out::McapSink;
+use tortwin_outputs::provenance::Provenance;
+use tortwin_recording::error::InputError;
+use tortwin_recording::reader::{Follow, ReaderContext};
+use tortwin_recording::RecordingReader;
+use tortwin_study::{Error, Result};
+
+use super::load_config;
+use super::replay::{config_name, engine_for, read_state, SavedState};
+
+/// The checkpoint's name in the output folder.
+pub const CHECKPOINT: &str = "live-checkpoint.json";
+const CHECKPOINT_FORMAT: &str = "tortwin-live-checkpoint";
+const CHECKPOINT_VERSION: u32 = 1;
+
+#[derive(Debug, Clone)]
+#[cfg_attr(feature = "cli", derive(clap::Args))]
+pub struct LiveArgs {
+    /// The recording a logger is writing (MCAP), or a folder in which its
+    /// recordings appear (taken in name order, each continuing the state
+    /// of the one before).
+    pub input: PathBuf,
+    /// Folder of the outputs: the MCAP output per recording and UTC day
+    /// (`STEM.YYYY-MM-DD.mcap`) and the checkpoint (`live-checkpoint.json`).
+    /// Empty or missing at the first start; the same folder continues a
+    /// follower that was stopped.
+    #[cfg_attr(feature = "cli", arg(long))]
+    pub out_dir: PathBuf,
+    /// Model configuration overlaid on the built-in defaults (TOML).
+    #[cfg_attr(feature = "cli", arg(long))]
+    pub config: Option<super::ConfigSource>,
+    /// Start the first recording from the state an earlier replay wrote.
+    #[cfg_attr(feature = "cli", arg(long))]
+    pub state_in: Option<PathBuf>,
+    /// Write the section's state here after every finished recording.
+    #[cfg_attr(feature = "cli", arg(long))]
+    pub state_out: Option<PathBuf>,
+    /// How often to look for more data, in milliseconds.
+    #[cfg_attr(feature = "cli", arg(long, default_value_t = 20, value_name = "MS"))]
+    pub poll_ms: u64,
+    /// With a folder: stop once no new recording has appeared for this many
+    /// seconds after the last one ended (default: wait for ever).
+    #[cfg_attr(feature = "cli", arg(long, value_name = "S"))]
+    pub idle_exit_s: Option<f64>,
+    /// Do not print a line per recording.
+    #[cfg_attr(feature = "cli", arg(long, short))]
+    pub quiet: bool,
+}
+
+/// What `live-checkpoint.json` holds.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct Checkpoint {
+    format: String,
+    version: u32,
+    /// The input followed, as given.
+    input: PathBuf,
+    /// The recordings finished, in order (file names).
+    done: Vec<String>,
+    /// The section's state after them.
+    state: Option<EngineState>,
+}
+
+/// A recording the follower finished.
+#[derive(Debug, Clone)]
+pub struct Followed {
+    pub recording: PathBuf,
+    pub trains: u64,
+    pub measurements: u64,
+}
+
+/// Follows `args.input` (see the module documentation); `on_recording` is
+/// told of each recording finished. Returns when the input ends: a file at
+/// its end, a folder after `idle_exit_s` without a new recording.
+pub fn live(args: &LiveArgs, on_recording: &mut dyn FnMut(&Followed)) -> Result<Vec<Followed>> {
+    let _inputs = tortwin_outputs::files::InputScope::enter();
+    let cfg = load_config(args.config.as_ref())?;
+    let source = config_name(args.config.as_ref());
+    tortwin_outputs::files::make_folder(&args.out_dir)?;
+    let checkpoint_path = args.out_dir.join(CHECKPOINT);
+    let mut checkpoint = match checkpoint_path.exists() {
+        true => read_checkpoint(&checkpoint_path, &args.input)?,
+        false => {
+            refuse_foreign_outputs(&args.out_dir)?;
+            let state = args.state_in.as_deref().map(read_state).transpose()?;
+            let checkpoint = Checkpoint {
+                format: CHECKPOINT_FORMAT.to_string(),
+                version: CHECKPOINT_VERSION,
+                input: args.input.clone(),
+                done: Vec::new(),
+                state,
+            };
+            // Before any output: a restart knows the folder is its own.
+            write_checkpoint(&checkpoint_path, &checkpoint)?;
+            checkpoint
+        }
+    };
+    let folder = args.input.is_dir();
+    let follow = Follow::new(Duration::from_millis(args.poll_ms.max(1)));
+    let provenance = Provenance::of_run(
+        &args
+            .config
+            .as_ref()
+            .and_then(super::ConfigSource::path)
+            .into_iter()
+            .chain(args.state_in.as_deref())
+            .collect::<Vec<_>>(),
+        &cfg,
+    )?;
+    let mut followed = Vec::new();
+    loop {
+        let next = match folder {
+            false if checkpoint.done.is_empty() => Some(args.input.clone()),
+            false => None,
+            true => next_in_folder(&args.input, checkpoint.done.last(), args, &follow)?,
+        };
+        let Some(recording) = next else {
+            break;
+        };
+        let start = checkpoint.state.as_ref().map(|state| SavedState {
+            state,
+            name: checkpoint_path.display().to_string(),
+            file: None,
+        });
+        let ctx = match &start {
+            Some(s) => ReaderContext {
+                origin_ns: Some(s.state.origin_ns),
+                occupied_until_s: s.state.occupied_until_s.unwrap_or(f64::NEG_INFINITY),
+            },
+            None => ReaderContext::default(),
+        };
+        let reader = RecordingReader::follow(&recording, ctx, follow.clone())?;
+        let mut engine = engine_for(
+            &reader,
+            cfg.clone(),
+            EngineOptions::default(),
+            start.as_ref(),
+            &source,
+        )?;
+        let stem = recording
+            .file_stem()
+            .map_or_else(|| "recording".into(), |s| s.to_string_lossy().into_owned());
+        let mut mcap = McapSink::daily(
+            &args.out_dir,
+            &stem,
+            Some(&provenance),
+            reader.line().is_some(),
+        );
+        let mut reader = reader;
+        let mut trains = 0u64;
+        let mut measurements = 0u64;
+        for event in reader.by_ref() {
+            let event = event?;
+            match event.kind {
+                tortwin_recording::EventKind::Passage(_) => trains += 1,
+                tortwin_recording::EventKind::Measurement(_) => measurements += 1,
+                _ => {}
+            }
+            engine
+                .push(event, &mut mcap as &mut dyn Sink)
+                .map_err(|source| Error::Replay {
+                    what: recording.display().to_string(),
+                    source,
+                })?;
+        }
+        engine.finish(&mut mcap, reader.unknown_topic_messages())?;
+        drop(mcap);
+        let state = engine.state();
+        if let Some(path) = &args.state_out {
+            let text = serde_json::to_string(&state).map_err(|source| Error::Json {
+                what: "the state",
+                source,
+            })?;
+            tortwin_outputs::files::write_atomically(path, text.as_bytes())?;
+        }
+        checkpoint.done.push(file_name(&recording));
+        checkpoint.state = Some(state);
+        write_checkpoint(&checkpoint_path, &checkpoint)?;
+        let done = Followed {
+            recording,
+            trains,
+            measurements,
+        };
+        on_recording(&done);
+        followed.push(done);
+    }
+    Ok(followed)
+}
+
+fn write_checkpoint(path: &Path, checkpoint: &Checkpoint) -> Result<()> {
+    let text = serde_json::to_string(checkpoint).map_err(|source| Error::Json {
+        what: "the checkpoint",
+        source,
+    })?;
+    Ok(tortwin_outputs::files::write_atomically(
+        path,
+        text.as_bytes(),
+    )?)
+}
+
+fn file_name(path: &Path) -> String {
+    path.file_name()
+        .map_or_else(String::new, |n| n.to_string_lossy().into_owned())
+}
+
+/// The folder's next recording after `last` in name order, waiting for it
+/// to appear; `None` after `idle_exit_s` without one.
+fn next_in_folder(
+    folder: &Path,
+    last: Option<&String>,
+    args: &LiveArgs,
+    follow: &Follow,
+) -> Result<Option<PathBuf>> {
+    let since = Instant::now();
+    loop {
+        let entries = std::fs::read_dir(folder).map_err(|e| {
+            InputError::file(folder, format!("cannot list the recordings' folder: {e}"))
+        })?;
+        let mut names: Vec<String> = entries
+            .flatten()
+            .filter_map(|e| e.file_name().into_string().ok())
+            .filter(|n| n.ends_with(".mcap") && !n.starts_with('.'))
+            .filter(|n| last.is_none_or(|last| n.as_str() > last.as_str()))
+            .collect();
+        names.sort();
+        if let Some(name) = names.into_iter().next() {
+            return Ok(Some(folder.join(name)));
+        }
+        if args
+            .idle_exit_s
+            .is_some_and(|s| since.elapsed().as_secs_f64() >= s)
+        {
+            return Ok(None);
+        }
+        std::thread::sleep(follow.poll.max(Duration::from_millis(50)));
+    }
+}
+
+/// Reads the checkpoint of an earlier follower of `input`.
+fn read_checkpoint(path: &Path, input: &Path) -> Result<Checkpoint> {
+    // Read without registering it as an input: it is rewritten after
+    // every recording (`tortwin_files::InputScope` would refuse that).
+    let text = std::fs::metadata(path)
+        .and_then(|m| {
+            if m.len() > tortwin_outputs::files::MAX_STATE_BYTES {
+                Err(std::io::Error::other(format!(
+                    "{} bytes, more than a checkpoint holds",
+                    m.len()
+                )))
+            } else {
+                std::fs::read_to_string(path)
+            }
+        })
+        .map_err(|e| InputError::file(path, format!("cannot read the checkpoint: {e}")))?;
+    let checkpoint: Checkpoint = serde_json::from_str(&text)
+        .map_err(|e| InputError::file(path, format!("not a tortwin live checkpoint: {e}")))?;
+    if checkpoint.format != CHECKPOINT_FORMAT || checkpoint.version != CHECKPOINT_VERSION {
+        return Err(InputError::file(
+            path,
+            format!(
+                "not a tortwin live checkpoint of version {CHECKPOINT_VERSION} (format {:?}, \
+                 version {})",
+                checkpoint.format, checkpoint.version
+            ),
+        )
+        .into());
+    }
+    if checkpoint.input != input {
+        return Err(UsageError(format!(
+            "{} continues a follower of {}, not of {}: use another --out-dir",
+            path.display(),
+            checkpoint.input.display(),
+            input.display()
+        ))
+        .into());
+    }
+    Ok(checkpoint)
+}
+
+/// A first start refuses a folder that already holds MCAP files: they
+/// would be taken for days already written.
+fn refuse_foreign_outputs(folder: &Path) -> Result<()> {
+    let Ok(entries) = std::fs::read_dir(folder) else {
+        return Ok(());
+    };
+    let foreign = entries
+        .flatten()
+        .filter_map(|e| e.file_name().into_string().ok())
+        .find(|n| n.ends_with(".mcap") && !n.starts_with('.'));
+    match foreign {
+        Some(name) => Err(UsageError(format!(
+            "--out-dir {} holds {name} but no {CHECKPOINT}: a follower starts in an empty \
+             folder (or continues in its own)",
+            folder.display()
+        ))
+        .into()),
+        None => Ok(()),
+    }
+}
+
+/// The lines `tortwin live` prints for a finished recording.
+pub fn render_followed(f: &Followed) -> String {
+    format!(
+        "{}: {} trains, {} measurements stepped\n",
+        f.recording.display(),
+        f.trains,
+        f.measurements
+    )
+}
