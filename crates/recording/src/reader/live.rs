@@ -97,8 +97,11 @@ pub(super) struct LiveQueue {
     held: BinaryHeap<Reverse<Held>>,
     /// The latest log_time read.
     latest_ns: Option<u64>,
-    /// The last message handed out.
+    /// The latest message of the format handed out.
     last_out: Option<ReplayKey>,
+    /// The first message of the format read after `last_out` although it
+    /// goes before it.
+    late: Option<ReplayKey>,
 }
 
 impl LiveQueue {
@@ -116,6 +119,7 @@ impl LiveQueue {
             held: BinaryHeap::new(),
             latest_ns: None,
             last_out: None,
+            late: None,
         })
     }
 
@@ -150,7 +154,11 @@ impl LiveQueue {
             return None;
         }
         let Reverse(Held(message)) = self.held.pop()?;
-        self.last_out = Some(message.key);
+        // A message on a topic the format does not know is skipped
+        // wherever it comes: written late, it is no error.
+        if message.key.topic != TopicRank::Unknown {
+            self.last_out = Some(message.key);
+        }
         Some(message)
     }
 
@@ -306,6 +314,10 @@ impl LiveQueue {
             index_in_file,
         };
         check_message_size(key, data.as_slice().len() as u64)?;
+        let late = key.topic != TopicRank::Unknown && self.last_out.is_some_and(|last| key < last);
+        if late && self.late.is_none() {
+            self.late = Some(key);
+        }
         self.next_index += 1;
         self.latest_ns = Some(
             self.latest_ns
@@ -321,17 +333,23 @@ impl LiveQueue {
         Ok(())
     }
 
-    /// Refuses a message read after one that follows it was handed out.
+    /// Refuses a message of the format read after one that follows it in
+    /// replay order was handed out.
     fn check_order(&self) -> Result<(), InputError> {
-        let (Some(last), Some(Reverse(Held(first)))) = (self.last_out, self.held.peek()) else {
+        let (Some(late), Some(last)) = (self.late, self.last_out) else {
             return Ok(());
         };
-        if first.key > last {
-            return Ok(());
-        }
+        let topic = match late.topic {
+            TopicRank::Known(topic) => topic.name().to_string(),
+            TopicRank::Unknown => String::new(),
+        };
         Err(InputError::at(
             &self.path,
-            self.location(first),
+            MessageLocation {
+                topic,
+                log_time_ns: late.log_time_ns,
+                index_in_file: late.index_in_file,
+            },
             format!(
                 "written after message {} at log_time {} ns, which goes after it in replay \
                  order and was already stepped: a recording followed live must be written in \
