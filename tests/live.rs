@@ -120,12 +120,26 @@ fn a_recording_followed_while_it_is_written_gives_the_replays_outputs() {
         .arg(&growing)
         .arg("--out-dir")
         .arg(&out)
+        .arg("--json")
         .output()
         .unwrap();
     check(&o, "tortwin live");
     finished(writer);
     let stdout = String::from_utf8_lossy(&o.stdout);
     assert!(stdout.contains("logger.mcap: 120 trains"), "{stdout}");
+    // --json: a line per train and rail as its field came out.
+    let lines: Vec<serde_json::Value> = stdout
+        .lines()
+        .filter(|l| l.starts_with('{'))
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    assert_eq!(lines.len(), 240, "120 trains on two rails");
+    for pair in lines.chunks(2) {
+        assert_eq!(pair[0]["train_id"], pair[1]["train_id"]);
+        assert_eq!([&pair[0]["rail"], &pair[1]["rail"]], ["high", "low"]);
+        let mu_min = pair[0]["mu_min"].as_f64().unwrap();
+        assert!((0.05..=0.8).contains(&mu_min), "{}", pair[0]);
+    }
     // One file per day, each complete on its own.
     assert_eq!(
         mcap_names(&out),

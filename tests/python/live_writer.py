@@ -68,8 +68,9 @@ class Output:
                 sid = schemas[key]
             self.ids[cid] = self.writer.register_channel(topic, encoding, sid)
 
-    def add(self, channel_id, message, log_time=None):
+    def add(self, channel_id, message, log_time=None, readable=None):
         t = message.log_time if log_time is None else log_time
+        before = self.stream.tell()
         self.writer.add_message(
             self.ids[channel_id],
             log_time=t,
@@ -77,6 +78,9 @@ class Output:
             publish_time=t,
             sequence=message.sequence,
         )
+        # A chunk written whole holds every message so far.
+        if readable is not None and self.stream.tell() != before:
+            readable.append((time.time_ns(), t))
 
     def finish(self):
         self.writer.finish()
@@ -89,7 +93,13 @@ def main():
     ap.add_argument("output")
     ap.add_argument("--speed", type=float, default=1000.0)
     ap.add_argument("--hourly", action="store_true")
+    ap.add_argument(
+        "--log-readable",
+        help="write here a line 'WALL_NS LOG_TIME_NS' each time the file has grown: "
+        "every message up to that log_time is readable from that wall-clock time on",
+    )
     args = ap.parse_args()
+    readable = []
 
     with open(args.input, "rb") as f:
         reader = make_reader(f)
@@ -121,7 +131,7 @@ def main():
         if not args.hourly:
             if out is None:
                 out = Output(args.output, channels)
-            out.add(cid, m)
+            out.add(cid, m, readable=readable)
             continue
         if topic[cid] in ("/section", "/line"):
             if out is None:
@@ -137,8 +147,12 @@ def main():
                 out.add(ocid, om, log_time=log_time)
         if passage:
             hour = log_time // HOUR_NS
-        out.add(cid, m)
+        out.add(cid, m, readable=readable)
     out.finish()
+    if args.log_readable:
+        with open(args.log_readable, "w") as f:
+            for wall, t in readable:
+                f.write(f"{wall} {t}\n")
 
 
 if __name__ == "__main__":

@@ -30,13 +30,13 @@ use std::time::{Duration, Instant};
 
 use serde::{Deserialize, Serialize};
 
-use tortwin_engine::sink::Sink;
+use tortwin_engine::sink::{Fanout, FieldSnapshot, Sink, SinkResult, SnapshotKind};
 use tortwin_engine::{EngineOptions, EngineState};
 use tortwin_files::usage::UsageError;
 use tortwin_outputs::mcap_out::McapSink;
 use tortwin_outputs::provenance::Provenance;
 use tortwin_recording::error::InputError;
-use tortwin_recording::reader::{Follow, ReaderContext};
+use tortwin_recording::reader::{Follow, Followed as ReadStep, ReaderContext};
 use tortwin_recording::RecordingReader;
 use tortwin_study::{Error, Result};
 
@@ -73,6 +73,15 @@ pub struct LiveArgs {
     /// How often to look for more data, in milliseconds.
     #[cfg_attr(feature = "cli", arg(long, default_value_t = 20, value_name = "MS"))]
     pub poll_ms: u64,
+    /// How far behind the latest message read a message may still be
+    /// written, in seconds (a source that reaches the logger late); trains
+    /// are stepped this much later. 0: the logger writes in time order.
+    #[cfg_attr(feature = "cli", arg(long, default_value_t = 0.0, value_name = "S"))]
+    pub max_delay_s: f64,
+    /// Print a JSON line per train and rail band as its field comes out
+    /// (mu's least and mean, the length below and above the target band).
+    #[cfg_attr(feature = "cli", arg(long))]
+    pub json: bool,
     /// With a folder: stop once no new recording has appeared for this many
     /// seconds after the last one ended (default: wait for ever).
     #[cfg_attr(feature = "cli", arg(long, value_name = "S"))]
@@ -131,7 +140,17 @@ pub fn live(args: &LiveArgs, on_recording: &mut dyn FnMut(&Followed)) -> Result<
         }
     };
     let folder = args.input.is_dir();
-    let follow = Follow::new(Duration::from_millis(args.poll_ms.max(1)));
+    if !(args.max_delay_s.is_finite() && (0.0..=86_400.0).contains(&args.max_delay_s)) {
+        return Err(UsageError(format!(
+            "--max-delay-s {} is not a delay of 0 to 86400 s",
+            args.max_delay_s
+        ))
+        .into());
+    }
+    let follow = Follow {
+        max_delay: Duration::from_secs_f64(args.max_delay_s),
+        ..Follow::new(Duration::from_millis(args.poll_ms.max(1)))
+    };
     let provenance = Provenance::of_run(
         &args
             .config
@@ -164,7 +183,13 @@ pub fn live(args: &LiveArgs, on_recording: &mut dyn FnMut(&Followed)) -> Result<
             },
             None => ReaderContext::default(),
         };
-        let reader = RecordingReader::follow(&recording, ctx, follow.clone())?;
+        // A recording finished before it is reached (a folder's backlog, a
+        // restart after the logger ended) is read as `replay` reads it:
+        // in any order.
+        let reader = match tortwin_recording::reader::looks_finished(&recording) {
+            true => RecordingReader::open(&recording, ctx)?,
+            false => RecordingReader::follow(&recording, ctx, follow.clone())?,
+        };
         let mut engine = engine_for(
             &reader,
             cfg.clone(),
@@ -181,24 +206,36 @@ pub fn live(args: &LiveArgs, on_recording: &mut dyn FnMut(&Followed)) -> Result<
             Some(&provenance),
             reader.line().is_some(),
         );
+        let mut lines = TrainLines;
+        let mut fanout: Fanout<&mut dyn Sink> = Fanout::default();
+        fanout.sinks.push(&mut mcap);
+        if args.json {
+            fanout.sinks.push(&mut lines);
+        }
         let mut reader = reader;
         let mut trains = 0u64;
         let mut measurements = 0u64;
-        for event in reader.by_ref() {
-            let event = event?;
-            match event.kind {
-                tortwin_recording::EventKind::Passage(_) => trains += 1,
-                tortwin_recording::EventKind::Measurement(_) => measurements += 1,
-                _ => {}
+        let replay_error = |source| Error::Replay {
+            what: recording.display().to_string(),
+            source,
+        };
+        while let Some(step) = reader.next_followed() {
+            match step? {
+                // Nothing before `t` is to come: the trains that left before
+                // it are rolled now, not at the next event.
+                ReadStep::Time(t) => engine.advance_to(t, &mut fanout).map_err(replay_error)?,
+                ReadStep::Event(event) => {
+                    match event.kind {
+                        tortwin_recording::EventKind::Passage(_) => trains += 1,
+                        tortwin_recording::EventKind::Measurement(_) => measurements += 1,
+                        _ => {}
+                    }
+                    engine.push(event, &mut fanout).map_err(replay_error)?;
+                }
             }
-            engine
-                .push(event, &mut mcap as &mut dyn Sink)
-                .map_err(|source| Error::Replay {
-                    what: recording.display().to_string(),
-                    source,
-                })?;
         }
-        engine.finish(&mut mcap, reader.unknown_topic_messages())?;
+        engine.finish(&mut fanout, reader.unknown_topic_messages())?;
+        drop(fanout);
         drop(mcap);
         let state = engine.state();
         if let Some(path) = &args.state_out {
@@ -341,4 +378,52 @@ pub fn render_followed(f: &Followed) -> String {
         f.trains,
         f.measurements
     )
+}
+
+/// `--json`: a line on stdout per train and rail band as its field comes
+/// out, flushed at once.
+struct TrainLines;
+
+impl Sink for TrainLines {
+    fn field(&mut self, f: &FieldSnapshot<'_>) -> SinkResult {
+        if f.kind != SnapshotKind::Train {
+            return Ok(());
+        }
+        let [lower, upper] = tortwin_outputs::scale::TARGET_BAND;
+        // Each grid point stands for the track halfway to its neighbours.
+        let width = |k: usize| {
+            let before = if k > 0 { f.d_m[k] - f.d_m[k - 1] } else { 0.0 };
+            let after = f.d_m.get(k + 1).map_or(0.0, |d| d - f.d_m[k]);
+            (before + after) / 2.0
+        };
+        let (mut n, mut sum, mut min) = (0usize, 0.0, f64::INFINITY);
+        let (mut below_m, mut above_m) = (0.0, 0.0);
+        for (k, &mu) in f.mu.iter().enumerate().filter(|(_, mu)| mu.is_finite()) {
+            n += 1;
+            sum += mu;
+            min = min.min(mu);
+            if mu < lower {
+                below_m += width(k);
+            } else if mu > upper {
+                above_m += width(k);
+            }
+        }
+        let line = serde_json::json!({
+            "kind": "train",
+            "train_id": f.train_id,
+            "log_time_ns": f.log_time_ns,
+            "rail": f.rail_name,
+            "band": f.band,
+            "wheel_pass": f.wheel_pass,
+            "mu_min": (n > 0).then_some(min),
+            "mu_mean": (n > 0).then(|| sum / n as f64),
+            "below_band_m": below_m,
+            "above_band_m": above_m,
+        });
+        use std::io::Write as _;
+        let mut out = std::io::stdout().lock();
+        // A reader that has gone (`| head`) is not the twin's failure.
+        let _ = writeln!(out, "{line}").and_then(|()| out.flush());
+        Ok(())
+    }
 }

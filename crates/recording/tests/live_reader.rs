@@ -25,11 +25,11 @@ const T0: u64 = 1_712_534_400_000_000_000;
 const SEC: u64 = 1_000_000_000;
 
 /// Messages in file order (the comment: index in the file). Written out of
-/// time order where a follower can still put them in place: the pulse at
-/// 5 s comes after the passage at 10 s (held until a later log_time is
-/// read), the pulse at 50 s after the measurement at 50 s (a tie: the pulse
-/// goes first by topic), the heartbeat (a topic tortwin does not read) at
-/// 2 s long after later messages.
+/// time order by at most 5 s, which a follower allowing a minute's delay
+/// puts in place: the pulse at 5 s comes after the passage at 10 s, the
+/// pulse at 50 s after the measurement at 50 s (a tie: the pulse goes first
+/// by topic); and the heartbeat (a topic tortwin does not read) at 2 s long
+/// after later messages, which is no error at all.
 fn messages() -> Vec<Msg> {
     vec![
         // 0
@@ -126,6 +126,7 @@ fn grow(whole: Vec<u8>, path: &Path) -> std::thread::JoinHandle<()> {
 /// reads of the finished file.
 fn follow_and_open(
     msgs: &[Msg],
+    max_delay: Duration,
 ) -> (
     Result<Vec<Event>, InputError>,
     Result<Vec<Event>, InputError>,
@@ -135,7 +136,10 @@ fn follow_and_open(
     write_recording(&finished, msgs, Layout::ChunkPerMessage);
     let growing = dir.path().join("growing.mcap");
     let writer = grow(std::fs::read(&finished).unwrap(), &growing);
-    let follow = Follow::new(Duration::from_millis(2));
+    let follow = Follow {
+        max_delay,
+        ..Follow::new(Duration::from_millis(2))
+    };
     let followed = RecordingReader::follow(&growing, ReaderContext::default(), follow)
         .and_then(|reader| reader.collect::<Result<Vec<_>, _>>());
     writer.join().unwrap();
@@ -144,25 +148,26 @@ fn follow_and_open(
     (followed, opened)
 }
 
+const MINUTE: Duration = Duration::from_secs(60);
+
 #[test]
 fn a_file_read_as_it_is_written_gives_the_finished_file_s_events() {
-    let (followed, opened) = follow_and_open(&messages());
+    let (followed, opened) = follow_and_open(&messages(), MINUTE);
     let opened = opened.unwrap();
     assert_eq!(opened.len(), 8);
     assert_eq!(followed.unwrap(), opened);
 }
 
 #[test]
-fn a_message_written_after_a_later_one_was_stepped_is_refused_where_it_is() {
+fn a_message_later_than_the_delay_allowed_is_refused_where_it_is() {
     let mut msgs = messages();
-    // After the measurement at 101 s is read, F-2's passage at 100 s has
-    // been handed out: a reading at 20 s cannot be put back before it.
+    // Read after the measurement at 101 s: a reading at 20 s is 81 s late.
     msgs.push(msg(
         "/measurement/friction",
         T0 + 20 * SEC,
         json!({"site_id": "M2", "rail": "left", "quantity": "rail_mu", "value": 0.33}),
     ));
-    let (followed, opened) = follow_and_open(&msgs);
+    let (followed, opened) = follow_and_open(&msgs, MINUTE);
     assert_eq!(opened.unwrap().len(), 9, "the finished file reads");
     let err = followed.unwrap_err().to_string();
     for needle in [
@@ -170,9 +175,17 @@ fn a_message_written_after_a_later_one_was_stepped_is_refused_where_it_is() {
         "/measurement/friction",
         &format!("log_time {}", T0 + 20 * SEC),
         "index 10",
-        "written after message 8",
-        "time order",
+        "81.000 s behind",
+        &format!("log_time {} ns", T0 + 101 * SEC),
+        "--max-delay-s",
     ] {
+        assert!(err.contains(needle), "{needle:?} not in: {err}");
+    }
+    // Without a delay allowed, the pulse written 5 s behind the passage is
+    // refused already.
+    let (followed, _) = follow_and_open(&messages(), Duration::ZERO);
+    let err = followed.unwrap_err().to_string();
+    for needle in ["/applicator/pulse", "index 3", "5.000 s behind"] {
         assert!(err.contains(needle), "{needle:?} not in: {err}");
     }
 }

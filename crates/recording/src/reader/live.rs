@@ -8,14 +8,18 @@
 //! (or a Footer). A half-written record is not an error: it is waited for.
 //!
 //! The replay order (log_time, topic, index in the file) is kept without the
-//! whole file: a message is handed out once a message with a later log_time
-//! has been read (a message written later may still share its log_time and
-//! go before it by topic), and every message at the end of the file. A
-//! message read after one that follows it in replay order has been handed
-//! out cannot be put back in its place: such a file was not written in time
-//! order, and the follower refuses it (`tortwin replay` reads it once it is
-//! finished). So what the follower hands out is exactly what the replay of
-//! the finished file reads, or an error.
+//! whole file. The file must be written in time order, up to
+//! [`Follow::max_delay`] (zero by default): the *horizon* is the latest
+//! log_time of a message of the format read so far, less that delay. A
+//! message is handed out once its log_time is before the horizon (a message
+//! written later may still share its log_time and go before it by topic),
+//! and every message at the end of the file; a message of the format whose
+//! log_time is before the horizon when it is read is refused (`tortwin
+//! replay` reads any order once the file is finished). So what the follower
+//! hands out is exactly what the replay of the finished file reads, or an
+//! error; and no event before the horizon is to come, which
+//! [`LiveQueue::poll`] tells (the engine then rolls the trains that ended
+//! before it without waiting for the next event).
 
 use std::cmp::Reverse;
 use std::collections::{BinaryHeap, HashMap};
@@ -43,6 +47,11 @@ use crate::error::{InputError, MessageLocation};
 pub struct Follow {
     /// How long to sleep when the file has nothing new.
     pub poll: Duration,
+    /// How far behind the latest log_time read a message of the format may
+    /// still be written (a source that reaches the logger late); messages
+    /// are stepped only once the file has been read this far past them.
+    /// Zero: the file is written in time order.
+    pub max_delay: Duration,
     /// Set by another thread to stop the follow: the reader then ends with
     /// an error that says so ([`Follow::STOPPED`]).
     pub stop: Arc<AtomicBool>,
@@ -55,6 +64,7 @@ impl Follow {
     pub fn new(poll: Duration) -> Self {
         Self {
             poll,
+            max_delay: Duration::ZERO,
             stop: Arc::new(AtomicBool::new(false)),
         }
     }
@@ -95,13 +105,20 @@ pub(super) struct LiveQueue {
     /// Messages read so far (chunks expanded): the next one's index.
     next_index: u64,
     held: BinaryHeap<Reverse<Held>>,
-    /// The latest log_time read.
+    /// The latest log_time of a message of the format read.
     latest_ns: Option<u64>,
-    /// The latest message of the format handed out.
-    last_out: Option<ReplayKey>,
-    /// The first message of the format read after `last_out` although it
-    /// goes before it.
-    late: Option<ReplayKey>,
+    /// The first message of the format read with a log_time before the
+    /// horizon, and the horizon then.
+    late: Option<(ReplayKey, u64)>,
+    /// The latest log_time [`LiveQueue::poll`] has told.
+    told_ns: Option<u64>,
+}
+
+/// What [`LiveQueue::poll`] found.
+pub(super) enum Polled {
+    Message(PendingMessage),
+    Time(u64),
+    End,
 }
 
 impl LiveQueue {
@@ -118,8 +135,8 @@ impl LiveQueue {
             next_index: 0,
             held: BinaryHeap::new(),
             latest_ns: None,
-            last_out: None,
             late: None,
+            told_ns: None,
         })
     }
 
@@ -131,11 +148,28 @@ impl LiveQueue {
     /// `None` once the file is finished and every message handed out.
     pub(super) fn next_message(&mut self) -> Result<Option<PendingMessage>, InputError> {
         loop {
+            match self.poll(false)? {
+                Polled::Message(m) => return Ok(Some(m)),
+                Polled::End => return Ok(None),
+                Polled::Time(_) => {}
+            }
+        }
+    }
+
+    /// The next message, or with `times` the latest log_time read when the
+    /// file has grown and no message can be handed out yet (nothing earlier
+    /// than it can come: the time has passed for what is held).
+    pub(super) fn poll(&mut self, times: bool) -> Result<Polled, InputError> {
+        loop {
             if let Some(message) = self.release() {
-                return Ok(Some(message));
+                return Ok(Polled::Message(message));
             }
             if self.finished {
-                return Ok(None);
+                return Ok(Polled::End);
+            }
+            if let Some(t) = self.horizon().filter(|&t| times && self.told_ns < Some(t)) {
+                self.told_ns = Some(t);
+                return Ok(Polled::Time(t));
             }
             if !self.read_more()? {
                 if self.follow.stop.load(Ordering::Relaxed) {
@@ -146,19 +180,21 @@ impl LiveQueue {
         }
     }
 
+    /// The latest log_time read less the delay allowed: no message of the
+    /// format before it is to come.
+    fn horizon(&self) -> Option<u64> {
+        let delay = u64::try_from(self.follow.max_delay.as_nanos()).unwrap_or(u64::MAX);
+        self.latest_ns.map(|t| t.saturating_sub(delay))
+    }
+
     /// The first message held, if nothing read later can go before it.
     fn release(&mut self) -> Option<PendingMessage> {
         let Reverse(Held(first)) = self.held.peek()?;
-        let due = self.finished || self.latest_ns.is_some_and(|t| first.key.log_time_ns < t);
+        let due = self.finished || self.horizon().is_some_and(|h| first.key.log_time_ns < h);
         if !due {
             return None;
         }
         let Reverse(Held(message)) = self.held.pop()?;
-        // A message on a topic the format does not know is skipped
-        // wherever it comes: written late, it is no error.
-        if message.key.topic != TopicRank::Unknown {
-            self.last_out = Some(message.key);
-        }
         Some(message)
     }
 
@@ -314,15 +350,18 @@ impl LiveQueue {
             index_in_file,
         };
         check_message_size(key, data.as_slice().len() as u64)?;
-        let late = key.topic != TopicRank::Unknown && self.last_out.is_some_and(|last| key < last);
-        if late && self.late.is_none() {
-            self.late = Some(key);
-        }
         self.next_index += 1;
-        self.latest_ns = Some(
-            self.latest_ns
-                .map_or(key.log_time_ns, |t| t.max(key.log_time_ns)),
-        );
+        // A message on a topic the format does not know is skipped wherever
+        // it comes: its time neither counts nor is checked.
+        if key.topic != TopicRank::Unknown {
+            if let Some(horizon) = self.horizon().filter(|&h| key.log_time_ns < h) {
+                self.late.get_or_insert((key, horizon));
+            }
+            self.latest_ns = Some(
+                self.latest_ns
+                    .map_or(key.log_time_ns, |t| t.max(key.log_time_ns)),
+            );
+        }
         self.held.push(Reverse(Held(PendingMessage {
             key,
             channel_id: header.channel_id,
@@ -333,16 +372,17 @@ impl LiveQueue {
         Ok(())
     }
 
-    /// Refuses a message of the format read after one that follows it in
-    /// replay order was handed out.
+    /// Refuses a message of the format read with a log_time before the
+    /// horizon.
     fn check_order(&self) -> Result<(), InputError> {
-        let (Some(late), Some(last)) = (self.late, self.last_out) else {
+        let Some((late, horizon)) = self.late else {
             return Ok(());
         };
         let topic = match late.topic {
             TopicRank::Known(topic) => topic.name().to_string(),
             TopicRank::Unknown => String::new(),
         };
+        let delay = self.follow.max_delay.as_secs_f64();
         Err(InputError::at(
             &self.path,
             MessageLocation {
@@ -351,10 +391,11 @@ impl LiveQueue {
                 index_in_file: late.index_in_file,
             },
             format!(
-                "written after message {} at log_time {} ns, which goes after it in replay \
-                 order and was already stepped: a recording followed live must be written in \
-                 time order (`tortwin replay` reads it in any order once it is finished)",
-                last.index_in_file, last.log_time_ns
+                "written {:.3} s behind a message read before it (log_time {} ns), more than \
+                 the {delay} s a followed recording may lag (--max-delay-s): its place in replay \
+                 order has passed (`tortwin replay` reads any order once the file is finished)",
+                (horizon - late.log_time_ns) as f64 * 1e-9 + delay,
+                horizon + u64::try_from(self.follow.max_delay.as_nanos()).unwrap_or(0)
             ),
         ))
     }

@@ -41,7 +41,7 @@ use crate::wire::{LineMsg, MeasurementMsg, PassageMsg, PulseMsg, SectionMsg, Wea
 use layout::{ReplayKey, TopicRank};
 pub use layout::{MAX_CHUNK_BYTES, MAX_MESSAGE_BYTES};
 pub use live::Follow;
-use live::LiveQueue;
+use live::{LiveQueue, Polled};
 use replay::{PendingMessage, ReplayQueue};
 
 /// What a recording needs from the replay before it: a recording continues
@@ -302,6 +302,44 @@ impl RecordingReader {
         None
     }
 
+    /// The next event of a followed recording ([`Self::follow`]), or the
+    /// time up to which the file has been read when it has grown and no
+    /// event can be handed out yet ([`Followed::Time`]); `None` at the
+    /// end. A reader of a finished file gives its events.
+    pub fn next_followed(&mut self) -> Option<Result<Followed, InputError>> {
+        loop {
+            if self.finished {
+                return None;
+            }
+            let message = match (self.taken.take(), &mut self.queue) {
+                (Some(m), _) => Ok(Some(m)),
+                (None, Queue::Live(q)) => match q.poll(true) {
+                    Ok(Polled::Message(m)) => Ok(Some(m)),
+                    Ok(Polled::Time(t)) => return Some(Ok(Followed::Time(t))),
+                    Ok(Polled::End) => Ok(None),
+                    Err(e) => Err(e),
+                },
+                (None, Queue::Replay(q)) => q.next_message(),
+            };
+            let step = match message {
+                Ok(Some(message)) => self.decode(message, false),
+                Ok(None) => {
+                    self.finished = true;
+                    return None;
+                }
+                Err(e) => Err(e),
+            };
+            match step {
+                Ok(Some((event, _))) => return Some(Ok(Followed::Event(event))),
+                Ok(None) => continue,
+                Err(e) => {
+                    self.finished = true;
+                    return Some(Err(e));
+                }
+            }
+        }
+    }
+
     /// The next message: one taken while looking for a `/line` first.
     fn next_pending(&mut self) -> Result<Option<PendingMessage>, InputError> {
         match self.taken.take() {
@@ -445,6 +483,42 @@ fn read_line(
     line::decode(&msg, section)
         .map(Some)
         .map_err(|e| at(&first, e.message))
+}
+
+/// Whether the file at `path` ends as a finished MCAP file does: a Footer
+/// record and the closing magic (a file a logger is writing ends in another
+/// record, or is its opening magic alone). Such a file is read with
+/// [`RecordingReader::open`], in any order, rather than followed.
+pub fn looks_finished(path: &Path) -> bool {
+    use std::io::{Read, Seek, SeekFrom};
+    // Footer: opcode, length 20, summary_start u64, summary_offset_start
+    // u64, summary_crc u32; then the magic.
+    const FOOTER_BODY: u64 = 20;
+    let magic = mcap::MAGIC;
+    let tail_len = layout::RECORD_HEADER_BYTES + FOOTER_BODY + magic.len() as u64;
+    let Ok(mut file) = std::fs::File::open(path) else {
+        return false;
+    };
+    let mut tail = vec![0u8; tail_len as usize];
+    let read = file
+        .seek(SeekFrom::End(-(tail_len as i64)))
+        .and_then(|_| file.read_exact(&mut tail));
+    if read.is_err() {
+        return false;
+    }
+    let (opcode, len) = layout::record_frame(&tail);
+    opcode == mcap::records::op::FOOTER
+        && len == FOOTER_BODY
+        && tail[tail.len() - magic.len()..] == *magic
+}
+
+/// A step of [`RecordingReader::next_followed`].
+#[derive(Debug, Clone, PartialEq)]
+pub enum Followed {
+    /// The next event in replay order.
+    Event(Event),
+    /// No event earlier than this log_time is to come.
+    Time(u64),
 }
 
 /// Where a laid-out file's first two `/section` and `/line` messages are.
