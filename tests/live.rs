@@ -64,6 +64,13 @@ fn logger(input: &Path, output: &Path, hourly: bool) -> Child {
     child
 }
 
+/// `tortwin live INPUT --out-dir OUT`, to which a test adds its flags.
+fn live(input: &Path, out: &Path) -> Command {
+    let mut cmd = tortwin();
+    cmd.arg("live").arg(input).arg("--out-dir").arg(out);
+    cmd
+}
+
 fn finished(mut logger: Child) {
     let status = logger.wait().unwrap();
     assert!(status.success(), "the logger failed: {status}");
@@ -115,14 +122,7 @@ fn a_recording_followed_while_it_is_written_gives_the_replays_outputs() {
     let growing = dir.path().join("logger.mcap");
     let writer = logger(&rec, &growing, false);
     let out = dir.path().join("live");
-    let o = tortwin()
-        .arg("live")
-        .arg(&growing)
-        .arg("--out-dir")
-        .arg(&out)
-        .arg("--json")
-        .output()
-        .unwrap();
+    let o = live(&growing, &out).arg("--json").output().unwrap();
     check(&o, "tortwin live");
     finished(writer);
     let stdout = String::from_utf8_lossy(&o.stdout);
@@ -162,11 +162,7 @@ fn hourly_recordings_in_a_folder_are_followed_one_after_the_other() {
     let writer = logger(&rec, &hours, true);
     let out = dir.path().join("live");
     let state = dir.path().join("live.state.json");
-    let o = tortwin()
-        .arg("live")
-        .arg(&hours)
-        .arg("--out-dir")
-        .arg(&out)
+    let o = live(&hours, &out)
         .arg("--state-out")
         .arg(&state)
         .args(["--idle-exit-s", "3", "-q"])
@@ -211,16 +207,7 @@ fn a_follower_killed_ten_times_continues_without_stepping_a_train_twice() {
     let growing = dir.path().join("logger.mcap");
     let writer = logger(&rec, &growing, false);
     let out = dir.path().join("live");
-    let follower = || {
-        tortwin()
-            .arg("live")
-            .arg(&growing)
-            .arg("--out-dir")
-            .arg(&out)
-            .arg("-q")
-            .spawn()
-            .unwrap()
-    };
+    let follower = || live(&growing, &out).arg("-q").spawn().unwrap();
     // Kill moments from a fixed xorshift sequence: 0.3-3 s apart, across
     // the logger's 26 s.
     let mut x: u64 = 0x9e37_79b9_7f4a_7c15;
@@ -254,13 +241,7 @@ fn a_follower_refuses_what_is_not_its_own_with_exit_2() {
     // An output folder with MCAP files but no checkpoint.
     std::fs::create_dir(&out).unwrap();
     std::fs::write(out.join("other.mcap"), b"").unwrap();
-    let o = tortwin()
-        .arg("live")
-        .arg(&rec)
-        .arg("--out-dir")
-        .arg(&out)
-        .output()
-        .unwrap();
+    let o = live(&rec, &out).output().unwrap();
     assert_eq!(o.status.code(), Some(2));
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(
@@ -270,36 +251,18 @@ fn a_follower_refuses_what_is_not_its_own_with_exit_2() {
     std::fs::remove_file(out.join("other.mcap")).unwrap();
     // A finished recording is followed to its end; the folder is then
     // this recording's, and another input is refused.
-    let o = tortwin()
-        .arg("live")
-        .arg(&rec)
-        .arg("--out-dir")
-        .arg(&out)
-        .output()
-        .unwrap();
+    let o = live(&rec, &out).output().unwrap();
     check(&o, "tortwin live of a finished recording");
     let other = dir.path().join("other.mcap");
     std::fs::copy(&rec, &other).unwrap();
-    let o = tortwin()
-        .arg("live")
-        .arg(&other)
-        .arg("--out-dir")
-        .arg(&out)
-        .output()
-        .unwrap();
+    let o = live(&other, &out).output().unwrap();
     assert_eq!(o.status.code(), Some(2));
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(err.contains("continues a follower of"), "{err}");
     // Not an MCAP file: named, exit 2.
     let bad = dir.path().join("bad.mcap");
     std::fs::write(&bad, b"this is not an MCAP file at all").unwrap();
-    let o = tortwin()
-        .arg("live")
-        .arg(&bad)
-        .arg("--out-dir")
-        .arg(dir.path().join("live-bad"))
-        .output()
-        .unwrap();
+    let o = live(&bad, &dir.path().join("live-bad")).output().unwrap();
     assert_eq!(o.status.code(), Some(2));
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(err.contains("bad.mcap") && err.contains("magic"), "{err}");

@@ -405,14 +405,21 @@ impl McapFile {
         })
     }
 
-    /// Writes a message already serialized.
-    fn write_raw(&mut self, topic: Topic, log_time_ns: u64, json: &[u8]) -> Result<(), McapError> {
-        let header = mcap::records::MessageHeader {
+    /// A message's header: log_time = publish_time. Sequence 0, "not used"
+    /// (MCAP spec): a file has no gaps to detect, and counters in every
+    /// header cost a year's file 5 %.
+    fn header(&self, topic: Topic, log_time_ns: u64) -> mcap::records::MessageHeader {
+        mcap::records::MessageHeader {
             channel_id: self.channel_ids[topic as usize],
             sequence: 0,
             log_time: log_time_ns,
             publish_time: log_time_ns,
-        };
+        }
+    }
+
+    /// Writes a message already serialized.
+    fn write_raw(&mut self, topic: Topic, log_time_ns: u64, json: &[u8]) -> Result<(), McapError> {
+        let header = self.header(topic, log_time_ns);
         self.writer.push(header, topic.name(), |bytes| {
             bytes.extend_from_slice(json);
             Ok(())
@@ -459,14 +466,7 @@ impl McapSink {
             // A day written before a restart.
             return Ok(());
         };
-        // Sequence 0, "not used" (MCAP spec): a file has no gaps to detect,
-        // and counters in every header cost a year's file 5 %.
-        let header = mcap::records::MessageHeader {
-            channel_id: file.channel_ids[topic as usize],
-            sequence: 0,
-            log_time: log_time_ns,
-            publish_time: log_time_ns,
-        };
+        let header = file.header(topic, log_time_ns);
         file.writer.push(header, topic.name(), |bytes| {
             serde_json::to_writer(bytes, message).map_err(|source| McapError::Json {
                 path: path.to_path_buf(),

@@ -597,18 +597,7 @@ fn message_key(
     header: &mcap::records::MessageHeader,
     index_in_file: u64,
 ) -> Result<ReplayKey, String> {
-    let channel = layout.channels.get(&header.channel_id).ok_or_else(|| {
-        format!(
-            "message {index_in_file} (log_time {} ns) refers to channel {}, \
-             which no Channel record before it defines",
-            header.log_time, header.channel_id
-        )
-    })?;
-    let key = ReplayKey {
-        log_time_ns: header.log_time,
-        topic: TopicRank::of(&channel.topic),
-        index_in_file,
-    };
+    let key = key_of(&layout.channels, header, index_in_file)?;
     let first_two = match key.topic {
         TopicRank::Known(Topic::Section) => Some(&mut layout.sections),
         TopicRank::Known(Topic::Line) => Some(&mut layout.lines),
@@ -620,6 +609,27 @@ fn message_key(
         keys.truncate(2);
     }
     Ok(key)
+}
+
+/// The replay key of the message with this header and index, whose
+/// channel must have been defined.
+pub(super) fn key_of(
+    channels: &HashMap<u16, ChannelInfo>,
+    header: &mcap::records::MessageHeader,
+    index_in_file: u64,
+) -> Result<ReplayKey, String> {
+    let channel = channels.get(&header.channel_id).ok_or_else(|| {
+        format!(
+            "message {index_in_file} (log_time {} ns) refers to channel {}, \
+             which no Channel record before it defines",
+            header.log_time, header.channel_id
+        )
+    })?;
+    Ok(ReplayKey {
+        log_time_ns: header.log_time,
+        topic: TopicRank::of(&channel.topic),
+        index_in_file,
+    })
 }
 
 /// A record's framing (its first [`RECORD_HEADER_BYTES`]): opcode and

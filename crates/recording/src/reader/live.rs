@@ -33,7 +33,7 @@ use std::time::Duration;
 use mcap::records::{op, Record};
 
 use super::layout::{
-    add_channel, check_message_size, chunk_header, for_each_chunk_record, message_header,
+    add_channel, check_message_size, chunk_header, for_each_chunk_record, key_of, message_header,
     record_frame, ChannelInfo, ReplayKey, TopicRank, MAX_SMALL_RECORD_BYTES, MESSAGE_HEADER_BYTES,
     RECORD_HEADER_BYTES,
 };
@@ -336,19 +336,7 @@ impl LiveQueue {
         header: mcap::records::MessageHeader,
         data: MessageData,
     ) -> Result<(), String> {
-        let index_in_file = self.next_index;
-        let channel = self.channels.get(&header.channel_id).ok_or_else(|| {
-            format!(
-                "message {index_in_file} (log_time {} ns) refers to channel {}, \
-                 which no Channel record before it defines",
-                header.log_time, header.channel_id
-            )
-        })?;
-        let key = ReplayKey {
-            log_time_ns: header.log_time,
-            topic: TopicRank::of(&channel.topic),
-            index_in_file,
-        };
+        let key = key_of(&self.channels, &header, self.next_index)?;
         check_message_size(key, data.as_slice().len() as u64)?;
         self.next_index += 1;
         // A message on a topic the format does not know is skipped wherever
@@ -410,14 +398,7 @@ impl LiveQueue {
     }
 
     pub(super) fn location(&self, message: &PendingMessage) -> MessageLocation {
-        MessageLocation {
-            topic: self
-                .channels
-                .get(&message.channel_id)
-                .map_or_else(String::new, |c| c.topic.clone()),
-            log_time_ns: message.key.log_time_ns,
-            index_in_file: message.key.index_in_file,
-        }
+        super::replay::location(&self.channels, message)
     }
 
     pub(super) fn channels(&self) -> &HashMap<u16, ChannelInfo> {

@@ -281,25 +281,13 @@ impl RecordingReader {
     /// back as tables, in the recording's own units and digits (converting
     /// an event's kg back to g need not give the same number).
     pub fn next_with_wire(&mut self) -> Option<Result<(Event, Wire), InputError>> {
-        while !self.finished {
-            let step = match self.next_pending() {
-                Ok(Some(message)) => self.decode(message, true),
-                Ok(None) => {
-                    self.finished = true;
-                    return None;
-                }
-                Err(e) => Err(e),
-            };
-            match step {
-                Ok(Some((event, Some(wire)))) => return Some(Ok((event, wire))),
+        loop {
+            match self.step(false, true)? {
+                Ok(Step::Event(event, Some(wire))) => return Some(Ok((event, wire))),
                 Ok(_) => continue,
-                Err(e) => {
-                    self.finished = true;
-                    return Some(Err(e));
-                }
+                Err(e) => return Some(Err(e)),
             }
         }
-        None
     }
 
     /// The next event of a followed recording ([`Self::follow`]), or the
@@ -307,30 +295,39 @@ impl RecordingReader {
     /// event can be handed out yet ([`Followed::Time`]); `None` at the
     /// end. A reader of a finished file gives its events.
     pub fn next_followed(&mut self) -> Option<Result<Followed, InputError>> {
-        loop {
-            if self.finished {
-                return None;
-            }
+        self.step(true, false).map(|step| {
+            step.map(|step| match step {
+                Step::Event(event, _) => Followed::Event(event),
+                Step::Time(t) => Followed::Time(t),
+            })
+        })
+    }
+
+    /// The next message decoded (with its wire message if `keep_wire`), or
+    /// with `times` the time a followed file has been read to; `None` at the
+    /// end. An error ends the reading.
+    fn step(&mut self, times: bool, keep_wire: bool) -> Option<Result<Step, InputError>> {
+        while !self.finished {
             let message = match (self.taken.take(), &mut self.queue) {
                 (Some(m), _) => Ok(Some(m)),
-                (None, Queue::Live(q)) => match q.poll(true) {
+                (None, Queue::Live(q)) => match q.poll(times) {
                     Ok(Polled::Message(m)) => Ok(Some(m)),
-                    Ok(Polled::Time(t)) => return Some(Ok(Followed::Time(t))),
+                    Ok(Polled::Time(t)) => return Some(Ok(Step::Time(t))),
                     Ok(Polled::End) => Ok(None),
                     Err(e) => Err(e),
                 },
                 (None, Queue::Replay(q)) => q.next_message(),
             };
-            let step = match message {
-                Ok(Some(message)) => self.decode(message, false),
+            let decoded = match message {
+                Ok(Some(message)) => self.decode(message, keep_wire),
                 Ok(None) => {
                     self.finished = true;
                     return None;
                 }
                 Err(e) => Err(e),
             };
-            match step {
-                Ok(Some((event, _))) => return Some(Ok(Followed::Event(event))),
+            match decoded {
+                Ok(Some((event, wire))) => return Some(Ok(Step::Event(event, wire))),
                 Ok(None) => continue,
                 Err(e) => {
                     self.finished = true;
@@ -338,14 +335,7 @@ impl RecordingReader {
                 }
             }
         }
-    }
-
-    /// The next message: one taken while looking for a `/line` first.
-    fn next_pending(&mut self) -> Result<Option<PendingMessage>, InputError> {
-        match self.taken.take() {
-            Some(message) => Ok(Some(message)),
-            None => self.queue.next_message(),
-        }
+        None
     }
 
     fn decode(
@@ -518,6 +508,12 @@ pub enum Followed {
     /// The next event in replay order.
     Event(Event),
     /// No event earlier than this log_time is to come.
+    Time(u64),
+}
+
+/// A step of [`RecordingReader::step`].
+enum Step {
+    Event(Event, Option<Wire>),
     Time(u64),
 }
 
@@ -810,24 +806,12 @@ impl Iterator for RecordingReader {
     type Item = Result<Event, InputError>;
 
     fn next(&mut self) -> Option<Self::Item> {
-        while !self.finished {
-            let step = match self.next_pending() {
-                Ok(Some(message)) => self.decode(message, false),
-                Ok(None) => {
-                    self.finished = true;
-                    return None;
-                }
-                Err(e) => Err(e),
-            };
-            match step {
-                Ok(Some((event, _))) => return Some(Ok(event)),
-                Ok(None) => continue,
-                Err(e) => {
-                    self.finished = true;
-                    return Some(Err(e));
-                }
+        loop {
+            match self.step(false, false)? {
+                Ok(Step::Event(event, _)) => return Some(Ok(event)),
+                Ok(Step::Time(_)) => continue,
+                Err(e) => return Some(Err(e)),
             }
         }
-        None
     }
 }

@@ -424,15 +424,7 @@ impl ReplayQueue {
 
     /// Where the message is, for an error about it.
     pub(super) fn location(&self, message: &PendingMessage) -> MessageLocation {
-        MessageLocation {
-            // The layout pass checked that every message's channel is defined.
-            topic: self
-                .channels
-                .get(&message.channel_id)
-                .map_or_else(String::new, |c| c.topic.clone()),
-            log_time_ns: message.key.log_time_ns,
-            index_in_file: message.key.index_in_file,
-        }
+        location(&self.channels, message)
     }
 
     /// Checks that a known topic's message is JSON encoded.
@@ -459,5 +451,20 @@ impl ReplayQueue {
 
     pub(super) fn path(&self) -> &Path {
         &self.path
+    }
+}
+
+/// Where a message is, for an error about it: its channel's topic (none if
+/// the channel is unknown), log_time and index in the file.
+pub(super) fn location(
+    channels: &HashMap<u16, ChannelInfo>,
+    message: &PendingMessage,
+) -> MessageLocation {
+    MessageLocation {
+        topic: channels
+            .get(&message.channel_id)
+            .map_or_else(String::new, |c| c.topic.clone()),
+        log_time_ns: message.key.log_time_ns,
+        index_in_file: message.key.index_in_file,
     }
 }
