@@ -20,11 +20,16 @@ use common::{check, python, tortwin};
 
 const SPEED: &str = "10000";
 
-/// A 3-day synthetic recording of the default section.
+/// A 3-day synthetic recording of the default section, its applicator's
+/// nozzle clogged from day 2 (so that the outputs hold alerts too).
 fn three_days(dir: &Path) -> PathBuf {
     let rec = dir.join("rec.mcap");
+    let clogged = "generic:acts_on=pulse_mass,applicator=A1,driver=time,form=step,\
+                   t0_utc=2024-04-09T00:00:00Z,f=0.3";
     let o = tortwin()
-        .args(["synth", "--days", "3", "--seed", "3", "--out"])
+        .args([
+            "synth", "--days", "3", "--seed", "3", "--hidden", clogged, "--out",
+        ])
         .arg(&rec)
         .arg("-q")
         .output()
@@ -133,6 +138,10 @@ fn a_recording_followed_while_it_is_written_gives_the_replays_outputs() {
         .filter(|l| l.starts_with('{'))
         .map(|l| serde_json::from_str(l).unwrap())
         .collect();
+    // The clogged nozzle's alert, as its line, between the trains' lines.
+    let (alerts, lines): (Vec<_>, Vec<_>) = lines.into_iter().partition(|l| l["kind"] == "alert");
+    assert_eq!(alerts.len(), 1, "{alerts:?}");
+    assert_eq!(alerts[0]["alert"]["kind"], "applicator_fade", "{alerts:?}");
     assert_eq!(lines.len(), 240, "120 trains on two rails");
     for pair in lines.chunks(2) {
         assert_eq!(pair[0]["train_id"], pair[1]["train_id"]);

@@ -75,7 +75,7 @@ def main():
         fail("no trains in the live output")
 
     if args.whole:
-        keep = ("/twin/train", "/twin/field", "/twin/measurement")
+        keep = ("/twin/train", "/twin/field", "/twin/measurement", "/twin/alert")
 
         def norm(m):
             d = json.loads(m[2])
@@ -88,11 +88,15 @@ def main():
             if a != b:
                 fail(f"{a[0]} {i} at {a[1]} ns differs from the whole recording's replay")
         if len(w) != len(lv):
-            fail(f"{len(lv)} trains, fields and measurements live, {len(w)} in the whole replay")
+            fail(f"{len(lv)} trains, fields, measurements and alerts live, {len(w)} in the whole replay")
 
+    alerts = sum(1 for m in live if m[0] == "/twin/alert")
+    if not alerts:
+        fail("no alerts in the live output")
     print(
         f"{len(files)} live files, {len(live)} messages equal to the replay's, "
-        f"{len(trains)} trains once each" + (", same as the whole recording" if args.whole else "")
+        f"{len(trains)} trains once each, {alerts} alerts"
+        + (", same as the whole recording" if args.whole else "")
     )
 
 

@@ -16,6 +16,7 @@
 //! Everything that simulates (replay, paper scenarios, synthetic truth runs,
 //! fits, strategies) drives this one engine with [`Engine::push`].
 
+pub mod alerts;
 pub mod line;
 pub mod readout;
 mod roll;
@@ -668,7 +669,7 @@ impl Engine {
             EventKind::Weather(w) => {
                 self.totals.weather_messages += 1;
                 self.weather = self.weather.after_message(time_s, w);
-                Ok(())
+                Ok(sink.weather(event.log_time_ns)?)
             }
             EventKind::Pulse(_) | EventKind::Measurement(_) => {
                 self.deferred.push(event);
@@ -1139,7 +1140,10 @@ impl Engine {
                     };
                     self.emit_measurement(&buffered.event, m, simulated, readout, sink)?;
                 }
-                EventKind::Weather(_) => self.totals.weather_messages += 1,
+                EventKind::Weather(_) => {
+                    self.totals.weather_messages += 1;
+                    sink.weather(buffered.event.log_time_ns)?;
+                }
                 EventKind::Passage(_) => unreachable!("a passage ends the window"),
             }
         }

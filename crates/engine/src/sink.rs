@@ -17,6 +17,7 @@ use std::borrow::Cow;
 
 use tortwin_recording::{Direction, Quantity, Section};
 
+pub use crate::alerts::Alert;
 pub use crate::sink_thread::SinkThread;
 
 /// What a sink learns before the first event.
@@ -234,6 +235,8 @@ pub enum Event<'a> {
     Field(FieldSnapshot<'a>),
     WheelContacts(WheelContacts<'a>),
     LineWheels(LineWheels<'a>),
+    Weather(u64),
+    Alert(Alert),
     Finish(RunSummary),
 }
 
@@ -319,6 +322,8 @@ impl Event<'_> {
                 rail_mu: owned(w.rail_mu),
                 bands_kg: w.bands_kg.map(owned),
             }),
+            Event::Weather(t) => Event::Weather(t),
+            Event::Alert(a) => Event::Alert(a),
             Event::Finish(summary) => Event::Finish(summary),
         }
     }
@@ -333,6 +338,8 @@ impl Event<'_> {
             Event::Field(f) => sink.field(f),
             Event::WheelContacts(w) => sink.wheel_contacts(w),
             Event::LineWheels(w) => sink.line_wheels(w),
+            Event::Weather(t) => sink.weather(*t),
+            Event::Alert(a) => sink.alert(a),
             Event::Finish(summary) => sink.finish(summary),
         }
     }
@@ -356,7 +363,12 @@ impl Event<'_> {
                     .sum::<usize>()
                     + w.rail_mu.len()
             }
-            Event::Train(_) | Event::Pulse(_) | Event::Measurement(_) | Event::Finish(_) => 0,
+            Event::Train(_)
+            | Event::Pulse(_)
+            | Event::Measurement(_)
+            | Event::Weather(_)
+            | Event::Alert(_)
+            | Event::Finish(_) => 0,
         };
         f64s * std::mem::size_of::<f64>()
     }
@@ -390,6 +402,14 @@ pub trait Sink {
     /// On a line, after each train's fields (only when
     /// `EngineOptions::line_axle` is set).
     fn line_wheels(&mut self, _w: &LineWheels<'_>) -> SinkResult {
+        Ok(())
+    }
+    /// A `/environment/weather` message taken, at its log_time.
+    fn weather(&mut self, _log_time_ns: u64) -> SinkResult {
+        Ok(())
+    }
+    /// An alert raised or cleared ([`crate::alerts::Alerting`]).
+    fn alert(&mut self, _alert: &Alert) -> SinkResult {
         Ok(())
     }
     /// Completes the output (e.g. renames the temporary file into place).
@@ -439,6 +459,14 @@ where
     }
     fn line_wheels(&mut self, w: &LineWheels<'_>) -> SinkResult {
         self.sinks.iter_mut().try_for_each(|s| s.line_wheels(w))
+    }
+    fn weather(&mut self, log_time_ns: u64) -> SinkResult {
+        self.sinks
+            .iter_mut()
+            .try_for_each(|s| s.weather(log_time_ns))
+    }
+    fn alert(&mut self, alert: &Alert) -> SinkResult {
+        self.sinks.iter_mut().try_for_each(|s| s.alert(alert))
     }
     fn finish(&mut self, summary: &RunSummary) -> SinkResult {
         self.sinks.iter_mut().try_for_each(|s| s.finish(summary))

@@ -20,8 +20,8 @@ use std::thread::JoinHandle;
 use tortwin_handover::{Filler, Taker};
 
 use crate::sink::{
-    Event, FieldSnapshot, LineWheels, MeasurementOutput, PulseEvent, RunSummary, SectionInfo, Sink,
-    SinkError, SinkResult, TrainEvent, WheelContacts,
+    Alert, Event, FieldSnapshot, LineWheels, MeasurementOutput, PulseEvent, RunSummary,
+    SectionInfo, Sink, SinkError, SinkResult, TrainEvent, WheelContacts,
 };
 
 /// Calls in one hand-over.
@@ -141,6 +141,14 @@ impl Sink for SinkThread {
 
     fn line_wheels(&mut self, w: &LineWheels<'_>) -> SinkResult {
         self.push(Event::LineWheels(w.clone()))
+    }
+
+    fn weather(&mut self, log_time_ns: u64) -> SinkResult {
+        self.push(Event::Weather(log_time_ns))
+    }
+
+    fn alert(&mut self, alert: &Alert) -> SinkResult {
+        self.push(Event::Alert(alert.clone()))
     }
 
     fn finish(&mut self, summary: &RunSummary) -> SinkResult {

@@ -50,6 +50,12 @@ pub struct EngineState {
     /// may differ). Absent for a section.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub line: Option<Line>,
+    /// What the alerts remember (their runs of trains, the residual
+    /// charts' baselines and sums), so that the next recording's alerts
+    /// continue them (crate::alerts). Absent when alerts are off, and in
+    /// states written before 2026-12-01.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub alerts: Option<crate::alerts::AlertMemory>,
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -119,6 +125,7 @@ pub(super) fn capture(engine: &Engine) -> EngineState {
             .then_some(engine.last_event_s),
         effects: engine.cfg.effects.clone(),
         line: engine.line.as_ref().map(|l| l.line.clone()),
+        alerts: None,
     }
 }
 

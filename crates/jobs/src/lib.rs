@@ -5,6 +5,7 @@
 //! found, plus a `render` of the few lines the command prints. The binary
 //! adds only argument parsing, the progress display and exit codes.
 
+mod alert_post;
 pub mod discover;
 pub mod live;
 pub mod paper;
@@ -106,6 +107,16 @@ pub(crate) fn load_config(source: Option<&ConfigSource>) -> Result<ModelConfig, 
     Ok(match source {
         Some(s) => s.load()?,
         None => ModelConfig::default(),
+    })
+}
+
+/// The alerts' thresholds: the defaults, overlaid by `source`'s `[alerts]`.
+pub(crate) fn load_alerts(
+    source: Option<&ConfigSource>,
+) -> Result<tortwin_model::config::alerts::AlertConfig, ConfigError> {
+    Ok(match source {
+        Some(s) => s.load_alerts()?,
+        None => Default::default(),
     })
 }
 

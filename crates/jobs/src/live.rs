@@ -30,7 +30,10 @@ use std::time::{Duration, Instant};
 
 use serde::{Deserialize, Serialize};
 
-use tortwin_engine::sink::{Fanout, FieldSnapshot, Sink, SinkResult, SnapshotKind};
+use tortwin_engine::alerts::Alerting;
+use tortwin_engine::sink::{
+    Alert, Fanout, FieldSnapshot, Sink, SinkError, SinkResult, SnapshotKind,
+};
 use tortwin_engine::{EngineOptions, EngineState};
 use tortwin_files::usage::UsageError;
 use tortwin_outputs::mcap_out::McapSink;
@@ -119,6 +122,12 @@ pub struct Followed {
 pub fn live(args: &LiveArgs, on_recording: &mut dyn FnMut(&Followed)) -> Result<Vec<Followed>> {
     let _inputs = tortwin_outputs::files::InputScope::enter();
     let cfg = load_config(args.config.as_ref())?;
+    let alerts = super::load_alerts(args.config.as_ref())?;
+    let mut poster = alerts
+        .post_url
+        .as_deref()
+        .filter(|_| alerts.enabled)
+        .map(crate::alert_post::AlertPoster::start);
     let source = config_name(args.config.as_ref());
     tortwin_outputs::files::make_folder(&args.out_dir)?;
     let checkpoint_path = args.out_dir.join(CHECKPOINT);
@@ -206,12 +215,17 @@ pub fn live(args: &LiveArgs, on_recording: &mut dyn FnMut(&Followed)) -> Result<
             Some(&provenance),
             reader.line().is_some(),
         );
+        let memory = super::replay::alert_memory(&reader, start.as_ref())?;
         let mut lines = TrainLines;
         let mut fanout: Fanout<&mut dyn Sink> = Fanout::default();
         fanout.sinks.push(&mut mcap);
         if args.json {
             fanout.sinks.push(&mut lines);
         }
+        if let Some(p) = poster.as_mut() {
+            fanout.sinks.push(p);
+        }
+        let mut fanout = Alerting::new(alerts.clone(), memory, fanout);
         let mut reader = reader;
         let mut trains = 0u64;
         let mut measurements = 0u64;
@@ -235,9 +249,11 @@ pub fn live(args: &LiveArgs, on_recording: &mut dyn FnMut(&Followed)) -> Result<
             }
         }
         engine.finish(&mut fanout, reader.unknown_topic_messages())?;
+        let memory = fanout.memory();
         drop(fanout);
         drop(mcap);
-        let state = engine.state();
+        let mut state = engine.state();
+        state.alerts = memory;
         if let Some(path) = &args.state_out {
             let text = serde_json::to_string(&state).map_err(|source| Error::Json {
                 what: "the state",
@@ -381,10 +397,41 @@ pub fn render_followed(f: &Followed) -> String {
 }
 
 /// `--json`: a line on stdout per train and rail band as its field comes
-/// out, flushed at once.
+/// out, and per alert, flushed at once.
 struct TrainLines;
 
+/// An alert's line (`--json`, and the body `[alerts] post_url` is sent):
+/// `{"kind": "alert", "log_time_ns", "alert": {the /twin/alert message}}`.
+pub(crate) fn alert_line(alert: &Alert) -> Result<String, SinkError> {
+    let message = tortwin_outputs::alerts::alert_json(alert).map_err(|field| {
+        format!(
+            "alert {} at log_time {} ns: evidence {field} is not a finite number",
+            alert.kind.as_str(),
+            alert.log_time_ns
+        )
+    })?;
+    let line = serde_json::json!({
+        "kind": "alert",
+        "log_time_ns": alert.log_time_ns,
+        "alert": message,
+    });
+    Ok(line.to_string())
+}
+
+/// Prints a line on stdout and flushes it.
+fn print_line(line: &str) {
+    use std::io::Write as _;
+    let mut out = std::io::stdout().lock();
+    // A reader that has gone (`| head`) is not the twin's failure.
+    let _ = writeln!(out, "{line}").and_then(|()| out.flush());
+}
+
 impl Sink for TrainLines {
+    fn alert(&mut self, alert: &Alert) -> SinkResult {
+        print_line(&alert_line(alert)?);
+        Ok(())
+    }
+
     fn field(&mut self, f: &FieldSnapshot<'_>) -> SinkResult {
         if f.kind != SnapshotKind::Train {
             return Ok(());
@@ -420,10 +467,7 @@ impl Sink for TrainLines {
             "below_band_m": below_m,
             "above_band_m": above_m,
         });
-        use std::io::Write as _;
-        let mut out = std::io::stdout().lock();
-        // A reader that has gone (`| head`) is not the twin's failure.
-        let _ = writeln!(out, "{line}").and_then(|()| out.flush());
+        print_line(&line.to_string());
         Ok(())
     }
 }

@@ -3,6 +3,7 @@
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
 
+use tortwin_engine::alerts::{AlertMemory, Alerting};
 use tortwin_engine::sink::{Fanout, RunSummary, Sink, SinkThread};
 use tortwin_engine::{Engine, EngineOptions, EngineState};
 use tortwin_files::usage::UsageError;
@@ -169,6 +170,7 @@ fn run(
 ) -> Result<Replayed> {
     // The inputs' scope is [`replay`]'s, which calls this.
     let cfg = load_config(args.config.as_ref())?;
+    let alerts = super::load_alerts(args.config.as_ref())?;
     let outputs = [&args.out_mcap, &args.out_rrd, &args.state_out];
     for (k, a) in outputs.iter().enumerate() {
         if let Some(a) = a {
@@ -218,6 +220,7 @@ fn run(
         .then(|| PerTrain::new(reader.section(), &cfg, &Target::default()))
         .transpose()?;
     let mut engine = engine_for(&reader, cfg, opts, start.as_ref(), &source)?;
+    let memory = alert_memory(&reader, start.as_ref())?;
 
     let mcap = args
         .out_mcap
@@ -269,6 +272,7 @@ fn run(
     for s in extra.iter_mut() {
         fanout.sinks.push(&mut **s);
     }
+    let mut fanout = Alerting::new(alerts, memory, fanout);
 
     progress.stage_of(
         &format!("replaying {} (messages)", args.recording.display()),
@@ -298,10 +302,12 @@ fn run(
     stepped?;
     let summary = engine.finish(&mut fanout, reader.unknown_topic_messages())?;
     progress.done(message_count);
+    let mut state = engine.state();
+    state.alerts = fanout.memory();
     drop(fanout);
     Ok(Replayed {
         summary,
-        state: engine.state(),
+        state,
         per_train: per_train.map(|p| p.rows().to_vec()),
     })
 }
@@ -335,6 +341,23 @@ pub(crate) fn engine_for(
             .map_err(|e| InputError::file(Path::new(&s.name), e.to_string()))?,
         None => Engine::on_line(section, line, cfg, opts, reader.origin_ns()),
     })
+}
+
+/// What `start`'s alerts remembered, checked against `reader`'s section.
+pub(crate) fn alert_memory(
+    reader: &RecordingReader,
+    start: Option<&SavedState<'_>>,
+) -> Result<Option<AlertMemory>> {
+    let Some(s) = start else {
+        return Ok(None);
+    };
+    let Some(memory) = &s.state.alerts else {
+        return Ok(None);
+    };
+    memory
+        .check(reader.section(), s.state.tracks.len())
+        .map_err(|e| InputError::file(Path::new(&s.name), e))?;
+    Ok(Some(memory.clone()))
 }
 
 /// The lines that say where the outputs are and how to open them.

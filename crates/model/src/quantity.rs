@@ -2,7 +2,9 @@
 //! `/measurement/friction`): the model predicts each, a generic term on
 //! `measurement` may be scoped to one.
 
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, serde::Serialize, serde::Deserialize,
+)]
 #[serde(rename_all = "snake_case")]
 pub enum Quantity {
     /// Friction coefficient of a wheel–rail contact.

@@ -27,6 +27,7 @@ pub const FRAME_ID: &str = "section";
 pub(crate) enum LogLevel {
     Info = 2,
     Warning = 3,
+    Error = 4,
 }
 
 #[derive(Serialize)]

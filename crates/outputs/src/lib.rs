@@ -4,6 +4,7 @@
 //! appear only when complete ([`files`]).
 
 pub use tortwin_files as files;
+pub mod alerts;
 pub mod foxglove;
 pub mod geometry;
 pub mod mcap_out;

@@ -3,6 +3,7 @@
 
 use std::path::{Path, PathBuf};
 
+use tortwin_model::config::alerts::AlertConfig;
 use tortwin_model::config::ModelConfig;
 use tortwin_model::error::ConfigError;
 
@@ -51,6 +52,28 @@ impl ConfigSource {
                 ModelConfig::from_overlay_str(&text, &p.display().to_string())
             }
             ConfigSource::Text { text, name } => ModelConfig::from_overlay_str(text, name),
+        }
+    }
+}
+
+impl ConfigSource {
+    /// The `[alerts]` table of this configuration (defaults for what it
+    /// does not set).
+    pub fn load_alerts(&self) -> Result<AlertConfig, ConfigError> {
+        match self {
+            ConfigSource::File(p) => {
+                let text = tortwin_outputs::files::read_text_input(
+                    p,
+                    tortwin_outputs::files::MAX_TEXT_INPUT_BYTES,
+                )
+                .map_err(|e| ConfigError {
+                    source_name: p.display().to_string(),
+                    key: "-".into(),
+                    message: format!("cannot read: {e}"),
+                })?;
+                AlertConfig::from_config_str(&text, &p.display().to_string())
+            }
+            ConfigSource::Text { text, name } => AlertConfig::from_config_str(text, name),
         }
     }
 }

@@ -9,6 +9,7 @@
 //! Ranges are checked once, after merging, by [`ModelConfig::validate`], which
 //! names the dotted key of the first bad value.
 
+pub mod alerts;
 pub mod terms;
 
 use std::collections::BTreeMap;
@@ -251,6 +252,9 @@ struct Overlay {
     polach: PolachOverlay,
     #[serde(default)]
     effects: EffectsOverlay,
+    /// The alerts' thresholds: read by [`alerts::AlertConfig`], not the model.
+    #[serde(default, rename = "alerts")]
+    _alerts: Option<toml::Table>,
 }
 
 /// The effects of an overlay: the named ones read by the table as in

@@ -15,7 +15,8 @@
 //! | `/twin/measurement` | input measurement, at its own log_time        |
 //! | `/twin/field`       | train field snapshot ([`SnapshotKind::Train`]), per rail and band |
 //! | `/foxglove/track`   | train: a `foxglove.SceneUpdate`, every rail's mu on the plan |
-//! | `/foxglove/log`     | train, pulse, warning: a `foxglove.Log`        |
+//! | `/foxglove/log`     | train, pulse, warning, alert: a `foxglove.Log` |
+//! | `/twin/alert`       | alert raised or cleared, with its evidence     |
 //!
 //! `/twin/field` holds no distances (they are `grid_d_m` of
 //! `/twin/section`) and its numbers at the precision the data has
@@ -54,8 +55,8 @@ use crate::geometry::Plan;
 use crate::provenance::Provenance;
 use crate::scale::TARGET_BAND;
 use tortwin_engine::sink::{
-    FieldSnapshot, MeasurementOutput, PulseEvent, RunSummary, SectionInfo, Sink, SnapshotKind,
-    TrainEvent,
+    Alert, FieldSnapshot, MeasurementOutput, PulseEvent, RunSummary, SectionInfo, Sink,
+    SnapshotKind, TrainEvent,
 };
 use tortwin_recording::Direction;
 use writer::WriterThread;
@@ -879,6 +880,28 @@ impl Sink for McapSink {
         Ok(())
     }
 
+    fn alert(&mut self, a: &Alert) -> tortwin_engine::sink::SinkResult {
+        let topic = Topic::Alert;
+        let message = crate::alerts::alert_json(a).map_err(|field| NonFiniteValue {
+            topic: topic.name(),
+            field,
+            log_time_ns: a.log_time_ns,
+            value: a
+                .evidence
+                .iter()
+                .find(|e| e.0 == field)
+                .map_or(f64::NAN, |e| e.1),
+        })?;
+        self.flush_scene()?;
+        self.write(topic, a.log_time_ns, &message)?;
+        let level = match crate::alerts::level(a) {
+            "error" => LogLevel::Error,
+            "warning" => LogLevel::Warning,
+            _ => LogLevel::Info,
+        };
+        Ok(self.log(a.log_time_ns, level, "alerts", &a.message)?)
+    }
+
     fn finish(&mut self, summary: &RunSummary) -> tortwin_engine::sink::SinkResult {
         self.flush_scene()?;
         let last_pulse_ns = self
@@ -1183,10 +1206,11 @@ enum Topic {
     Field,
     Scene,
     Log,
+    Alert,
 }
 
 impl Topic {
-    const ALL: [Topic; 7] = [
+    const ALL: [Topic; 8] = [
         Topic::Section,
         Topic::Train,
         Topic::Pulse,
@@ -1194,6 +1218,7 @@ impl Topic {
         Topic::Field,
         Topic::Scene,
         Topic::Log,
+        Topic::Alert,
     ];
 
     fn name(self) -> &'static str {
@@ -1205,6 +1230,7 @@ impl Topic {
             Topic::Field => "/twin/field",
             Topic::Scene => "/foxglove/track",
             Topic::Log => "/foxglove/log",
+            Topic::Alert => "/twin/alert",
         }
     }
 
@@ -1217,6 +1243,7 @@ impl Topic {
             Topic::Field => "tortwin.Field",
             Topic::Scene => "foxglove.SceneUpdate",
             Topic::Log => "foxglove.Log",
+            Topic::Alert => "tortwin.Alert",
         }
     }
 
@@ -1231,6 +1258,7 @@ impl Topic {
             Topic::Field => FIELD_SCHEMA,
             Topic::Scene => crate::foxglove::SCENE_UPDATE_SCHEMA,
             Topic::Log => crate::foxglove::LOG_SCHEMA,
+            Topic::Alert => ALERT_SCHEMA,
         }
     }
 }
@@ -1246,6 +1274,8 @@ const PULSE_SCHEMA: &str = include_str!("../../schemas/tortwin/pulse.json");
 const MEASUREMENT_SCHEMA: &str = include_str!("../../schemas/tortwin/measurement.json");
 
 const FIELD_SCHEMA: &str = include_str!("../../schemas/tortwin/field.json");
+
+const ALERT_SCHEMA: &str = include_str!("../../schemas/tortwin/alert.json");
 
 /// `/twin/field` of a line (docs/spec/line.md, "Outputs and state"): mu,
 /// adhesion and the wheel mass are null where no wheel of the train used
