@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # `tortwin live` beside a logger at the pace issue 31 names: a 3-day
-# synthetic recording written again by tests/python/live_writer.py (the
+# synthetic recording (its nozzle clogged from day 2) written again by tests/python/live_writer.py (the
 # Python mcap package's writer, 4 kB chunks, each write in two halves) at
 # SPEED times real time (default 1000: 4.3 minutes), followed as it grows,
 # then checked message for message against `tortwin replay` of the
@@ -16,7 +16,9 @@ cargo build --release --quiet
 dir=$(mktemp -d)
 trap 'rm -rf "$dir"' EXIT
 t=./target/release/tortwin
-$t synth --days 3 --seed 3 --out "$dir/rec.mcap" -q
+# Its nozzle clogged from day 2, as in tests/live.rs: the outputs hold an alert.
+$t synth --days 3 --seed 3 --out "$dir/rec.mcap" -q \
+  --hidden generic:acts_on=pulse_mass,applicator=A1,driver=time,form=step,t0_utc=2024-04-09T00:00:00Z,f=0.3
 if [ "$hourly" = "--hourly" ]; then
   target="$dir/hours"
 else
