@@ -69,6 +69,38 @@ fn logger(input: &Path, output: &Path, hourly: bool) -> Child {
     child
 }
 
+/// `rerun --port P --save FILE` (rerun-sdk's own program, the gRPC server a
+/// viewer runs), listening once this returns; and the URL to connect to.
+fn rerun_server(save: &Path) -> (Child, String) {
+    let python = std::env::var("TORTWIN_PYTHON").unwrap_or_else(|_| "python3".to_owned());
+    // A free port: the system's choice, let go for the server to take.
+    let port = std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port();
+    let mut child = Command::new(python)
+        .args(["-m", "rerun", "--port", &port.to_string(), "--save"])
+        .arg(save)
+        .env("CI", "1")
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .expect("python3 -m rerun (pip install rerun-sdk)");
+    let t0 = Instant::now();
+    while std::net::TcpStream::connect(("127.0.0.1", port)).is_err() {
+        if let Ok(Some(status)) = child.try_wait() {
+            panic!("rerun --save ended before listening: {status}");
+        }
+        assert!(
+            t0.elapsed() < Duration::from_secs(60),
+            "rerun never listened"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    (child, format!("rerun+http://127.0.0.1:{port}/proxy"))
+}
+
 /// `tortwin live INPUT --out-dir OUT`, to which a test adds its flags.
 fn live(input: &Path, out: &Path) -> Command {
     let mut cmd = tortwin();
@@ -125,12 +157,40 @@ fn a_recording_followed_while_it_is_written_gives_the_replays_outputs() {
     let dir = tempfile::tempdir().unwrap();
     let rec = three_days(dir.path());
     let growing = dir.path().join("logger.mcap");
+    // A rerun gRPC server from rerun-sdk (its `rerun` program) that saves
+    // what it receives; the follower streams to it as it goes.
+    let received = dir.path().join("received.rrd");
+    let (mut viewer, url) = rerun_server(&received);
     let writer = logger(&rec, &growing, false);
     let out = dir.path().join("live");
-    let o = live(&growing, &out).arg("--json").output().unwrap();
-    check(&o, "tortwin live");
+    let followed = live(&growing, &out)
+        .arg("--json")
+        .args(["--connect", &url])
+        .output()
+        .unwrap();
+    check(&followed, "tortwin live");
     finished(writer);
-    let stdout = String::from_utf8_lossy(&o.stdout);
+    // Ctrl-C: the server writes the rest of what it received and ends.
+    let int = Command::new("kill")
+        .args(["-INT", &viewer.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(int.success());
+    assert!(viewer.wait().unwrap().success() || received.exists());
+    let want = dir.path().join("replay.rrd");
+    let o = tortwin()
+        .arg("replay")
+        .arg(&rec)
+        .arg("--out-rrd")
+        .arg(&want)
+        .arg("-q")
+        .output()
+        .unwrap();
+    check(&o, "tortwin replay --out-rrd");
+    let o = python("check_rrd_same.py", &[&received, &want]);
+    check(&o, "check_rrd_same.py");
+    eprintln!("rerun: {}", String::from_utf8_lossy(&o.stdout));
+    let stdout = String::from_utf8_lossy(&followed.stdout);
     assert!(stdout.contains("logger.mcap: 120 trains"), "{stdout}");
     // --json: a line per train and rail as its field came out.
     let lines: Vec<serde_json::Value> = stdout

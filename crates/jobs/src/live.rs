@@ -38,6 +38,8 @@ use tortwin_engine::{EngineOptions, EngineState};
 use tortwin_files::usage::UsageError;
 use tortwin_outputs::mcap_out::McapSink;
 use tortwin_outputs::provenance::Provenance;
+use tortwin_outputs::rerun_out::{RerunOptions, RerunSink};
+use tortwin_outputs::rerun_sdk;
 use tortwin_recording::error::InputError;
 use tortwin_recording::reader::{Follow, Followed as ReadStep, ReaderContext};
 use tortwin_recording::RecordingReader;
@@ -48,6 +50,8 @@ use super::replay::{config_name, engine_for, read_state, SavedState};
 
 /// The checkpoint's name in the output folder.
 pub const CHECKPOINT: &str = "live-checkpoint.json";
+/// Where a rerun viewer listens by default.
+pub const DEFAULT_VIEWER_URL: &str = "rerun+http://127.0.0.1:9876/proxy";
 const CHECKPOINT_FORMAT: &str = "tortwin-live-checkpoint";
 const CHECKPOINT_VERSION: u32 = 1;
 
@@ -82,9 +86,22 @@ pub struct LiveArgs {
     #[cfg_attr(feature = "cli", arg(long, default_value_t = 0.0, value_name = "S"))]
     pub max_delay_s: f64,
     /// Print a JSON line per train and rail band as its field comes out
-    /// (mu's least and mean, the length below and above the target band).
+    /// (mu's least and mean, the length below and above the target band),
+    /// and per alert.
     #[cfg_attr(feature = "cli", arg(long))]
     pub json: bool,
+    /// Stream to a running rerun viewer (or a gRPC server relaying to
+    /// viewers) at URL, default rerun+http://127.0.0.1:9876/proxy: what
+    /// `replay --out-rrd` would write, train by train, with its layout.
+    #[cfg_attr(
+        feature = "cli",
+        arg(long, value_name = "URL", num_args = 0..=1, default_missing_value = DEFAULT_VIEWER_URL)
+    )]
+    pub connect: Option<String>,
+    /// Start a rerun viewer (the `rerun` program on PATH, e.g. from `pip
+    /// install rerun-sdk`) and stream to it, as `--connect` does.
+    #[cfg_attr(feature = "cli", arg(long, conflicts_with = "connect"))]
+    pub spawn: bool,
     /// With a folder: stop once no new recording has appeared for this many
     /// seconds after the last one ended (default: wait for ever).
     #[cfg_attr(feature = "cli", arg(long, value_name = "S"))]
@@ -130,6 +147,18 @@ pub fn live(args: &LiveArgs, on_recording: &mut dyn FnMut(&Followed)) -> Result<
         .map(crate::alert_post::AlertPoster::start);
     let source = config_name(args.config.as_ref());
     tortwin_outputs::files::make_folder(&args.out_dir)?;
+    let viewer = match (args.spawn, &args.connect) {
+        (true, _) => {
+            rerun_sdk::spawn(&rerun_sdk::SpawnOptions::default()).map_err(|e| {
+                UsageError(format!(
+                    "--spawn: cannot start a rerun viewer ({e}); install one (pip install \
+                     rerun-sdk) or give --connect URL"
+                ))
+            })?;
+            Some(DEFAULT_VIEWER_URL.to_owned())
+        }
+        (false, url) => url.clone(),
+    };
     let checkpoint_path = args.out_dir.join(CHECKPOINT);
     let mut checkpoint = match checkpoint_path.exists() {
         true => read_checkpoint(&checkpoint_path, &args.input)?,
@@ -170,109 +199,140 @@ pub fn live(args: &LiveArgs, on_recording: &mut dyn FnMut(&Followed)) -> Result<
             .collect::<Vec<_>>(),
         &cfg,
     )?;
-    let mut followed = Vec::new();
-    loop {
-        let next = match folder {
-            false if checkpoint.done.is_empty() => Some(args.input.clone()),
-            false => None,
-            true => next_in_folder(&args.input, checkpoint.done.last(), args, &follow)?,
-        };
-        let Some(recording) = next else {
-            break;
-        };
-        let start = checkpoint.state.as_ref().map(|state| SavedState {
-            state,
-            name: checkpoint_path.display().to_string(),
-            file: None,
-        });
-        let ctx = match &start {
-            Some(s) => ReaderContext {
-                origin_ns: Some(s.state.origin_ns),
-                occupied_until_s: s.state.occupied_until_s.unwrap_or(f64::NEG_INFINITY),
-            },
-            None => ReaderContext::default(),
-        };
-        // A recording finished before it is reached (a folder's backlog, a
-        // restart after the logger ended) is read as `replay` reads it:
-        // in any order.
-        let reader = match tortwin_recording::reader::looks_finished(&recording) {
-            true => RecordingReader::open(&recording, ctx)?,
-            false => RecordingReader::follow(&recording, ctx, follow.clone())?,
-        };
-        let mut engine = engine_for(
-            &reader,
-            cfg.clone(),
-            EngineOptions::default(),
-            start.as_ref(),
-            &source,
-        )?;
-        let stem = recording
-            .file_stem()
-            .map_or_else(|| "recording".into(), |s| s.to_string_lossy().into_owned());
-        let mut mcap = McapSink::daily(
-            &args.out_dir,
-            &stem,
-            Some(&provenance),
-            reader.line().is_some(),
-        );
-        let memory = super::replay::alert_memory(&reader, start.as_ref())?;
-        let mut lines = TrainLines;
-        let mut fanout: Fanout<&mut dyn Sink> = Fanout::default();
-        fanout.sinks.push(&mut mcap);
-        if args.json {
-            fanout.sinks.push(&mut lines);
-        }
-        if let Some(p) = poster.as_mut() {
-            fanout.sinks.push(p);
-        }
-        let mut fanout = Alerting::new(alerts.clone(), memory, fanout);
-        let mut reader = reader;
-        let mut trains = 0u64;
-        let mut measurements = 0u64;
-        let replay_error = |source| Error::Replay {
-            what: recording.display().to_string(),
-            source,
-        };
-        while let Some(step) = reader.next_followed() {
-            match step? {
-                // Nothing before `t` is to come: the trains that left before
-                // it are rolled now, not at the next event.
-                ReadStep::Time(t) => engine.advance_to(t, &mut fanout).map_err(replay_error)?,
-                ReadStep::Event(event) => {
-                    match event.kind {
-                        tortwin_recording::EventKind::Passage(_) => trains += 1,
-                        tortwin_recording::EventKind::Measurement(_) => measurements += 1,
-                        _ => {}
+    // One recording in the viewer for the whole follow, a folder's files
+    // one after the other: its id is the output folder's.
+    let recording_id = format!("tortwin live {}", args.out_dir.display());
+    let stream_options = |name: String| RerunOptions {
+        provenance: Some(provenance.clone()),
+        recording_name: Some(name),
+        ..RerunOptions::default()
+    };
+    let stream = viewer
+        .as_deref()
+        .map(|url| {
+            RerunSink::viewer_stream(url, &recording_id, &stream_options(file_name(&args.input)))
+        })
+        .transpose()?;
+    let url = viewer.as_deref().unwrap_or_default();
+    let result = (|| -> Result<Vec<Followed>> {
+        let mut followed = Vec::new();
+        loop {
+            let next = match folder {
+                false if checkpoint.done.is_empty() => Some(args.input.clone()),
+                false => None,
+                true => next_in_folder(&args.input, checkpoint.done.last(), args, &follow)?,
+            };
+            let Some(recording) = next else {
+                break;
+            };
+            let start = checkpoint.state.as_ref().map(|state| SavedState {
+                state,
+                name: checkpoint_path.display().to_string(),
+                file: None,
+            });
+            let ctx = match &start {
+                Some(s) => ReaderContext {
+                    origin_ns: Some(s.state.origin_ns),
+                    occupied_until_s: s.state.occupied_until_s.unwrap_or(f64::NEG_INFINITY),
+                },
+                None => ReaderContext::default(),
+            };
+            // A recording finished before it is reached (a folder's backlog, a
+            // restart after the logger ended) is read as `replay` reads it:
+            // in any order.
+            let reader = match tortwin_recording::reader::looks_finished(&recording) {
+                true => RecordingReader::open(&recording, ctx)?,
+                false => RecordingReader::follow(&recording, ctx, follow.clone())?,
+            };
+            let mut engine = engine_for(
+                &reader,
+                cfg.clone(),
+                EngineOptions::default(),
+                start.as_ref(),
+                &source,
+            )?;
+            let stem = recording
+                .file_stem()
+                .map_or_else(|| "recording".into(), |s| s.to_string_lossy().into_owned());
+            let mut mcap = McapSink::daily(
+                &args.out_dir,
+                &stem,
+                Some(&provenance),
+                reader.line().is_some(),
+            );
+            let memory = super::replay::alert_memory(&reader, start.as_ref())?;
+            let mut rrd = stream
+                .as_ref()
+                .map(|rec| {
+                    RerunSink::on_stream(rec.clone(), url, stream_options(file_name(&recording)))
+                })
+                .transpose()?;
+            let mut lines = TrainLines;
+            let mut fanout: Fanout<&mut dyn Sink> = Fanout::default();
+            fanout.sinks.push(&mut mcap);
+            if let Some(s) = rrd.as_mut() {
+                fanout.sinks.push(s);
+            }
+            if args.json {
+                fanout.sinks.push(&mut lines);
+            }
+            if let Some(p) = poster.as_mut() {
+                fanout.sinks.push(p);
+            }
+            let mut fanout = Alerting::new(alerts.clone(), memory, fanout);
+            let mut reader = reader;
+            let mut trains = 0u64;
+            let mut measurements = 0u64;
+            let replay_error = |source| Error::Replay {
+                what: recording.display().to_string(),
+                source,
+            };
+            while let Some(step) = reader.next_followed() {
+                match step? {
+                    // Nothing before `t` is to come: the trains that left before
+                    // it are rolled now, not at the next event.
+                    ReadStep::Time(t) => engine.advance_to(t, &mut fanout).map_err(replay_error)?,
+                    ReadStep::Event(event) => {
+                        match event.kind {
+                            tortwin_recording::EventKind::Passage(_) => trains += 1,
+                            tortwin_recording::EventKind::Measurement(_) => measurements += 1,
+                            _ => {}
+                        }
+                        engine.push(event, &mut fanout).map_err(replay_error)?;
                     }
-                    engine.push(event, &mut fanout).map_err(replay_error)?;
                 }
             }
+            engine.finish(&mut fanout, reader.unknown_topic_messages())?;
+            let memory = fanout.memory();
+            drop(fanout);
+            drop(mcap);
+            drop(rrd);
+            let mut state = engine.state();
+            state.alerts = memory;
+            if let Some(path) = &args.state_out {
+                let text = serde_json::to_string(&state).map_err(|source| Error::Json {
+                    what: "the state",
+                    source,
+                })?;
+                tortwin_outputs::files::write_atomically(path, text.as_bytes())?;
+            }
+            checkpoint.done.push(file_name(&recording));
+            checkpoint.state = Some(state);
+            write_checkpoint(&checkpoint_path, &checkpoint)?;
+            let done = Followed {
+                recording,
+                trains,
+                measurements,
+            };
+            on_recording(&done);
+            followed.push(done);
         }
-        engine.finish(&mut fanout, reader.unknown_topic_messages())?;
-        let memory = fanout.memory();
-        drop(fanout);
-        drop(mcap);
-        let mut state = engine.state();
-        state.alerts = memory;
-        if let Some(path) = &args.state_out {
-            let text = serde_json::to_string(&state).map_err(|source| Error::Json {
-                what: "the state",
-                source,
-            })?;
-            tortwin_outputs::files::write_atomically(path, text.as_bytes())?;
-        }
-        checkpoint.done.push(file_name(&recording));
-        checkpoint.state = Some(state);
-        write_checkpoint(&checkpoint_path, &checkpoint)?;
-        let done = Followed {
-            recording,
-            trains,
-            measurements,
-        };
-        on_recording(&done);
-        followed.push(done);
+        Ok(followed)
+    })();
+    if let Some(rec) = stream {
+        RerunSink::let_go(rec, url);
     }
-    Ok(followed)
+    result
 }
 
 fn write_checkpoint(path: &Path, checkpoint: &Checkpoint) -> Result<()> {

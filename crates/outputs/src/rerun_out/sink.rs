@@ -30,12 +30,18 @@ use super::{
 };
 use crate::files::PartialFile;
 
+/// How long the end of a recording waits for a viewer to take what was sent.
+const STREAM_FLUSH_TIMEOUT: Duration = Duration::from_secs(10);
+
 /// Writes the twin's results to a rerun `.rrd` (see the module docs).
 pub struct RerunSink {
     /// `None` once [`Sink::finish`] has closed the stream.
     rec: Option<RecordingStream>,
-    /// The output under its temporary name; renamed at finish, deleted if dropped before.
-    file: PartialFile,
+    /// The output under its temporary name; renamed at finish, deleted if
+    /// dropped before. `None` for a stream to a viewer ([`RerunSink::connect`]).
+    file: Option<PartialFile>,
+    /// What errors name: the file's final path, or the viewer's URL.
+    target: std::path::PathBuf,
     /// [`RerunOptions::application_id`], checked; the blueprint's too.
     application_id: ApplicationId,
     options: RerunOptions,
@@ -117,7 +123,8 @@ impl RerunSink {
 
         Ok(RerunSink {
             rec: Some(rec),
-            file,
+            target: file.final_path().to_path_buf(),
+            file: Some(file),
             application_id,
             options,
             layout: None,
@@ -139,9 +146,111 @@ impl RerunSink {
         })
     }
 
-    /// The output's final path, which the errors name.
+    /// A stream to a running viewer, or to a gRPC server that relays to
+    /// viewers, at `url` (`rerun+http://HOST:PORT/proxy`), as the recording
+    /// `recording_id`, for [`RerunSink::on_stream`]: one stream for a whole
+    /// follow, so that a folder's recordings add to one recording in the
+    /// viewer. What the viewer has not taken waits in memory. Dropping the
+    /// last handle waits for the viewer to take everything, for ever if it
+    /// never comes: see [`RerunSink::let_go`].
+    pub fn viewer_stream(
+        url: &str,
+        recording_id: &str,
+        options: &RerunOptions,
+    ) -> Result<RecordingStream, RerunError> {
+        let target = std::path::PathBuf::from(url);
+        let application_id =
+            ApplicationId::try_new(options.application_id.as_str()).map_err(|source| {
+                RerunError::ApplicationId {
+                    path: target.clone(),
+                    id: options.application_id.clone(),
+                    source,
+                }
+            })?;
+        let recording_name = options
+            .recording_name
+            .clone()
+            .unwrap_or_else(|| recording_id.to_owned());
+        let rec = RecordingStreamBuilder::new(application_id)
+            .recording_id(recording_id.to_owned())
+            .recording_name(recording_name)
+            .enabled(true)
+            .batcher_config(ChunkBatcherConfig {
+                max_bytes_in_flight: MAX_BYTES_IN_FLIGHT,
+                ..ChunkBatcherConfig::LOW_LATENCY
+            })
+            .connect_grpc_opts(url)
+            .map_err(sdk_error(&target, || "connecting to the viewer".to_owned()))?;
+        rec.set_log_time_enabled(false);
+        rec.set_log_tick_enabled(false);
+        if let Some(provenance) = &options.provenance {
+            send_provenance(&rec, provenance)
+                .map_err(sdk_error(&target, || "sending the provenance".to_owned()))?;
+        }
+        Ok(rec)
+    }
+
+    /// Ends a [`RerunSink::viewer_stream`]: waits up to 10 s for the viewer
+    /// to take what is left; a viewer that is not there is said on stderr
+    /// and the stream let go without waiting (its threads end with the
+    /// process).
+    pub fn let_go(rec: RecordingStream, url: &str) {
+        match rec.flush_with_timeout(STREAM_FLUSH_TIMEOUT) {
+            Ok(()) => drop(rec),
+            Err(e) => {
+                eprintln!("warning: the rerun viewer at {url} did not take everything: {e}");
+                std::mem::forget(rec);
+            }
+        }
+    }
+
+    /// Writes to `rec`, a [`RerunSink::viewer_stream`] (`url` names it in
+    /// errors): the same entities and values as [`RerunSink::create`]'s
+    /// file; each train's profiles and series are sent once its field is
+    /// in (a file batches them), and the layout at the start and again at
+    /// the end.
+    pub fn on_stream(
+        rec: RecordingStream,
+        url: &str,
+        options: RerunOptions,
+    ) -> Result<RerunSink, RerunError> {
+        let target = std::path::PathBuf::from(url);
+        let application_id =
+            ApplicationId::try_new(options.application_id.as_str()).map_err(|source| {
+                RerunError::ApplicationId {
+                    path: target.clone(),
+                    id: options.application_id.clone(),
+                    source,
+                }
+            })?;
+        Ok(RerunSink {
+            rec: Some(rec),
+            file: None,
+            target,
+            application_id,
+            options,
+            layout: None,
+            tracks: Vec::new(),
+            grid_len: 0,
+            profile_chunk_rows: 1,
+            wheel_pass: 0,
+            styled: HashSet::new(),
+            measurement_paths: HashMap::new(),
+            measured: BTreeMap::new(),
+            pulsed: BTreeSet::new(),
+            series: HashMap::new(),
+            pulse_totals: BTreeMap::new(),
+            frames: None,
+            grid_d_m: Vec::new(),
+            scratch: Vec::new(),
+            time_span_ns: None,
+            line_wheels: None,
+        })
+    }
+
+    /// The output's final path (or the viewer's URL), which the errors name.
     fn path(&self) -> &Path {
-        self.file.final_path()
+        &self.target
     }
 
     fn rec(&self) -> Result<&RecordingStream, RerunError> {
@@ -236,17 +345,16 @@ impl RerunSink {
     /// Sends every buffered series.
     fn flush_series(&mut self) -> Result<(), RerunError> {
         let rec = self.rec.as_ref().ok_or_else(|| RerunError::Finished {
-            path: self.file.final_path().to_path_buf(),
+            path: self.target.clone(),
         })?;
         // In the entities' order, whatever the map's.
         let mut all: Vec<_> = std::mem::take(&mut self.series).into_iter().collect();
         all.sort_by(|a, b| a.0.cmp(&b.0));
         for (path, series) in all {
             if !series.values.is_empty() {
-                send_series(rec, path, series)
-                    .map_err(sdk_error(self.file.final_path(), || {
-                        "pulses and measurements".to_owned()
-                    }))?;
+                send_series(rec, path, series).map_err(sdk_error(&self.target, || {
+                    "pulses and measurements".to_owned()
+                }))?;
             }
         }
         Ok(())
@@ -301,6 +409,38 @@ impl RerunSink {
         Ok(())
     }
 
+    /// Sends the blueprint (unless the options say not to) for what the
+    /// run has shown so far.
+    fn send_layout(&self) -> Result<(), RerunError> {
+        if !self.options.blueprint {
+            return Ok(());
+        }
+        let rec = self.rec()?;
+        let Some(layout) = &self.layout else {
+            return Err(RerunError::NotBegun {
+                path: self.path().to_path_buf(),
+            });
+        };
+        let blueprint = blueprint(&Run {
+            application_id: &self.application_id,
+            layout,
+            tracks: self.tracks.iter().map(|t| &t.entities).collect(),
+            measured: &self.measured,
+            pulsed: &self.pulsed,
+            history_rows: self.options.history_rows,
+            time_span_ns: self.time_span_ns,
+            wheel_pass: self.wheel_pass,
+            line_wheels: self.line_wheels.as_ref(),
+        })
+        .map_err(sdk_error(self.path(), || "blueprint".to_owned()))?;
+        if !send_blueprint(rec, blueprint) {
+            return Err(RerunError::EmptyBlueprint {
+                path: self.path().to_path_buf(),
+            });
+        }
+        Ok(())
+    }
+
     /// Sends what is still buffered, the last heatmaps, the summary and the
     /// blueprint; closes the stream and moves the file into place.
     fn finish_run(&mut self, summary: &RunSummary) -> Result<(), RerunError> {
@@ -312,7 +452,7 @@ impl RerunSink {
         if let Some(rec) = self.rec.as_ref() {
             for track in &mut self.tracks {
                 send_rows(rec, track, grid_len)
-                    .map_err(sdk_error(self.file.final_path(), || "profiles".to_owned()))?;
+                    .map_err(sdk_error(&self.target, || "profiles".to_owned()))?;
             }
         }
         // The last block of each history, where its last train was, if not yet logged.
@@ -327,11 +467,10 @@ impl RerunSink {
             let time_ns = self.note_time(log_time_ns)?;
             let wheel_pass = self.sequence(wheel_pass)?;
             let rec = self.rec.as_ref().ok_or_else(|| RerunError::Finished {
-                path: self.file.final_path().to_path_buf(),
+                path: self.target.clone(),
             })?;
-            log_block(rec, &mut self.tracks[index], grid_len, time_ns, wheel_pass).map_err(
-                sdk_error(self.file.final_path(), || "last history".to_owned()),
-            )?;
+            log_block(rec, &mut self.tracks[index], grid_len, time_ns, wheel_pass)
+                .map_err(sdk_error(&self.target, || "last history".to_owned()))?;
         }
         let rec = self.rec()?;
         let history = (self.options.history_rows, self.options.history_every.max(1));
@@ -340,51 +479,40 @@ impl RerunSink {
             &rerun_sdk::TextDocument::from_markdown(summarize(summary, history)),
         )
         .map_err(sdk_error(self.path(), || "summary".to_owned()))?;
-        if self.options.blueprint {
-            let Some(layout) = &self.layout else {
-                return Err(RerunError::NotBegun {
-                    path: self.path().to_path_buf(),
-                });
-            };
-            let blueprint = blueprint(&Run {
-                application_id: &self.application_id,
-                layout,
-                tracks: self.tracks.iter().map(|t| &t.entities).collect(),
-                measured: &self.measured,
-                pulsed: &self.pulsed,
-                history_rows: self.options.history_rows,
-                time_span_ns: self.time_span_ns,
-                wheel_pass: self.wheel_pass,
-                line_wheels: self.line_wheels.as_ref(),
-            })
-            .map_err(sdk_error(self.path(), || "blueprint".to_owned()))?;
-            if !send_blueprint(rec, blueprint) {
-                return Err(RerunError::EmptyBlueprint {
-                    path: self.path().to_path_buf(),
-                });
-            }
-        }
+        self.send_layout()?;
 
         let rec = self.rec.take().ok_or_else(|| RerunError::Finished {
-            path: self.file.final_path().to_path_buf(),
+            path: self.target.clone(),
         })?;
+        if self.file.is_none() {
+            // A viewer is a view, not the record (the MCAP output is): the
+            // stream's owner lets it go (RerunSink::let_go); this handle
+            // is not the last.
+            let _ = rec.flush_async();
+            return Ok(());
+        }
         if let Err(source) = rec.flush_blocking() {
             // The SDK's error does not say why; the file does.
-            return Err(match self.file.probe_write() {
-                Err(io) => RerunError::Write {
-                    path: self.path().to_path_buf(),
-                    source: io,
+            return Err(
+                match self.file.as_ref().map_or(Ok(()), PartialFile::probe_write) {
+                    Err(io) => RerunError::Write {
+                        path: self.path().to_path_buf(),
+                        source: io,
+                    },
+                    Ok(()) => RerunError::Flush {
+                        path: self.path().to_path_buf(),
+                        source,
+                    },
                 },
-                Ok(()) => RerunError::Flush {
-                    path: self.path().to_path_buf(),
-                    source,
-                },
-            });
+            );
         }
         // Dropping the only handle joins the SDK's threads; the file sink
         // writes the rrd footer and closes the file before this returns.
         drop(rec);
-        Ok(self.file.commit()?)
+        match self.file.take() {
+            Some(mut file) => Ok(file.commit()?),
+            None => Ok(()),
+        }
     }
 }
 
@@ -420,6 +548,12 @@ impl Sink for RerunSink {
             .map_err(sdk_error(self.path(), || "the section's plan".to_owned()))?;
         self.frames = Some(frames);
         self.grid_d_m = info.grid_d_m.to_vec();
+        if self.file.is_none() {
+            // A viewer watching: each train's rows go at once, and the
+            // layout now (again at the end, with the sites measured).
+            self.profile_chunk_rows = 1;
+            self.send_layout()?;
+        }
         Ok(())
     }
 
@@ -519,7 +653,7 @@ impl Sink for RerunSink {
         let wheel_pass = self.wheel_pass;
         let time_ns = self.set_time(f.log_time_ns, Some(wheel_pass))?;
         let wheel_pass_seq = self.sequence(wheel_pass)?;
-        let path = self.file.final_path();
+        let path = self.target.as_path();
         let (Some(rec), Some(frames)) = (self.rec.as_ref(), self.frames.as_ref()) else {
             return Err(RerunError::Finished {
                 path: path.to_path_buf(),
@@ -595,6 +729,10 @@ impl Sink for RerunSink {
                 track.block.clear();
                 track.block_index += 1;
             }
+        }
+        if self.file.is_none() {
+            // A viewer watching: the pulses and readings up to this train.
+            self.flush_series()?;
         }
         Ok(())
     }
