@@ -336,3 +336,81 @@ fn a_follower_refuses_what_is_not_its_own_with_exit_2() {
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(err.contains("bad.mcap") && err.contains("magic"), "{err}");
 }
+
+#[test]
+fn a_recording_its_logger_left_unfinished_ends_when_a_later_one_is_there() {
+    // A logger that crashed a day into its file and began the next day's:
+    // the first file stops at 60 % of its bytes, mid-record, with no end.
+    let dir = tempfile::tempdir().unwrap();
+    let rec = three_days(dir.path());
+    let days = dir.path().join("days");
+    check(
+        &tortwin()
+            .arg("split")
+            .arg(&rec)
+            .arg("--out")
+            .arg(&days)
+            .arg("-q")
+            .output()
+            .unwrap(),
+        "tortwin split",
+    );
+    let names = mcap_names(&days);
+    assert_eq!(names.len(), 3, "{names:?}");
+    let folder = dir.path().join("logger");
+    std::fs::create_dir(&folder).unwrap();
+    let first = std::fs::read(days.join(&names[0])).unwrap();
+    std::fs::write(folder.join(&names[0]), &first[..first.len() * 6 / 10]).unwrap();
+    for name in &names[1..] {
+        std::fs::copy(days.join(name), folder.join(name)).unwrap();
+    }
+    let out = dir.path().join("live");
+    // Bounded: a follower that waits on the left file for ever fails here.
+    let child = live(&folder, &out)
+        .args(["--abandon-s", "1", "--idle-exit-s", "2"])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let pid = child.id();
+    let (done, ended) = std::sync::mpsc::channel::<()>();
+    let watchdog = std::thread::spawn(move || {
+        if ended.recv_timeout(Duration::from_secs(60)).is_err() {
+            let _ = Command::new("kill")
+                .args(["-KILL", &pid.to_string()])
+                .status();
+        }
+    });
+    let o = child.wait_with_output().unwrap();
+    done.send(()).unwrap();
+    watchdog.join().unwrap();
+    check(&o, "tortwin live (killed after 60 s if it kept waiting)");
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        stderr.contains(&format!("{} ended without its end record", names[0])),
+        "{stderr}"
+    );
+    // The first file's whole records were stepped; the next two in full.
+    let trains: Vec<u64> = stdout
+        .lines()
+        .filter_map(|l| l.split(": ").nth(1)?.split(' ').next()?.parse().ok())
+        .collect();
+    assert_eq!(trains.len(), 3, "{stdout}");
+    assert!((1..40).contains(&trains[0]), "{stdout}");
+    assert_eq!(trains[1..], [40, 40], "{stdout}");
+    assert_eq!(mcap_names(&out).len(), 3, "{:?}", mcap_names(&out));
+    // Without a later recording the follower keeps waiting: a file that
+    // merely paused is not left.
+    let alone = dir.path().join("alone");
+    std::fs::create_dir(&alone).unwrap();
+    std::fs::write(alone.join(&names[0]), &first[..first.len() * 6 / 10]).unwrap();
+    let mut child = live(&alone, &dir.path().join("live-alone"))
+        .args(["--abandon-s", "1", "-q"])
+        .spawn()
+        .unwrap();
+    std::thread::sleep(Duration::from_secs(3));
+    assert!(child.try_wait().unwrap().is_none(), "it stopped waiting");
+    child.kill().unwrap();
+    child.wait().unwrap();
+}

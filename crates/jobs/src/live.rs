@@ -26,6 +26,8 @@
 //! missing, and the state is the replay's.
 
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use serde::{Deserialize, Serialize};
@@ -41,7 +43,7 @@ use tortwin_outputs::provenance::Provenance;
 use tortwin_outputs::rerun_out::{RerunOptions, RerunSink};
 use tortwin_outputs::rerun_sdk;
 use tortwin_recording::error::InputError;
-use tortwin_recording::reader::{Follow, Followed as ReadStep, ReaderContext};
+use tortwin_recording::reader::{Abandoned, Follow, Followed as ReadStep, ReaderContext};
 use tortwin_recording::RecordingReader;
 use tortwin_study::{Error, Result};
 
@@ -102,6 +104,11 @@ pub struct LiveArgs {
     /// install rerun-sdk`) and stream to it, as `--connect` does.
     #[cfg_attr(feature = "cli", arg(long, conflicts_with = "connect"))]
     pub spawn: bool,
+    /// With a folder: a recording that has not grown for this many seconds
+    /// while a later one is in the folder was left by its logger (crashed
+    /// mid-file): it ends at its last whole record, with a warning.
+    #[cfg_attr(feature = "cli", arg(long, default_value_t = 60.0, value_name = "S"))]
+    pub abandon_s: f64,
     /// With a folder: stop once no new recording has appeared for this many
     /// seconds after the last one ended (default: wait for ever).
     #[cfg_attr(feature = "cli", arg(long, value_name = "S"))]
@@ -178,6 +185,13 @@ pub fn live(args: &LiveArgs, on_recording: &mut dyn FnMut(&Followed)) -> Result<
         }
     };
     let folder = args.input.is_dir();
+    if !(args.abandon_s.is_finite() && (0.0..=31_536_000.0).contains(&args.abandon_s)) {
+        return Err(UsageError(format!(
+            "--abandon-s {} is not a duration of 0 to a year in s",
+            args.abandon_s
+        ))
+        .into());
+    }
     if !(args.max_delay_s.is_finite() && (0.0..=86_400.0).contains(&args.max_delay_s)) {
         return Err(UsageError(format!(
             "--max-delay-s {} is not a delay of 0 to 86400 s",
@@ -240,9 +254,33 @@ pub fn live(args: &LiveArgs, on_recording: &mut dyn FnMut(&Followed)) -> Result<
             // A recording finished before it is reached (a folder's backlog, a
             // restart after the logger ended) is read as `replay` reads it:
             // in any order.
+            // In a folder, a later recording beside one that stopped growing
+            // means its logger left it (and began the next).
+            let left = Arc::new(AtomicBool::new(false));
+            let mut follow_this = follow.clone();
+            if folder {
+                let (dir, name, left) = (args.input.clone(), file_name(&recording), left.clone());
+                let later = move || {
+                    let later = std::fs::read_dir(&dir)
+                        .into_iter()
+                        .flatten()
+                        .flatten()
+                        .any(|e| {
+                            e.file_name().to_str().is_some_and(|n| {
+                                n.ends_with(".mcap") && !n.starts_with('.') && n > name.as_str()
+                            })
+                        });
+                    left.store(later, Ordering::Relaxed);
+                    later
+                };
+                follow_this.abandon = Some((
+                    Duration::from_secs_f64(args.abandon_s),
+                    Abandoned(Arc::new(later)),
+                ));
+            }
             let reader = match tortwin_recording::reader::looks_finished(&recording) {
                 true => RecordingReader::open(&recording, ctx)?,
-                false => RecordingReader::follow(&recording, ctx, follow.clone())?,
+                false => RecordingReader::follow(&recording, ctx, follow_this)?,
             };
             let mut engine = engine_for(
                 &reader,
@@ -324,6 +362,15 @@ pub fn live(args: &LiveArgs, on_recording: &mut dyn FnMut(&Followed)) -> Result<
                 trains,
                 measurements,
             };
+            if left.load(Ordering::Relaxed) {
+                eprintln!(
+                    "warning: {} ended without its end record (not grown for {} s while a \
+                     later recording was in the folder: its logger left it); what was written \
+                     whole was stepped",
+                    done.recording.display(),
+                    args.abandon_s
+                );
+            }
             on_recording(&done);
             followed.push(done);
         }

@@ -179,7 +179,8 @@ pub(super) fn blueprint(run: &Run<'_>) -> Result<Vec<LogMsg>, RecordingStreamErr
     }
 
     // Right, bottom: the context.
-    let trains = bp.view("TextLog", "Trains", ["+ /trains"])?;
+    // The trains, and the alerts among them (WARN, ERROR).
+    let trains = bp.view("TextLog", "Trains", ["+ /trains", "+ /alerts"])?;
     let pulses = bp.view(
         "TimeSeries",
         "Applicator pulses (g)",

@@ -61,6 +61,7 @@
 //! | `sites/<site>/<rail>/<quantity>`               | `Scalars` [measured, simulated] + `SeriesPoints` | measurement (`time`) |
 //! | `applicator/<id>/<rail>`                       | `Scalars`: g since the previous train + `SeriesPoints` | train snapshot (`time`) |
 //! | `trains`                                       | `TextLog`              | train         |
+//! | `alerts`                                       | `TextLog` (ERROR, WARN, INFO when cleared) | alert raised or cleared |
 //! | `run/summary`                                  | `TextDocument`         | static, at finish |
 //!
 //! # Blueprint

@@ -12,7 +12,7 @@ use crate::rerun_sdk::{
     ApplicationId, AsComponents, EntityPath, RecordingStream, RecordingStreamBuilder, TimeCell,
 };
 use tortwin_engine::sink::{
-    FieldSnapshot, LineWheels, MeasurementOutput, PulseEvent, RunSummary, SectionInfo, Sink,
+    Alert, FieldSnapshot, LineWheels, MeasurementOutput, PulseEvent, RunSummary, SectionInfo, Sink,
     SinkResult, SnapshotKind, TrainEvent,
 };
 use tortwin_recording::{Direction, Quantity};
@@ -577,6 +577,22 @@ impl Sink for RerunSink {
             )
             .map_err(sdk_error(self.path(), || {
                 format!("train {}", train.train_id)
+            }))?;
+        Ok(())
+    }
+
+    fn alert(&mut self, alert: &Alert) -> SinkResult {
+        self.set_time(alert.log_time_ns, Some(self.wheel_pass))?;
+        let level = match crate::alerts::level(alert) {
+            "error" => TextLogLevel::ERROR,
+            "warning" => TextLogLevel::WARN,
+            _ => TextLogLevel::INFO,
+        };
+        let text = format!("{}: {}", alert.kind.as_str(), alert.message);
+        self.rec()?
+            .log("alerts", &rerun_sdk::TextLog::new(text).with_level(level))
+            .map_err(sdk_error(self.path(), || {
+                format!("alert {}", alert.kind.as_str())
             }))?;
         Ok(())
     }

@@ -55,6 +55,22 @@ pub struct Follow {
     /// Set by another thread to stop the follow: the reader then ends with
     /// an error that says so ([`Follow::STOPPED`]).
     pub stop: Arc<AtomicBool>,
+    /// A file its writer left unfinished (a logger that crashed mid-file
+    /// and began another): once the file has not grown for the duration,
+    /// the test is asked; `true` ends the file at its last whole record,
+    /// as its DataEnd would.
+    pub abandon: Option<(Duration, Abandoned)>,
+}
+
+/// Whether a file that stopped growing was left by its writer (see
+/// [`Follow::abandon`]).
+#[derive(Clone)]
+pub struct Abandoned(pub Arc<dyn Fn() -> bool + Send + Sync>);
+
+impl std::fmt::Debug for Abandoned {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("Abandoned(..)")
+    }
 }
 
 impl Follow {
@@ -66,6 +82,7 @@ impl Follow {
             poll,
             max_delay: Duration::ZERO,
             stop: Arc::new(AtomicBool::new(false)),
+            abandon: None,
         }
     }
 }
@@ -112,6 +129,8 @@ pub(super) struct LiveQueue {
     late: Option<(ReplayKey, u64)>,
     /// The latest log_time [`LiveQueue::poll`] has told.
     told_ns: Option<u64>,
+    /// When the file last grew.
+    grew: std::time::Instant,
 }
 
 /// What [`LiveQueue::poll`] found.
@@ -137,6 +156,7 @@ impl LiveQueue {
             latest_ns: None,
             late: None,
             told_ns: None,
+            grew: std::time::Instant::now(),
         })
     }
 
@@ -171,9 +191,18 @@ impl LiveQueue {
                 self.told_ns = Some(t);
                 return Ok(Polled::Time(t));
             }
-            if !self.read_more()? {
+            if self.read_more()? {
+                self.grew = std::time::Instant::now();
+            } else {
                 if self.follow.stop.load(Ordering::Relaxed) {
                     return Err(self.corrupt(Follow::STOPPED.to_string()));
+                }
+                if let Some((after, left)) = &self.follow.abandon {
+                    if self.grew.elapsed() >= *after && (left.0)() {
+                        // What is whole is read; the rest is lost with its writer.
+                        self.finished = true;
+                        continue;
+                    }
                 }
                 std::thread::sleep(self.follow.poll);
             }

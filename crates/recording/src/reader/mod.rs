@@ -40,7 +40,7 @@ use crate::topic::Topic;
 use crate::wire::{LineMsg, MeasurementMsg, PassageMsg, PulseMsg, SectionMsg, WeatherMsg};
 use layout::{ReplayKey, TopicRank};
 pub use layout::{MAX_CHUNK_BYTES, MAX_MESSAGE_BYTES};
-pub use live::Follow;
+pub use live::{Abandoned, Follow};
 use live::{LiveQueue, Polled};
 use replay::{PendingMessage, ReplayQueue};
 
