@@ -1292,10 +1292,10 @@ mod tests {
 
     const S: u64 = 1_000_000_000;
 
-    /// 100 m, rails `high` and `low`, A1 at 10 m on both, sites M1 (40 m)
-    /// and M2 (80 m); a point every 2 m.
-    fn started(config: AlertConfig, memory: Option<AlertMemory>) -> Alerting<Heard> {
-        let section = Section {
+    /// 100 m, rails `high` and `low`, A1 at 10 m on both, `sites` sites
+    /// M1, M2, ... 40 m apart from 40 m.
+    fn section(sites: usize) -> Section {
+        Section {
             section_id: "s".into(),
             length_m: 100.0,
             rails: vec!["high".into(), "low".into()],
@@ -1308,17 +1308,18 @@ mod tests {
                 rails: vec![0, 1],
                 nominal_pulse_kg: 2e-4,
             }],
-            sites: vec![
-                Site {
-                    id: "M1".into(),
-                    position_m: 40.0,
-                },
-                Site {
-                    id: "M2".into(),
-                    position_m: 80.0,
-                },
-            ],
-        };
+            sites: (0..sites)
+                .map(|k| Site {
+                    id: format!("M{}", k + 1),
+                    position_m: 40.0 * (k + 1) as f64,
+                })
+                .collect(),
+        }
+    }
+
+    /// [`section`] with two sites, a point every 2 m.
+    fn started(config: AlertConfig, memory: Option<AlertMemory>) -> Alerting<Heard> {
+        let section = section(2);
         let tracks: Vec<TrackInfo> = (0..2)
             .map(|rail| TrackInfo {
                 rail,
@@ -1561,26 +1562,6 @@ mod tests {
         let b = started(AlertConfig::default(), Some(back.clone()));
         assert_eq!(b.memory().unwrap(), memory);
 
-        let section = |sites: usize| Section {
-            section_id: "s".into(),
-            length_m: 100.0,
-            rails: vec!["high".into(), "low".into()],
-            curve_radius_m: None,
-            rail_head_radius_m: 0.3,
-            nominal_wheel_diameter_m: 0.92,
-            applicators: vec![Applicator {
-                id: "A1".into(),
-                position_m: 10.0,
-                rails: vec![0, 1],
-                nominal_pulse_kg: 2e-4,
-            }],
-            sites: (0..sites)
-                .map(|k| Site {
-                    id: format!("M{k}"),
-                    position_m: 40.0,
-                })
-                .collect(),
-        };
         assert_eq!(back.check(&section(2), 2), Ok(()));
         assert!(back
             .check(&section(0), 2)

@@ -38,6 +38,14 @@ impl ConfigSource {
 
     /// The defaults overlaid with this configuration.
     pub fn load(&self) -> Result<ModelConfig, ConfigError> {
+        self.parse(ModelConfig::from_overlay_str)
+    }
+
+    /// `parse` of the configuration's text and name.
+    fn parse<T>(
+        &self,
+        parse: impl FnOnce(&str, &str) -> Result<T, ConfigError>,
+    ) -> Result<T, ConfigError> {
         match self {
             ConfigSource::File(p) => {
                 let text = tortwin_outputs::files::read_text_input(
@@ -49,9 +57,9 @@ impl ConfigSource {
                     key: "-".into(),
                     message: format!("cannot read: {e}"),
                 })?;
-                ModelConfig::from_overlay_str(&text, &p.display().to_string())
+                parse(&text, &p.display().to_string())
             }
-            ConfigSource::Text { text, name } => ModelConfig::from_overlay_str(text, name),
+            ConfigSource::Text { text, name } => parse(text, name),
         }
     }
 }
@@ -60,21 +68,7 @@ impl ConfigSource {
     /// The `[alerts]` table of this configuration (defaults for what it
     /// does not set).
     pub fn load_alerts(&self) -> Result<AlertConfig, ConfigError> {
-        match self {
-            ConfigSource::File(p) => {
-                let text = tortwin_outputs::files::read_text_input(
-                    p,
-                    tortwin_outputs::files::MAX_TEXT_INPUT_BYTES,
-                )
-                .map_err(|e| ConfigError {
-                    source_name: p.display().to_string(),
-                    key: "-".into(),
-                    message: format!("cannot read: {e}"),
-                })?;
-                AlertConfig::from_config_str(&text, &p.display().to_string())
-            }
-            ConfigSource::Text { text, name } => AlertConfig::from_config_str(text, name),
-        }
+        self.parse(AlertConfig::from_config_str)
     }
 }
 

@@ -30,6 +30,15 @@ use super::{
 };
 use crate::files::PartialFile;
 
+/// The application id of `options`, checked (`target` names the output).
+fn checked_id(target: &Path, id: &str) -> Result<ApplicationId, RerunError> {
+    ApplicationId::try_new(id).map_err(|source| RerunError::ApplicationId {
+        path: target.to_path_buf(),
+        id: id.to_owned(),
+        source,
+    })
+}
+
 /// How long the end of a recording waits for a viewer to take what was sent.
 const STREAM_FLUSH_TIMEOUT: Duration = Duration::from_secs(10);
 
@@ -92,14 +101,7 @@ impl RerunSink {
             .recording_name
             .clone()
             .unwrap_or_else(|| file_name.to_string_lossy().into_owned());
-        let application_id =
-            ApplicationId::try_new(options.application_id.as_str()).map_err(|source| {
-                RerunError::ApplicationId {
-                    path: path.to_path_buf(),
-                    id: options.application_id.clone(),
-                    source,
-                }
-            })?;
+        let application_id = checked_id(path, &options.application_id)?;
         // `enabled(true)`: the user asked for this file, so the `RERUN=off`
         // environment switch must not silently drop it.
         let rec = RecordingStreamBuilder::new(application_id.clone())
@@ -121,10 +123,28 @@ impl RerunSink {
                 .map_err(sdk_error(path, || "writing the provenance".to_owned()))?;
         }
 
-        Ok(RerunSink {
+        let target = file.final_path().to_path_buf();
+        Ok(RerunSink::new(
+            rec,
+            Some(file),
+            target,
+            application_id,
+            options,
+        ))
+    }
+
+    /// A sink that has seen nothing yet, writing to `rec`.
+    fn new(
+        rec: RecordingStream,
+        file: Option<PartialFile>,
+        target: std::path::PathBuf,
+        application_id: ApplicationId,
+        options: RerunOptions,
+    ) -> RerunSink {
+        RerunSink {
             rec: Some(rec),
-            target: file.final_path().to_path_buf(),
-            file: Some(file),
+            file,
+            target,
             application_id,
             options,
             layout: None,
@@ -143,7 +163,7 @@ impl RerunSink {
             scratch: Vec::new(),
             time_span_ns: None,
             line_wheels: None,
-        })
+        }
     }
 
     /// A stream to a running viewer, or to a gRPC server that relays to
@@ -159,14 +179,7 @@ impl RerunSink {
         options: &RerunOptions,
     ) -> Result<RecordingStream, RerunError> {
         let target = std::path::PathBuf::from(url);
-        let application_id =
-            ApplicationId::try_new(options.application_id.as_str()).map_err(|source| {
-                RerunError::ApplicationId {
-                    path: target.clone(),
-                    id: options.application_id.clone(),
-                    source,
-                }
-            })?;
+        let application_id = checked_id(&target, &options.application_id)?;
         let recording_name = options
             .recording_name
             .clone()
@@ -215,37 +228,8 @@ impl RerunSink {
         options: RerunOptions,
     ) -> Result<RerunSink, RerunError> {
         let target = std::path::PathBuf::from(url);
-        let application_id =
-            ApplicationId::try_new(options.application_id.as_str()).map_err(|source| {
-                RerunError::ApplicationId {
-                    path: target.clone(),
-                    id: options.application_id.clone(),
-                    source,
-                }
-            })?;
-        Ok(RerunSink {
-            rec: Some(rec),
-            file: None,
-            target,
-            application_id,
-            options,
-            layout: None,
-            tracks: Vec::new(),
-            grid_len: 0,
-            profile_chunk_rows: 1,
-            wheel_pass: 0,
-            styled: HashSet::new(),
-            measurement_paths: HashMap::new(),
-            measured: BTreeMap::new(),
-            pulsed: BTreeSet::new(),
-            series: HashMap::new(),
-            pulse_totals: BTreeMap::new(),
-            frames: None,
-            grid_d_m: Vec::new(),
-            scratch: Vec::new(),
-            time_span_ns: None,
-            line_wheels: None,
-        })
+        let application_id = checked_id(&target, &options.application_id)?;
+        Ok(RerunSink::new(rec, None, target, application_id, options))
     }
 
     /// The output's final path (or the viewer's URL), which the errors name.
