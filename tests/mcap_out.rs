@@ -424,7 +424,8 @@ fn writes_every_topic_and_reads_back() {
 
     let summary = mcap::Summary::read(&bytes).unwrap().expect("a summary");
     assert_eq!(summary.stats.as_ref().unwrap().message_count, 13);
-    assert_eq!(summary.channels.len(), 7);
+    // /twin/alert is declared though this run raised none.
+    assert_eq!(summary.channels.len(), 8);
     assert!(!summary.chunk_indexes.is_empty());
     assert!(summary
         .chunk_indexes
