@@ -136,7 +136,8 @@ impl Alert {
 /// Passes every call to `inner`, and the alerts each raises or clears.
 pub struct Alerting<S> {
     pub inner: S,
-    detector: Detector,
+    /// `None` with alerts off: the calls only pass through.
+    detector: Option<Detector>,
     raised: Vec<Alert>,
 }
 
@@ -145,8 +146,11 @@ impl<S: Sink> Alerting<S> {
     /// checked with [`AlertMemory::check`]). With `config.enabled` false
     /// it passes the calls on and raises nothing.
     pub fn new(config: AlertConfig, memory: Option<AlertMemory>, inner: S) -> Self {
-        let mut detector = Detector::new(config);
-        detector.resume = memory;
+        let detector = config.enabled.then(|| {
+            let mut detector = Detector::new(config);
+            detector.resume = memory;
+            detector
+        });
         Alerting {
             inner,
             detector,
@@ -156,8 +160,7 @@ impl<S: Sink> Alerting<S> {
 
     /// What the alerts remember, for the state (`None` when they are off).
     pub fn memory(&self) -> Option<AlertMemory> {
-        let d = &self.detector;
-        d.config.enabled.then(|| AlertMemory {
+        self.detector.as_ref().map(|d| AlertMemory {
             low: d.low.clone(),
             high: d.high.clone(),
             pulses: d
@@ -181,10 +184,6 @@ impl<S: Sink> Alerting<S> {
     }
 
     fn emit(&mut self) -> SinkResult {
-        if !self.detector.config.enabled {
-            self.raised.clear();
-            return Ok(());
-        }
         for alert in self.raised.drain(..) {
             self.inner.alert(&alert)?;
         }
@@ -195,22 +194,30 @@ impl<S: Sink> Alerting<S> {
 impl<S: Sink> Sink for Alerting<S> {
     fn begin(&mut self, info: &SectionInfo<'_>) -> SinkResult {
         self.inner.begin(info)?;
-        self.detector.begin(info);
+        if let Some(d) = self.detector.as_mut() {
+            d.begin(info);
+        }
         Ok(())
     }
     fn train(&mut self, train: &TrainEvent<'_>) -> SinkResult {
         self.inner.train(train)?;
-        self.detector.train(train, &mut self.raised);
+        if let Some(d) = self.detector.as_mut() {
+            d.train(train, &mut self.raised);
+        }
         self.emit()
     }
     fn pulse(&mut self, pulse: &PulseEvent<'_>) -> SinkResult {
         self.inner.pulse(pulse)?;
-        self.detector.pulse(pulse, &mut self.raised);
+        if let Some(d) = self.detector.as_mut() {
+            d.pulse(pulse, &mut self.raised);
+        }
         self.emit()
     }
     fn measurement(&mut self, m: &MeasurementOutput<'_>) -> SinkResult {
         self.inner.measurement(m)?;
-        self.detector.measurement(m, &mut self.raised);
+        if let Some(d) = self.detector.as_mut() {
+            d.measurement(m, &mut self.raised);
+        }
         self.emit()
     }
     fn wants_readouts(&self) -> bool {
@@ -218,7 +225,9 @@ impl<S: Sink> Sink for Alerting<S> {
     }
     fn field(&mut self, f: &FieldSnapshot<'_>) -> SinkResult {
         self.inner.field(f)?;
-        self.detector.field(f, &mut self.raised);
+        if let Some(d) = self.detector.as_mut() {
+            d.field(f, &mut self.raised);
+        }
         self.emit()
     }
     fn wheel_contacts(&mut self, w: &WheelContacts<'_>) -> SinkResult {
@@ -229,14 +238,18 @@ impl<S: Sink> Sink for Alerting<S> {
     }
     fn weather(&mut self, log_time_ns: u64) -> SinkResult {
         self.inner.weather(log_time_ns)?;
-        self.detector.weather(log_time_ns, &mut self.raised);
+        if let Some(d) = self.detector.as_mut() {
+            d.weather(log_time_ns, &mut self.raised);
+        }
         self.emit()
     }
     fn alert(&mut self, alert: &Alert) -> SinkResult {
         self.inner.alert(alert)
     }
     fn finish(&mut self, summary: &RunSummary) -> SinkResult {
-        self.detector.close_samples(None, &mut self.raised);
+        if let Some(d) = self.detector.as_mut() {
+            d.close_samples(None, &mut self.raised);
+        }
         self.emit()?;
         self.inner.finish(summary)
     }
@@ -1545,6 +1558,22 @@ mod tests {
         a.weather(9 * 600 * S + 3600 * S).unwrap();
         assert_eq!(kinds(&a), [("data_gap", "raised")]);
         assert_eq!(a.inner.0[0].evidence[1], ("gap_s", 3600.0));
+    }
+
+    #[test]
+    fn alerts_off_pass_the_calls_through_and_remember_nothing() {
+        let config = AlertConfig {
+            enabled: false,
+            ..AlertConfig::default()
+        };
+        let mut a = started(config, None);
+        for i in 0..25u64 {
+            let sim = 0.30 + 0.002 * i as f64;
+            a.measurement(&reading(1, 1, "T0", i, 0.4, sim)).unwrap();
+        }
+        a.finish(&RunSummary::default()).unwrap();
+        assert!(a.inner.0.is_empty());
+        assert_eq!(a.memory(), None);
     }
 
     #[test]
