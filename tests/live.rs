@@ -73,12 +73,7 @@ fn logger(input: &Path, output: &Path, hourly: bool) -> Child {
 /// viewer runs), listening once this returns; and the URL to connect to.
 fn rerun_server(save: &Path) -> (Child, String) {
     let python = std::env::var("TORTWIN_PYTHON").unwrap_or_else(|_| "python3".to_owned());
-    // A free port: the system's choice, let go for the server to take.
-    let port = std::net::TcpListener::bind("127.0.0.1:0")
-        .unwrap()
-        .local_addr()
-        .unwrap()
-        .port();
+    let port = free_port();
     let mut child = Command::new(python)
         .args(["-m", "rerun", "--port", &port.to_string(), "--save"])
         .arg(save)
@@ -223,22 +218,107 @@ fn a_recording_followed_while_it_is_written_gives_the_replays_outputs() {
     check_live(&out, &[replayed], None);
 }
 
+/// A free port: the system's choice, let go for a server to take.
+fn free_port() -> u16 {
+    std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port()
+}
+
+/// `python3 tests/python/SCRIPT ARGS`, running.
+fn python_child(script: &str, args: &[&std::ffi::OsStr]) -> Child {
+    let python = std::env::var("TORTWIN_PYTHON").unwrap_or_else(|_| "python3".to_owned());
+    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/python")
+        .join(script);
+    Command::new(python)
+        .arg(path)
+        .args(args)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("python3 runs a script of tests/python")
+}
+
+/// Hourly files appear in a folder while the follower serves Foxglove's
+/// WebSocket protocol: a client (tests/python/foxglove_client.py, the
+/// `websockets` package) subscribed before the first file receives what
+/// the MCAP output holds, and one connecting after the last gets the
+/// section at once.
 #[test]
 fn hourly_recordings_in_a_folder_are_followed_one_after_the_other() {
     let dir = tempfile::tempdir().unwrap();
     let rec = three_days(dir.path());
     let hours = dir.path().join("hours");
-    let writer = logger(&rec, &hours, true);
+    std::fs::create_dir(&hours).unwrap();
     let out = dir.path().join("live");
     let state = dir.path().join("live.state.json");
-    let o = live(&hours, &out)
+    let address = format!("127.0.0.1:{}", free_port());
+    let url = format!("ws://{address}");
+    let follower = live(&hours, &out)
         .arg("--state-out")
         .arg(&state)
-        .args(["--idle-exit-s", "3", "-q"])
-        .output()
+        .args(["--idle-exit-s", "8", "-q", "--foxglove", &address])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
         .unwrap();
-    check(&o, "tortwin live");
+    let received = dir.path().join("received.json");
+    let ready = dir.path().join("subscribed");
+    let client = python_child(
+        "foxglove_client.py",
+        &[
+            url.as_ref(),
+            "--out".as_ref(),
+            received.as_os_str(),
+            "--ready".as_ref(),
+            ready.as_os_str(),
+        ],
+    );
+    let t0 = Instant::now();
+    while !ready.exists() {
+        assert!(
+            t0.elapsed() < Duration::from_secs(60),
+            "the Foxglove client never subscribed"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let writer = logger(&rec, &hours, true);
     finished(writer);
+    // A viewer connecting after the last file (the follower waits 8 s for
+    // another): the section comes when it subscribes.
+    let late = dir.path().join("late.json");
+    let o = python(
+        "foxglove_client.py",
+        &[
+            url.as_ref(),
+            "--out".as_ref(),
+            late.as_os_str(),
+            "--until-section".as_ref(),
+            "--timeout".as_ref(),
+            "6".as_ref(),
+        ],
+    );
+    check(&o, "foxglove_client.py --until-section");
+    check(&follower.wait_with_output().unwrap(), "tortwin live");
+    check(&client.wait_with_output().unwrap(), "foxglove_client.py");
+    let o = python("check_foxglove_ws.py", &[&received, &out]);
+    check(&o, "check_foxglove_ws.py");
+    eprintln!("foxglove: {}", String::from_utf8_lossy(&o.stdout));
+    let late: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&late).unwrap()).unwrap();
+    let all: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&received).unwrap()).unwrap();
+    let last_section = all["messages"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .rfind(|m| m["topic"] == "/twin/section")
+        .unwrap();
+    assert_eq!(late["messages"].as_array().unwrap().len(), 1, "{late}");
+    assert_eq!(&late["messages"][0], last_section);
     // The replays of the hourly files one after the other, each from the
     // state the one before left.
     let parts = mcap_names(&hours);

@@ -38,7 +38,7 @@ use tortwin_engine::sink::{
 };
 use tortwin_engine::{EngineOptions, EngineState};
 use tortwin_files::usage::UsageError;
-use tortwin_outputs::mcap_out::McapSink;
+use tortwin_outputs::mcap_out::{FoxgloveServer, McapSink};
 use tortwin_outputs::provenance::Provenance;
 use tortwin_outputs::rerun_out::{RerunOptions, RerunSink};
 use tortwin_outputs::rerun_sdk;
@@ -54,6 +54,8 @@ use super::replay::{config_name, engine_for, read_state, SavedState};
 pub const CHECKPOINT: &str = "live-checkpoint.json";
 /// Where a rerun viewer listens by default.
 pub const DEFAULT_VIEWER_URL: &str = "rerun+http://127.0.0.1:9876/proxy";
+/// Where `--foxglove` serves by default (Foxglove's usual port).
+pub const DEFAULT_FOXGLOVE_ADDRESS: &str = "127.0.0.1:8765";
 const CHECKPOINT_FORMAT: &str = "tortwin-live-checkpoint";
 const CHECKPOINT_VERSION: u32 = 1;
 
@@ -100,6 +102,15 @@ pub struct LiveArgs {
         arg(long, value_name = "URL", num_args = 0..=1, default_missing_value = DEFAULT_VIEWER_URL)
     )]
     pub connect: Option<String>,
+    /// Serve the MCAP output's channels live over Foxglove's WebSocket
+    /// protocol on HOST:PORT (default 127.0.0.1:8765; 0.0.0.0:8765 for
+    /// other machines): the Foxglove app connects to ws://HOST:PORT and
+    /// shows them with the shipped layout.
+    #[cfg_attr(
+        feature = "cli",
+        arg(long, value_name = "HOST:PORT", num_args = 0..=1, default_missing_value = DEFAULT_FOXGLOVE_ADDRESS)
+    )]
+    pub foxglove: Option<String>,
     /// Start a rerun viewer (the `rerun` program on PATH, e.g. from `pip
     /// install rerun-sdk`) and stream to it, as `--connect` does.
     #[cfg_attr(feature = "cli", arg(long, conflicts_with = "connect"))]
@@ -228,6 +239,21 @@ pub fn live(args: &LiveArgs, on_recording: &mut dyn FnMut(&Followed)) -> Result<
         })
         .transpose()?;
     let url = viewer.as_deref().unwrap_or_default();
+    let foxglove = args
+        .foxglove
+        .as_deref()
+        .map(|address| {
+            let server = FoxgloveServer::start(address)
+                .map_err(|e| UsageError(format!("--foxglove: {e}")))?;
+            if !args.quiet {
+                eprintln!(
+                    "serving Foxglove's WebSocket protocol on ws://{}",
+                    with_port(address, server.port())
+                );
+            }
+            Ok::<_, UsageError>(Arc::new(server))
+        })
+        .transpose()?;
     let result = (|| -> Result<Vec<Followed>> {
         let mut followed = Vec::new();
         loop {
@@ -298,6 +324,12 @@ pub fn live(args: &LiveArgs, on_recording: &mut dyn FnMut(&Followed)) -> Result<
                 Some(&provenance),
                 reader.line().is_some(),
             );
+            if let Some(server) = &foxglove {
+                server
+                    .advertise(reader.line().is_some())
+                    .map_err(|e| UsageError(format!("--foxglove: {e}")))?;
+                mcap = mcap.publishing(server.clone());
+            }
             let memory = super::replay::alert_memory(&reader, start.as_ref())?;
             let mut rrd = stream
                 .as_ref()
@@ -379,7 +411,18 @@ pub fn live(args: &LiveArgs, on_recording: &mut dyn FnMut(&Followed)) -> Result<
     if let Some(rec) = stream {
         RerunSink::let_go(rec, url);
     }
+    if let Some(server) = foxglove.and_then(Arc::into_inner) {
+        server.stop();
+    }
     result
+}
+
+/// `address` with the port the server took (port 0: a free one).
+fn with_port(address: &str, port: u16) -> String {
+    match address.rsplit_once(':') {
+        Some((host, _)) => format!("{host}:{port}"),
+        None => address.to_owned(),
+    }
 }
 
 fn write_checkpoint(path: &Path, checkpoint: &Checkpoint) -> Result<()> {

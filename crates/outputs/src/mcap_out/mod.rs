@@ -39,12 +39,16 @@
 //! failure is a [`McapError`] that names the file.
 
 mod writer;
+mod ws;
+
+pub use ws::{FoxgloveServer, FoxgloveServerError};
 
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::fs::File;
 use std::io::BufWriter;
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
 use serde::ser::{SerializeSeq, Serializer};
 use serde::Serialize;
@@ -151,6 +155,11 @@ pub struct McapSink {
     last_log_time_ns: u64,
     /// Pulses since the last train snapshot, per applicator and rail.
     pulses: Vec<PulseTally>,
+    /// Where every message also goes, as it is written
+    /// ([`McapSink::publishing`]).
+    server: Option<Arc<FoxgloveServer>>,
+    /// A message's bytes for the server and the file.
+    tee: Vec<u8>,
 }
 
 /// An MCAP file being written: under a temporary name until it is finished.
@@ -273,7 +282,17 @@ impl McapSink {
             text: String::new(),
             last_log_time_ns: 0,
             pulses: Vec::new(),
+            server: None,
+            tee: Vec::new(),
         }
+    }
+
+    /// Also sends every message, the same bytes at the same log_time, to
+    /// the clients of a Foxglove WebSocket server (`tortwin live
+    /// --foxglove`), a day already written before a restart included.
+    pub fn publishing(mut self, server: Arc<FoxgloveServer>) -> McapSink {
+        self.server = Some(server);
+        self
     }
 
     /// A daily output's next file: the day of `log_time_ns`, opened with
@@ -301,6 +320,9 @@ impl McapSink {
             file.finish()?;
         }
         self.path = path.clone();
+        if let (Some(server), Some((json, at))) = (&self.server, &section) {
+            server.publish(Topic::Section, *at, json);
+        }
         if path.exists() {
             return Ok(());
         }
@@ -463,17 +485,27 @@ impl McapSink {
         self.last_log_time_ns = self.last_log_time_ns.max(log_time_ns);
         self.next_day(log_time_ns)?;
         let path = &self.path;
+        let json_error = |source| McapError::Json {
+            path: path.to_path_buf(),
+            topic: topic.name(),
+            source,
+        };
+        if let Some(server) = &self.server {
+            self.tee.clear();
+            serde_json::to_writer(&mut self.tee, message).map_err(json_error)?;
+            server.publish(topic, log_time_ns, &self.tee);
+            return match self.file.as_mut() {
+                Some(file) => file.write_raw(topic, log_time_ns, &self.tee),
+                None => Ok(()),
+            };
+        }
         let Some(file) = self.file.as_mut() else {
             // A day written before a restart.
             return Ok(());
         };
         let header = file.header(topic, log_time_ns);
         file.writer.push(header, topic.name(), |bytes| {
-            serde_json::to_writer(bytes, message).map_err(|source| McapError::Json {
-                path: path.to_path_buf(),
-                topic: topic.name(),
-                source,
-            })
+            serde_json::to_writer(bytes, message).map_err(json_error)
         })
     }
 
