@@ -63,11 +63,17 @@ fn run(command: Command) -> Result<()> {
         Command::Live(args) => {
             let quiet = args.quiet;
             let mut said = Ok(());
-            live::live(&args, &mut |followed| {
+            let mut on_recording = |followed: &live::Followed| {
                 if !quiet && said.is_ok() {
                     said = say(&live::render_followed(followed));
                 }
-            })?;
+            };
+            let hooks = live::LiveHooks {
+                on_recording: &mut on_recording,
+                on_line: None,
+                stop: None,
+            };
+            live::live(&args, hooks)?;
             said?;
         }
         Command::Import(args) => {

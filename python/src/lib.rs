@@ -513,6 +513,124 @@ fn merge(py: Python<'_>, argv: Vec<String>) -> PyResult<u64> {
     run_job(py, move |progress| jobs::recordings::merge(&args, progress))
 }
 
+/// What a follow sends the iterator: a JSON line, or the follow's end.
+enum Followed {
+    Line(String),
+    End(Result<(), Error>),
+}
+
+/// `tortwin live ARGV` on a thread of its own, as an iterator of JSON
+/// lines: each train's rail band and each alert (`--json`'s lines) as they
+/// come out, and `{"kind": "recording", ...}` per recording finished.
+#[pyclass(module = "tortwin._native")]
+struct Live {
+    lines: std::sync::Mutex<mpsc::Receiver<Followed>>,
+    stop: Arc<AtomicBool>,
+    worker: std::sync::Mutex<Option<std::thread::JoinHandle<()>>>,
+}
+
+/// Starts `tortwin live ARGV` (see [`Live`]).
+#[pyfunction]
+#[pyo3(signature = (argv, config=None))]
+fn live(argv: Vec<String>, config: Option<(String, String, String)>) -> PyResult<Live> {
+    let Command::Live(mut args) = parse(argv)? else {
+        return Err(PyRuntimeError::new_err("not a live command"));
+    };
+    if let Some(source) = config_source(config)? {
+        args.config = Some(source);
+    }
+    let stop = Arc::new(AtomicBool::new(false));
+    let (tx, rx) = mpsc::channel();
+    let thread_stop = stop.clone();
+    let worker = std::thread::Builder::new()
+        .name("tortwin-live".into())
+        .spawn(move || {
+            // A receiver that is gone (the iterator dropped) stops the follow.
+            let send = |followed: Followed| {
+                if tx.send(followed).is_err() {
+                    thread_stop.store(true, Ordering::Relaxed);
+                }
+            };
+            let mut on_line = |line: &str| send(Followed::Line(line.to_owned()));
+            let mut on_recording = |f: &jobs::live::Followed| {
+                let line = serde_json::json!({
+                    "kind": "recording",
+                    "recording": f.recording.display().to_string(),
+                    "trains": f.trains,
+                    "measurements": f.measurements,
+                });
+                send(Followed::Line(line.to_string()));
+            };
+            let hooks = jobs::live::LiveHooks {
+                on_recording: &mut on_recording,
+                on_line: Some(&mut on_line),
+                stop: Some(thread_stop.clone()),
+            };
+            let result = jobs::live::live(&args, hooks).map(|_| ());
+            send(Followed::End(result));
+        })
+        .map_err(|e| TortwinError::new_err(format!("cannot start the follower's thread: {e}")))?;
+    Ok(Live {
+        lines: std::sync::Mutex::new(rx),
+        stop,
+        worker: std::sync::Mutex::new(Some(worker)),
+    })
+}
+
+#[pymethods]
+impl Live {
+    /// The next line, waiting for it without the GIL (Ctrl-C stops the
+    /// follow and raises KeyboardInterrupt); `None` once the follow ended.
+    fn next(&self, py: Python<'_>) -> PyResult<Option<String>> {
+        loop {
+            let received = py.detach(|| {
+                let lines = self.lines.lock().unwrap_or_else(|e| e.into_inner());
+                lines.recv_timeout(Duration::from_millis(100))
+            });
+            match received {
+                Ok(Followed::Line(line)) => return Ok(Some(line)),
+                Ok(Followed::End(result)) => {
+                    self.join(py);
+                    return result.map(|()| None).map_err(to_py);
+                }
+                Err(mpsc::RecvTimeoutError::Timeout) => {
+                    if let Err(interrupt) = py.check_signals() {
+                        self.close(py);
+                        return Err(interrupt);
+                    }
+                }
+                Err(mpsc::RecvTimeoutError::Disconnected) => {
+                    self.join(py);
+                    return Ok(None);
+                }
+            }
+        }
+    }
+
+    /// Stops the follow (as a SIGKILL would: the checkpoint and the day
+    /// files in place stay) and waits for its thread.
+    fn close(&self, py: Python<'_>) {
+        self.stop.store(true, Ordering::Relaxed);
+        self.join(py);
+    }
+}
+
+impl Live {
+    fn join(&self, py: Python<'_>) {
+        let worker = self.worker.lock().unwrap_or_else(|e| e.into_inner()).take();
+        if let Some(worker) = worker {
+            let _ = py.detach(move || worker.join());
+        }
+    }
+}
+
+impl Drop for Live {
+    fn drop(&mut self) {
+        // Dropped without close(): the follow stops at its next poll.
+        self.stop.store(true, Ordering::Relaxed);
+    }
+}
+
 /// The version of the library crates the module was built from.
 #[pyfunction]
 fn version() -> &'static str {
@@ -530,6 +648,8 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(strategy, m)?)?;
     m.add_function(wrap_pyfunction!(split, m)?)?;
     m.add_function(wrap_pyfunction!(merge, m)?)?;
+    m.add_function(wrap_pyfunction!(live, m)?)?;
+    m.add_class::<Live>()?;
     m.add_function(wrap_pyfunction!(version, m)?)?;
     Ok(())
 }

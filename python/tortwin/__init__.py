@@ -33,7 +33,7 @@ from __future__ import annotations
 import json
 import os
 import tempfile
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass, field as dataclass_field
 from pathlib import Path
 from typing import Any, Union
@@ -54,6 +54,7 @@ __all__ = [
     "TortwinError",
     "calibrate",
     "discover",
+    "live",
     "replay",
     "strategy",
     "synth",
@@ -264,6 +265,68 @@ def replay(
         state=State(state),
         per_train=_table(per_train_ipc) if per_train_ipc is not None else None,
     )
+
+
+def live(
+    input: PathLike,
+    out_dir: PathLike,
+    config: Config = None,
+    *,
+    state_in: PathLike | None = None,
+    state_out: PathLike | None = None,
+    poll_ms: int | None = None,
+    max_delay_s: float | None = None,
+    abandon_s: float | None = None,
+    idle_exit_s: float | None = None,
+    connect: str | bool = False,
+    foxglove: str | bool = False,
+) -> Iterator[dict[str, Any]]:
+    """Follows a recording while a logger writes it, or a folder in which
+    its files appear, as ``tortwin live`` does (the same outputs in
+    ``out_dir``, the same checkpoint: a follow stopped and started again
+    continues), and yields what comes out as it comes, as dicts:
+
+    ``{"kind": "train", ...}``
+        A train's rail band once its field is out: ``train_id``,
+        ``log_time_ns`` (the train's end), ``rail``, ``band``,
+        ``wheel_pass``, ``mu_min`` and ``mu_mean``, ``below_band_m`` and
+        ``above_band_m`` (``live --json``'s line).
+    ``{"kind": "alert", "log_time_ns", "alert": {...}}``
+        An alert raised or cleared (the ``/twin/alert`` message, with its
+        evidence).
+    ``{"kind": "recording", "recording", "trains", "measurements"}``
+        A recording finished (its state is checkpointed).
+
+    The iterator ends with the input: a file at its end, a folder after
+    ``idle_exit_s`` without a new file (default: never). Leaving the loop
+    (``break``, Ctrl-C, the generator collected) stops the follow as a
+    kill would: what was checkpointed stays. ``connect`` (True or a URL)
+    streams to a rerun viewer, ``foxglove`` (True or ``"HOST:PORT"``)
+    serves the Foxglove app, as ``--connect`` and ``--foxglove`` do. A
+    :class:`State` to start from is passed as a file (:meth:`State.save`).
+    """
+    argv = ["live", os.fspath(input), "--out-dir", os.fspath(out_dir), "--quiet"]
+    argv += _options(
+        dict(
+            state_in=state_in,
+            state_out=state_out,
+            poll_ms=poll_ms,
+            max_delay_s=max_delay_s,
+            abandon_s=abandon_s,
+            idle_exit_s=idle_exit_s,
+        )
+    )
+    for flag, value in (("--connect", connect), ("--foxglove", foxglove)):
+        if value is True:
+            argv.append(flag)
+        elif value:
+            argv += [flag, str(value)]
+    follower = _native.live(argv, _config(config))
+    try:
+        while (line := follower.next()) is not None:
+            yield json.loads(line)
+    finally:
+        follower.close()
 
 
 def synth(

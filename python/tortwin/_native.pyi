@@ -49,5 +49,18 @@ def split(argv: list[str]) -> list[tuple[str, str]]:
 def merge(argv: list[str]) -> int:
     """``tortwin merge ARGV``: the messages written."""
 
+class Live:
+    """``tortwin live ARGV`` following on a thread of its own."""
+
+    def next(self) -> str | None:
+        """The next JSON line (a train's rail band, an alert, a recording
+        finished), waiting for it; ``None`` once the follow ended."""
+
+    def close(self) -> None:
+        """Stops the follow and waits for its thread."""
+
+def live(argv: list[str], config: Config | None = None) -> Live:
+    """Starts ``tortwin live ARGV``: its lines come from :meth:`Live.next`."""
+
 def version() -> str:
     """The version of the library crates the module was built from."""

@@ -363,3 +363,59 @@ def test_synth_of_a_line_writes_what_the_command_line_writes(tmp_path, tortwin_b
     assert cli.returncode == 0, cli.stderr
     assert (tmp_path / "py.mcap").read_bytes() == (tmp_path / "cli.mcap").read_bytes()
     assert key["params"]["line"]["line_id"] == "demo-10km"
+
+
+CLOGGED = (
+    "generic:acts_on=pulse_mass,applicator=A1,driver=time,form=step,"
+    "t0_utc=2024-04-09T00:00:00Z,f=0.3"
+)
+
+
+def test_live_yields_the_lines_the_command_line_prints(tmp_path, tortwin_bin):
+    """tortwin.live over a finished 3-day recording with a clogged nozzle:
+    every train's rail band and the alert, as `live --json` prints them,
+    then the recording; the outputs are the command line's."""
+    rec = tmp_path / "rec.mcap"
+    tortwin.synth(rec, days=3, seed=3, hidden=[CLOGGED])
+    cli = run_cli(tortwin_bin, "live", rec, "--out-dir", tmp_path / "cli", "--json", "-q")
+    assert cli.returncode == 0, cli.stderr
+    printed = [json.loads(line) for line in cli.stdout.splitlines() if line.startswith("{")]
+    got = list(tortwin.live(rec, tmp_path / "py"))
+    assert got[-1] == {
+        "kind": "recording",
+        "recording": str(rec),
+        "trains": 120,
+        "measurements": got[-1]["measurements"],
+    }
+    assert got[:-1] == printed
+    kinds = [item["kind"] for item in printed]
+    assert kinds.count("train") == 240 and kinds.count("alert") == 1
+    alert = next(item for item in printed if item["kind"] == "alert")
+    assert alert["alert"]["kind"] == "applicator_fade"
+    for name in ("rec.2024-04-08.mcap", "rec.2024-04-09.mcap", "rec.2024-04-10.mcap"):
+        py, cl = tmp_path / "py" / name, tmp_path / "cli" / name
+        with open(py, "rb") as a, open(cl, "rb") as b:
+            ours = [(c.topic, m.log_time, m.data) for _, c, m in make_reader(a).iter_messages()]
+            theirs = [(c.topic, m.log_time, m.data) for _, c, m in make_reader(b).iter_messages()]
+        assert ours == theirs, name
+
+
+def test_leaving_a_live_loop_stops_the_follow(tmp_path):
+    """A folder is followed for ever; breaking out of the loop after its
+    first file stops the follower within a poll, its checkpoint kept."""
+    folder = tmp_path / "in"
+    folder.mkdir()
+    tortwin.synth(folder / "a.mcap", days=1, seed=5, trains_per_day=6, length_m=300.0)
+    follow = tortwin.live(folder, tmp_path / "out")
+    for item in follow:
+        if item["kind"] == "recording":
+            break
+    import threading
+
+    closing = threading.Thread(target=follow.close, daemon=True)
+    closing.start()
+    closing.join(timeout=10)
+    assert not closing.is_alive(), "the follower did not stop"
+    checkpoint = json.loads((tmp_path / "out" / "live-checkpoint.json").read_text())
+    assert checkpoint["done"] == ["a.mcap"]
+    assert (tmp_path / "out" / "a.2024-04-08.mcap").exists()

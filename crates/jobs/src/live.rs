@@ -151,10 +151,37 @@ pub struct Followed {
     pub measurements: u64,
 }
 
-/// Follows `args.input` (see the module documentation); `on_recording` is
-/// told of each recording finished. Returns when the input ends: a file at
-/// its end, a folder after `idle_exit_s` without a new recording.
-pub fn live(args: &LiveArgs, on_recording: &mut dyn FnMut(&Followed)) -> Result<Vec<Followed>> {
+/// What the caller of [`live`] is told as the follow goes, and how it
+/// stops it.
+pub struct LiveHooks<'a> {
+    /// Each recording finished.
+    pub on_recording: &'a mut dyn FnMut(&Followed),
+    /// Each JSON line of a train's rail band or an alert (`--json`'s
+    /// lines, [`alert_line`]); `None`: printed on stdout with `--json`.
+    pub on_line: Option<&'a mut dyn FnMut(&str)>,
+    /// Set from another thread to stop: the follow ends as a SIGKILL would
+    /// end it (the checkpoint is the last finished recording's, the day
+    /// files in place stay), and [`live`] returns what was finished.
+    pub stop: Option<Arc<AtomicBool>>,
+}
+
+/// Follows `args.input` (see the module documentation), telling `hooks`
+/// as it goes. Returns when the input ends (a file at its end, a folder
+/// after `idle_exit_s` without a new recording) or `hooks.stop` is set.
+pub fn live(args: &LiveArgs, hooks: LiveHooks<'_>) -> Result<Vec<Followed>> {
+    let LiveHooks {
+        on_recording,
+        mut on_line,
+        stop,
+    } = hooks;
+    let stop = stop.unwrap_or_default();
+    let mut print = |line: &str| print_line(line);
+    let on_line: Option<&mut dyn FnMut(&str)> = match on_line.take() {
+        Some(f) => Some(f),
+        None if args.json => Some(&mut print),
+        None => None,
+    };
+    let mut on_line = on_line;
     let _inputs = tortwin_outputs::files::InputScope::enter();
     let cfg = load_config(args.config.as_ref())?;
     let alerts = super::load_alerts(args.config.as_ref())?;
@@ -212,6 +239,7 @@ pub fn live(args: &LiveArgs, on_recording: &mut dyn FnMut(&Followed)) -> Result<
     }
     let follow = Follow {
         max_delay: Duration::from_secs_f64(args.max_delay_s),
+        stop: stop.clone(),
         ..Follow::new(Duration::from_millis(args.poll_ms.max(1)))
     };
     let provenance = Provenance::of_run(
@@ -254,13 +282,13 @@ pub fn live(args: &LiveArgs, on_recording: &mut dyn FnMut(&Followed)) -> Result<
             Ok::<_, UsageError>(Arc::new(server))
         })
         .transpose()?;
-    let result = (|| -> Result<Vec<Followed>> {
-        let mut followed = Vec::new();
+    let mut followed = Vec::new();
+    let result = (|| -> Result<()> {
         loop {
             let next = match folder {
                 false if checkpoint.done.is_empty() => Some(args.input.clone()),
                 false => None,
-                true => next_in_folder(&args.input, checkpoint.done.last(), args, &follow)?,
+                true => next_in_folder(&args.input, checkpoint.done.last(), args, &follow, &stop)?,
             };
             let Some(recording) = next else {
                 break;
@@ -337,14 +365,14 @@ pub fn live(args: &LiveArgs, on_recording: &mut dyn FnMut(&Followed)) -> Result<
                     RerunSink::on_stream(rec.clone(), url, stream_options(file_name(&recording)))
                 })
                 .transpose()?;
-            let mut lines = TrainLines;
+            let mut lines = on_line.as_mut().map(|out| TrainLines { out: &mut **out });
             let mut fanout: Fanout<&mut dyn Sink> = Fanout::default();
             fanout.sinks.push(&mut mcap);
             if let Some(s) = rrd.as_mut() {
                 fanout.sinks.push(s);
             }
-            if args.json {
-                fanout.sinks.push(&mut lines);
+            if let Some(lines) = lines.as_mut() {
+                fanout.sinks.push(lines);
             }
             if let Some(p) = poster.as_mut() {
                 fanout.sinks.push(p);
@@ -406,8 +434,15 @@ pub fn live(args: &LiveArgs, on_recording: &mut dyn FnMut(&Followed)) -> Result<
             on_recording(&done);
             followed.push(done);
         }
-        Ok(followed)
+        Ok(())
     })();
+    // Stopped by the caller: what was finished (the reader's error only
+    // says it was stopped).
+    let result = match result {
+        Err(_) if stop.load(Ordering::Relaxed) => Ok(followed),
+        Err(e) => Err(e),
+        Ok(()) => Ok(followed),
+    };
     if let Some(rec) = stream {
         RerunSink::let_go(rec, url);
     }
@@ -448,9 +483,13 @@ fn next_in_folder(
     last: Option<&String>,
     args: &LiveArgs,
     follow: &Follow,
+    stop: &AtomicBool,
 ) -> Result<Option<PathBuf>> {
     let since = Instant::now();
     loop {
+        if stop.load(Ordering::Relaxed) {
+            return Ok(None);
+        }
         let entries = std::fs::read_dir(folder).map_err(|e| {
             InputError::file(folder, format!("cannot list the recordings' folder: {e}"))
         })?;
@@ -546,9 +585,11 @@ pub fn render_followed(f: &Followed) -> String {
     )
 }
 
-/// `--json`: a line on stdout per train and rail band as its field comes
-/// out, and per alert, flushed at once.
-struct TrainLines;
+/// `--json`: a line per train and rail band as its field comes out, and
+/// per alert (on stdout, flushed at once, or to [`LiveHooks::on_line`]).
+struct TrainLines<'a> {
+    out: &'a mut dyn FnMut(&str),
+}
 
 /// An alert's line (`--json`, and the body `[alerts] post_url` is sent):
 /// `{"kind": "alert", "log_time_ns", "alert": {the /twin/alert message}}`.
@@ -576,9 +617,9 @@ fn print_line(line: &str) {
     let _ = writeln!(out, "{line}").and_then(|()| out.flush());
 }
 
-impl Sink for TrainLines {
+impl Sink for TrainLines<'_> {
     fn alert(&mut self, alert: &Alert) -> SinkResult {
-        print_line(&alert_line(alert)?);
+        (self.out)(&alert_line(alert)?);
         Ok(())
     }
 
@@ -617,7 +658,7 @@ impl Sink for TrainLines {
             "below_band_m": below_m,
             "above_band_m": above_m,
         });
-        print_line(&line.to_string());
+        (self.out)(&line.to_string());
         Ok(())
     }
 }
