@@ -511,13 +511,7 @@ impl Detector {
     fn begin(&mut self, info: &SectionInfo<'_>) {
         let s = &info.section;
         let d = info.grid_d_m.to_vec();
-        let width_m = (0..d.len())
-            .map(|k| {
-                let before = if k > 0 { d[k] - d[k - 1] } else { 0.0 };
-                let after = d.get(k + 1).map_or(0.0, |x| x - d[k]);
-                (before + after) / 2.0
-            })
-            .collect();
+        let width_m = (0..d.len()).map(|k| point_width_m(&d, k)).collect();
         let applicators: Vec<_> = s
             .applicators
             .iter()
@@ -1282,6 +1276,14 @@ fn median(values: &mut [f64]) -> f64 {
 /// A log_time as UTC (RFC 3339), for a message.
 fn utc(ns: u64) -> String {
     tortwin_model::config::terms::format_utc(ns as f64 * 1e-9)
+}
+
+/// The track grid point `k` of `d_m` stands for: half the way to each
+/// neighbour (what the band alerts and `live --json`'s lengths add up).
+pub fn point_width_m(d_m: &[f64], k: usize) -> f64 {
+    let before = if k > 0 { d_m[k] - d_m[k - 1] } else { 0.0 };
+    let after = d_m.get(k + 1).map_or(0.0, |x| x - d_m[k]);
+    (before + after) / 2.0
 }
 
 #[cfg(test)]

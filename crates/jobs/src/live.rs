@@ -629,11 +629,7 @@ impl Sink for TrainLines<'_> {
         }
         let [lower, upper] = tortwin_outputs::scale::TARGET_BAND;
         // Each grid point stands for the track halfway to its neighbours.
-        let width = |k: usize| {
-            let before = if k > 0 { f.d_m[k] - f.d_m[k - 1] } else { 0.0 };
-            let after = f.d_m.get(k + 1).map_or(0.0, |d| d - f.d_m[k]);
-            (before + after) / 2.0
-        };
+        let width = |k: usize| tortwin_engine::alerts::point_width_m(&f.d_m, k);
         let (mut n, mut sum, mut min) = (0usize, 0.0, f64::INFINITY);
         let (mut below_m, mut above_m) = (0.0, 0.0);
         for (k, &mu) in f.mu.iter().enumerate().filter(|(_, mu)| mu.is_finite()) {
