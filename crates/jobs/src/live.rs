@@ -191,7 +191,36 @@ pub fn live(args: &LiveArgs, hooks: LiveHooks<'_>) -> Result<Vec<Followed>> {
         .filter(|_| alerts.enabled)
         .map(crate::alert_post::AlertPoster::start);
     let source = config_name(args.config.as_ref());
+    if !(args.abandon_s.is_finite() && (0.0..=31_536_000.0).contains(&args.abandon_s)) {
+        return Err(UsageError(format!(
+            "--abandon-s {} is not a duration of 0 to a year in s",
+            args.abandon_s
+        ))
+        .into());
+    }
+    if !(args.max_delay_s.is_finite() && (0.0..=86_400.0).contains(&args.max_delay_s)) {
+        return Err(UsageError(format!(
+            "--max-delay-s {} is not a delay of 0 to 86400 s",
+            args.max_delay_s
+        ))
+        .into());
+    }
     tortwin_outputs::files::make_folder(&args.out_dir)?;
+    let foxglove = args
+        .foxglove
+        .as_deref()
+        .map(|address| {
+            let server = FoxgloveServer::start(address)
+                .map_err(|e| UsageError(format!("--foxglove: {e}")))?;
+            if !args.quiet {
+                eprintln!(
+                    "serving Foxglove's WebSocket protocol on ws://{}",
+                    with_port(address, server.port())
+                );
+            }
+            Ok::<_, UsageError>(Arc::new(server))
+        })
+        .transpose()?;
     let viewer = match (args.spawn, &args.connect) {
         (true, _) => {
             rerun_sdk::spawn(&rerun_sdk::SpawnOptions::default()).map_err(|e| {
@@ -223,20 +252,6 @@ pub fn live(args: &LiveArgs, hooks: LiveHooks<'_>) -> Result<Vec<Followed>> {
         }
     };
     let folder = args.input.is_dir();
-    if !(args.abandon_s.is_finite() && (0.0..=31_536_000.0).contains(&args.abandon_s)) {
-        return Err(UsageError(format!(
-            "--abandon-s {} is not a duration of 0 to a year in s",
-            args.abandon_s
-        ))
-        .into());
-    }
-    if !(args.max_delay_s.is_finite() && (0.0..=86_400.0).contains(&args.max_delay_s)) {
-        return Err(UsageError(format!(
-            "--max-delay-s {} is not a delay of 0 to 86400 s",
-            args.max_delay_s
-        ))
-        .into());
-    }
     let follow = Follow {
         max_delay: Duration::from_secs_f64(args.max_delay_s),
         stop: stop.clone(),
@@ -267,21 +282,6 @@ pub fn live(args: &LiveArgs, hooks: LiveHooks<'_>) -> Result<Vec<Followed>> {
         })
         .transpose()?;
     let url = viewer.as_deref().unwrap_or_default();
-    let foxglove = args
-        .foxglove
-        .as_deref()
-        .map(|address| {
-            let server = FoxgloveServer::start(address)
-                .map_err(|e| UsageError(format!("--foxglove: {e}")))?;
-            if !args.quiet {
-                eprintln!(
-                    "serving Foxglove's WebSocket protocol on ws://{}",
-                    with_port(address, server.port())
-                );
-            }
-            Ok::<_, UsageError>(Arc::new(server))
-        })
-        .transpose()?;
     let mut followed = Vec::new();
     let result = (|| -> Result<()> {
         loop {
