@@ -171,17 +171,16 @@ pub struct LiveHooks<'a> {
 pub fn live(args: &LiveArgs, hooks: LiveHooks<'_>) -> Result<Vec<Followed>> {
     let LiveHooks {
         on_recording,
-        mut on_line,
+        on_line,
         stop,
     } = hooks;
     let stop = stop.unwrap_or_default();
     let mut print = |line: &str| print_line(line);
-    let on_line: Option<&mut dyn FnMut(&str)> = match on_line.take() {
+    let mut on_line: Option<&mut dyn FnMut(&str)> = match on_line {
         Some(f) => Some(f),
         None if args.json => Some(&mut print),
         None => None,
     };
-    let mut on_line = on_line;
     let _inputs = tortwin_outputs::files::InputScope::enter();
     let cfg = load_config(args.config.as_ref())?;
     let alerts = super::load_alerts(args.config.as_ref())?;
