@@ -212,10 +212,7 @@ pub fn live(args: &LiveArgs, hooks: LiveHooks<'_>) -> Result<Vec<Followed>> {
             let server = FoxgloveServer::start(address)
                 .map_err(|e| UsageError(format!("--foxglove: {e}")))?;
             if !args.quiet {
-                eprintln!(
-                    "serving Foxglove's WebSocket protocol on ws://{}",
-                    with_port(address, server.port())
-                );
+                eprintln!("serving Foxglove's WebSocket protocol on {}", server.url());
             }
             Ok::<_, UsageError>(Arc::new(server))
         })
@@ -449,14 +446,6 @@ pub fn live(args: &LiveArgs, hooks: LiveHooks<'_>) -> Result<Vec<Followed>> {
         server.stop();
     }
     result
-}
-
-/// `address` with the port the server took (port 0: a free one).
-fn with_port(address: &str, port: u16) -> String {
-    match address.rsplit_once(':') {
-        Some((host, _)) => format!("{host}:{port}"),
-        None => address.to_owned(),
-    }
 }
 
 fn write_checkpoint(path: &Path, checkpoint: &Checkpoint) -> Result<()> {

@@ -406,12 +406,12 @@ impl McapFile {
         let no_metadata = BTreeMap::new();
         let mut channel_ids = [0; Topic::ALL.len()];
         for topic in Topic::ALL {
-            let schema = match topic {
-                Topic::Field if line => LINE_FIELD_SCHEMA,
-                _ => topic.schema(),
-            };
             let schema_id = writer
-                .add_schema(topic.schema_name(), "jsonschema", schema.as_bytes())
+                .add_schema(
+                    topic.schema_name(),
+                    "jsonschema",
+                    topic.schema(line).as_bytes(),
+                )
                 .map_err(mcap_error(&format!(
                     "adding the schema of {}",
                     topic.name()
@@ -1281,8 +1281,11 @@ impl Topic {
 
     /// The JSON Schema (draft 2020-12) of the channel's messages. Extra
     /// properties are allowed so that readers keep working when a field is added.
-    fn schema(self) -> &'static str {
+    /// `line`: the recording is a line, whose `/twin/field` has
+    /// [`LINE_FIELD_SCHEMA`].
+    fn schema(self, line: bool) -> &'static str {
         match self {
+            Topic::Field if line => LINE_FIELD_SCHEMA,
             Topic::Section => SECTION_SCHEMA,
             Topic::Train => TRAIN_SCHEMA,
             Topic::Pulse => PULSE_SCHEMA,

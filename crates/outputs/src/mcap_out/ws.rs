@@ -13,7 +13,7 @@ use std::sync::{Arc, Mutex, PoisonError};
 use foxglove::websocket::{ChannelView, Client, ServerListener};
 use foxglove::{Context, PartialMetadata, RawChannel, Schema, WebSocketServerHandle};
 
-use super::{Topic, LINE_FIELD_SCHEMA};
+use super::Topic;
 
 /// Messages queued per client before the oldest are dropped (a viewer too
 /// slow to keep up loses old trains, not the twin's time). A train is
@@ -27,6 +27,7 @@ const LINGER: std::time::Duration = std::time::Duration::from_secs(2);
 /// A Foxglove WebSocket server publishing the MCAP output's channels.
 pub struct FoxgloveServer {
     address: String,
+    host: String,
     context: Arc<Context>,
     handle: Option<WebSocketServerHandle>,
     shared: Arc<Shared>,
@@ -87,6 +88,7 @@ impl FoxgloveServer {
             .map_err(|e| error(e.to_string()))?;
         let server = FoxgloveServer {
             address: address.to_owned(),
+            host: host.to_owned(),
             context,
             handle: Some(handle),
             shared,
@@ -95,13 +97,17 @@ impl FoxgloveServer {
         Ok(server)
     }
 
-    /// The port it listens on.
-    pub fn port(&self) -> u16 {
-        self.handle.as_ref().map_or(0, WebSocketServerHandle::port)
+    /// Where clients connect: `ws://HOST:PORT`, with the port it took.
+    pub fn url(&self) -> String {
+        let port = self.handle.as_ref().map_or(0, WebSocketServerHandle::port);
+        match self.host.contains(':') {
+            true => format!("ws://[{}]:{port}", self.host),
+            false => format!("ws://{}:{port}", self.host),
+        }
     }
 
     /// Advertises the channels for a recording of a section, or of a line
-    /// (`line`: `/twin/field` with a line's schema, [`LINE_FIELD_SCHEMA`]):
+    /// (`line`: `/twin/field` with a line's schema, [`super::LINE_FIELD_SCHEMA`]):
     /// all of them the first time (when the server starts, so that viewers
     /// can subscribe before the first recording), and `/twin/field` again
     /// when a recording of the other kind follows.
@@ -111,17 +117,13 @@ impl FoxgloveServer {
             return Ok(());
         }
         let build = |topic: Topic| {
-            let schema = match topic {
-                Topic::Field if line => LINE_FIELD_SCHEMA,
-                _ => topic.schema(),
-            };
             self.context
                 .channel_builder(topic.name())
                 .message_encoding("json")
                 .schema(Schema::new(
                     topic.schema_name(),
                     "jsonschema",
-                    schema.as_bytes(),
+                    topic.schema(line).as_bytes(),
                 ))
                 .build_raw()
         };
