@@ -107,17 +107,29 @@ pub unsafe fn exp4_inline(x: [f64; 4]) -> [f64; 4] {
     let tmp = _mm256_fmadd_pd(p23, r2, _mm256_add_pd(r, tail));
     let tmp = _mm256_fmadd_pd(_mm256_mul_pd(r2, r2), p45, tmp);
     let scale = _mm256_castsi256_pd(sbits);
+    // glibc's special cases, told apart by the top 12 bits of |x|: tiny
+    // |x| (zero included, common: a clean wheel on a clean rail) is
+    // `1 + x`, in the register; |x| >= 512, infinities and NaN go to
+    // `f64::exp`, lane by lane (rare: the lanes are looked at only then).
+    let abstop = _mm256_and_si256(
+        _mm256_srli_epi64::<52>(_mm256_castpd_si256(xv)),
+        _mm256_set1_epi64x(0x7ff),
+    );
+    let tiny = _mm256_cmpgt_epi64(_mm256_set1_epi64x(TOP_TINY as i64), abstop);
+    let large = _mm256_cmpgt_epi64(abstop, _mm256_set1_epi64x((TOP_TINY + TOP_SPAN - 1) as i64));
+    let result = _mm256_blendv_pd(
+        _mm256_fmadd_pd(scale, tmp, scale),
+        _mm256_add_pd(_mm256_set1_pd(1.0), xv),
+        _mm256_castsi256_pd(tiny),
+    );
     let mut out = [0.0; 4];
-    _mm256_storeu_pd(out.as_mut_ptr(), _mm256_fmadd_pd(scale, tmp, scale));
-    // glibc's special cases: tiny |x| (zero included, common: a clean
-    // wheel on a clean rail) is `1 + x`; |x| >= 512, infinities and NaN go
-    // to `f64::exp`.
-    for (o, &xi) in out.iter_mut().zip(&x) {
-        let abstop = (xi.to_bits() >> 52) & 0x7ff;
-        if abstop < TOP_TINY {
-            *o = 1.0 + xi;
-        } else if abstop >= TOP_TINY + TOP_SPAN {
-            *o = xi.exp();
+    _mm256_storeu_pd(out.as_mut_ptr(), result);
+    let large = _mm256_movemask_pd(_mm256_castsi256_pd(large));
+    if large != 0 {
+        for (j, (o, &xi)) in out.iter_mut().zip(&x).enumerate() {
+            if large & (1 << j) != 0 {
+                *o = xi.exp();
+            }
         }
     }
     out
