@@ -20,7 +20,7 @@ use tortwin_model::effects::{self, Named, TimeEffects};
 use tortwin_model::exp::exp4_inline;
 use tortwin_model::exp::exp4_is_vectorised;
 use tortwin_model::generic::ActsOn;
-use tortwin_model::product::{self, ContactConditions, ProductParams};
+use tortwin_model::product::{self, ContactConditions, ContactLosses, ProductParams};
 use tortwin_model::tangent::{
     self, effect_slot, ConditionTangents, EffectParam, Tangent, EFFECT_SLOTS, SLOTS,
 };
@@ -111,6 +111,12 @@ struct Roller {
     consumption_generic_d: [f64; EFFECT_SLOTS],
     /// The air temperature of `temperature_factor` (when that is constant).
     temperature_c: f64,
+    /// The consumption factor of every contact, when nothing in it
+    /// changes along the path: computed once, as [`Roller::conditions`]
+    /// would compute it at each contact.
+    consumption_constant: Option<f64>,
+    /// A time effect is on ([`TimeEffects::any`], asked once).
+    ages: bool,
 }
 
 impl Roller {
@@ -330,7 +336,7 @@ impl Roller {
             weather,
             precip_mm,
             rail_kg: track.rail_mass_kg[i],
-            aged: self.time_effects.any() && !last.is_nan(),
+            aged: self.ages && !last.is_nan(),
             dt_s: t - last,
             rain_mm: precip_mm - track.precip_at_touch_mm[i],
         }
@@ -369,16 +375,10 @@ impl Roller {
         if self.transfer_varies {
             transfer_factor *= self.event_factor(ActsOn::Transfer, t, weather);
         }
-        let mut consumption_factor = match (self.temperature_factor, self.temperature_beta) {
-            (Some(constant), _) => constant,
-            (None, Some(beta)) => {
-                effects::temperature_factor(weather.current.air_temperature_c, beta)
-            }
-            (None, None) => 1.0,
-        } * self.consumption_generic;
-        if self.consumption_varies {
-            consumption_factor *= self.event_factor(ActsOn::Consumption, t, weather);
-        }
+        let consumption_factor = match self.consumption_constant {
+            Some(constant) => constant,
+            None => self.consumption_factor(t, weather),
+        };
         ContactConditions {
             fp_fc: self.fp_fc,
             transfer_revolution: st
@@ -386,6 +386,24 @@ impl Roller {
                 .map(|ia| revolution[i.abs_diff(ia)] * transfer_factor),
             consumption_factor,
         }
+    }
+
+    /// The consumption's effect factor at a contact at `t` under
+    /// `weather`: temperature_consumption's, then the generic terms'
+    /// driven by the wheel and by time or weather.
+    #[inline(always)]
+    fn consumption_factor(&self, t: f64, weather: &super::weather::WeatherState) -> f64 {
+        let mut factor = match (self.temperature_factor, self.temperature_beta) {
+            (Some(constant), _) => constant,
+            (None, Some(beta)) => {
+                effects::temperature_factor(weather.current.air_temperature_c, beta)
+            }
+            (None, None) => 1.0,
+        } * self.consumption_generic;
+        if self.consumption_varies {
+            factor *= self.event_factor(ActsOn::Consumption, t, weather);
+        }
+        factor
     }
 
     /// Step 2 (what a measurement of this contact sees, returned), steps 3
@@ -403,18 +421,34 @@ impl Roller {
         exps: Option<[f64; 2]>,
         i: usize,
     ) -> f64 {
+        let mut wheel_kg = st.wheel_kg;
         let mut rail_kg = touch.rail_kg;
-        let m_kg = st.wheel_kg + rail_kg;
+        let m_kg = wheel_kg + rail_kg;
         let losses = match exps {
-            Some(exps) => product::roll_given(
-                &self.params,
-                &mut st.wheel_kg,
-                &mut rail_kg,
-                conditions,
-                exps,
-            ),
-            None => product::roll(&self.params, &mut st.wheel_kg, &mut rail_kg, conditions),
+            Some(exps) => {
+                product::roll_given(&self.params, &mut wheel_kg, &mut rail_kg, conditions, exps)
+            }
+            None => product::roll(&self.params, &mut wheel_kg, &mut rail_kg, conditions),
         };
+        self.rolled(st, track, observed, m_kg, (wheel_kg, rail_kg), losses, i)
+    }
+
+    /// What follows steps 3 to 5 (their masses and losses given): the
+    /// losses to the wheel's totals, step 6 (wheel-side effects), the rail
+    /// mass stored and what is observed; returns `m_kg`, the step-2 mass.
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
+    fn rolled(
+        &self,
+        st: &mut WheelRoll,
+        track: &mut TrackState,
+        observed: &mut Observed,
+        m_kg: f64,
+        (wheel_kg, rail_kg): (f64, f64),
+        losses: ContactLosses,
+        i: usize,
+    ) -> f64 {
+        st.wheel_kg = wheel_kg;
         st.consumed_kg += losses.consumed_kg;
         st.capped_kg += losses.capped_kg;
         if let Some((alpha, r)) = self.reservoir {
@@ -546,11 +580,34 @@ impl<F: Fn([f64; LANES]) -> [f64; LANES] + Copy> Exp4 for F {}
 trait Div4: Fn([f64; LANES], [f64; LANES]) -> [f64; LANES] + Copy {}
 impl<F: Fn([f64; LANES], [f64; LANES]) -> [f64; LANES] + Copy> Div4 for F {}
 
+/// Four lanes' steps 3 to 5 ([`product::roll_given4`]).
+trait Roll4:
+    Fn(
+        &ProductParams,
+        ([f64; LANES], [f64; LANES]),
+        &[ContactConditions; LANES],
+        ([f64; LANES], [f64; LANES]),
+    ) -> ([f64; LANES], [f64; LANES], [ContactLosses; LANES])
+    + Copy
+{
+}
+impl<F> Roll4 for F where
+    F: Fn(
+            &ProductParams,
+            ([f64; LANES], [f64; LANES]),
+            &[ContactConditions; LANES],
+            ([f64; LANES], [f64; LANES]),
+        ) -> ([f64; LANES], [f64; LANES], [ContactLosses; LANES])
+        + Copy
+{
+}
+
 /// What the wavefront computes four lanes at once.
 #[derive(Clone, Copy)]
-struct Vector<E, D> {
+struct Vector<E, D, R> {
     exp: E,
     div: D,
+    roll: R,
 }
 
 /// Four quotients in one AVX register.
@@ -1146,6 +1203,7 @@ impl RollContext<'_> {
         let v = Vector {
             exp: |x: [f64; LANES]| x.map(f64::exp),
             div: |a: [f64; LANES], b: [f64; LANES]| std::array::from_fn(|j| a[j] / b[j]),
+            roll: product::roll_given4,
         };
         self.roll_group_with(group, state, work, v);
     }
@@ -1161,6 +1219,10 @@ impl RollContext<'_> {
             exp: |x| unsafe { exp4_inline(x) },
             // SAFETY: as above.
             div: |a, b| unsafe { div4_avx(a, b) },
+            // SAFETY: as above.
+            roll: |p: &ProductParams, m, c: &[ContactConditions; LANES], e| unsafe {
+                product::roll_given4_avx(p, m, c, e)
+            },
         };
         self.roll_group_with(group, state, work, v);
     }
@@ -1171,7 +1233,7 @@ impl RollContext<'_> {
         group: &Group<'_>,
         state: &mut TrackState,
         work: &mut TrackWork,
-        v: Vector<impl Exp4, impl Div4>,
+        v: Vector<impl Exp4, impl Div4, impl Roll4>,
     ) {
         let Group {
             record,
@@ -1358,7 +1420,7 @@ impl RollContext<'_> {
         works: &mut [TrackWork],
         tracks: [usize; LANES],
         is: [usize; LANES],
-        v: Vector<impl Exp4, impl Div4>,
+        v: Vector<impl Exp4, impl Div4, impl Roll4>,
     ) -> [f64; LANES] {
         let exp4 = v.exp;
         let mut touches = self.touches4(lanes, states, tracks, is, v.div);
@@ -1406,6 +1468,30 @@ impl RollContext<'_> {
         let transfer = exp4(args.map(|a| a[0]));
         let consumption = exp4(args.map(|a| a[1]));
         let mut seen = [0.0; LANES];
+        if W == 0 {
+            // Steps 3 to 5 of the four lanes at once, then each lane's rest.
+            let wheel = std::array::from_fn(|j| lanes[j].st.wheel_kg);
+            let rail = std::array::from_fn(|j| touches[j].rail_kg);
+            let (wheel_after, rail_after, losses) = (v.roll)(
+                self.product,
+                (wheel, rail),
+                &conditions,
+                (transfer, consumption),
+            );
+            for (j, lane) in lanes.iter_mut().enumerate() {
+                let (state, work) = (&mut states[tracks[j]], &mut works[tracks[j]]);
+                seen[j] = lane.roller.rolled(
+                    &mut lane.st,
+                    state,
+                    &mut work.observed,
+                    wheel[j] + rail[j],
+                    (wheel_after[j], rail_after[j]),
+                    losses[j],
+                    is[j],
+                );
+            }
+            return seen;
+        }
         for (j, lane) in lanes.iter_mut().enumerate() {
             let exps = [transfer[j], consumption[j]];
             let (state, work) = (&mut states[tracks[j]], &mut works[tracks[j]]);
@@ -1588,7 +1674,7 @@ impl RollContext<'_> {
                 _ => {}
             }
         }
-        let roller = Roller {
+        let mut roller = Roller {
             params: *self.product,
             time_effects: self.time_effects,
             t_passage_s: self.time_s(record.log_time_ns),
@@ -1636,7 +1722,17 @@ impl RollContext<'_> {
             transfer_factor_d,
             consumption_generic_d,
             temperature_c: self.timeline.last().current.air_temperature_c,
+            consumption_constant: None,
+            ages: self.time_effects.any(),
         };
+        // Neither the weather nor a term driven by time or weather moves it:
+        // what every contact would compute (the time and weather unread).
+        if !roller.consumption_varies
+            && (roller.temperature_factor.is_some() || roller.temperature_beta.is_none())
+        {
+            let weather = self.timeline.first();
+            roller.consumption_constant = Some(roller.consumption_factor(f64::NAN, &weather));
+        }
         Lane {
             axle: a,
             row,

@@ -413,6 +413,189 @@ fn roll_core(
     losses
 }
 
+/// [`roll_given`] for four contacts at once (four wheels' lanes of the
+/// stepping kernel, each with its own masses, conditions and
+/// exponentials): returns the new wheel and rail masses and each lane's
+/// losses. Lane by lane here; [`roll_given4_avx`] computes the same bits in
+/// vector registers.
+#[inline(always)]
+pub fn roll_given4(
+    params: &ProductParams,
+    masses: ([f64; 4], [f64; 4]),
+    conditions: &[ContactConditions; 4],
+    exps: ([f64; 4], [f64; 4]),
+) -> ([f64; 4], [f64; 4], [ContactLosses; 4]) {
+    let (mut wheel, mut rail) = masses;
+    let losses = std::array::from_fn(|j| {
+        roll_given(
+            params,
+            &mut wheel[j],
+            &mut rail[j],
+            &conditions[j],
+            [exps.0[j], exps.1[j]],
+        )
+    });
+    (wheel, rail, losses)
+}
+
+/// [`roll_given4`] in AVX registers: every lane's operations are
+/// [`roll_core`]'s, in its order and without fused multiply-adds (so the
+/// same correctly rounded results); its branches (a positive total mass,
+/// a transfer, which surface gives, the cap, a subnormal total) become
+/// lane masks that choose between results computed for both sides. No
+/// branch depends on the masses, so none is mispredicted where the donor
+/// changes from point to point.
+///
+/// # Safety
+/// The CPU must have AVX.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx")]
+#[inline]
+pub unsafe fn roll_given4_avx(
+    params: &ProductParams,
+    masses: ([f64; 4], [f64; 4]),
+    conditions: &[ContactConditions; 4],
+    exps: ([f64; 4], [f64; 4]),
+) -> ([f64; 4], [f64; 4], [ContactLosses; 4]) {
+    use std::arch::x86_64::*;
+    // Macros, not closures: a closure is not compiled for AVX and may be
+    // left out of line (see the engine's `touches4`).
+    macro_rules! load {
+        ($a:expr) => {
+            _mm256_loadu_pd($a.as_ptr())
+        };
+    }
+    macro_rules! store {
+        ($v:expr) => {{
+            let mut a = [0.0; 4];
+            _mm256_storeu_pd(a.as_mut_ptr(), $v);
+            a
+        }};
+    }
+    macro_rules! splat {
+        ($x:expr) => {
+            _mm256_set1_pd($x)
+        };
+    }
+    // $a where $mask, else $b.
+    macro_rules! pick {
+        ($mask:expr, $a:expr, $b:expr $(,)?) => {
+            _mm256_blendv_pd($b, $a, $mask)
+        };
+    }
+    macro_rules! lanes {
+        (|$c:ident| $e:expr) => {{
+            let [c0, c1, c2, c3] = conditions;
+            _mm256_setr_pd(
+                {
+                    let $c = c0;
+                    $e
+                },
+                {
+                    let $c = c1;
+                    $e
+                },
+                {
+                    let $c = c2;
+                    $e
+                },
+                {
+                    let $c = c3;
+                    $e
+                },
+            )
+        }};
+    }
+    let w0 = load!(&masses.0);
+    let r0 = load!(&masses.1);
+    let m = _mm256_add_pd(w0, r0);
+    let positive = _mm256_cmp_pd::<_CMP_GT_OQ>(m, _mm256_setzero_pd());
+    let per_m = _mm256_div_pd(splat!(1.0), m);
+    // Transfer (eq. 5, 6) where the wheel has passed an applicator.
+    let transfers = lanes!(|c| if c.transfer_revolution.is_some() {
+        f64::from_bits(u64::MAX)
+    } else {
+        0.0
+    });
+    let revolution = lanes!(|c| c.transfer_revolution.unwrap_or(0.0));
+    let t = _mm256_mul_pd(
+        _mm256_mul_pd(
+            splat!(params.kt),
+            _mm256_sub_pd(splat!(1.0), load!(&exps.0)),
+        ),
+        revolution,
+    );
+    // (t * 1.0).min(0.5): min_pd gives its second operand where t is NaN,
+    // as f64::min does.
+    let fraction = _mm256_min_pd(_mm256_mul_pd(t, splat!(1.0)), splat!(TRANSFER_FRACTION_MAX));
+    let wheel_gives = _mm256_cmp_pd::<_CMP_GT_OQ>(w0, r0);
+    let rail_gives = _mm256_cmp_pd::<_CMP_GT_OQ>(r0, w0);
+    let moved_w = _mm256_mul_pd(fraction, _mm256_sub_pd(w0, r0));
+    let moved_r = _mm256_mul_pd(fraction, _mm256_sub_pd(r0, w0));
+    let w_t = pick!(
+        wheel_gives,
+        _mm256_sub_pd(w0, moved_w),
+        pick!(rail_gives, _mm256_add_pd(w0, moved_r), w0),
+    );
+    let r_t = pick!(
+        wheel_gives,
+        _mm256_add_pd(r0, moved_w),
+        pick!(rail_gives, _mm256_sub_pd(r0, moved_r), r0),
+    );
+    let transferred = _mm256_and_pd(transfers, positive);
+    let w1 = pick!(transferred, w_t, w0);
+    let r1 = pick!(transferred, r_t, r0);
+    // Consumption (eq. 1) of the total before the transfer.
+    let saturation = if params.m0_kg > 0.0 {
+        _mm256_sub_pd(splat!(1.0), load!(&exps.1))
+    } else {
+        splat!(1.0)
+    };
+    let factor = lanes!(|c| c.consumption_factor);
+    let fp_fc = lanes!(|c| c.fp_fc);
+    let c = _mm256_min_pd(
+        _mm256_add_pd(
+            _mm256_mul_pd(splat!(params.k0_kg), factor),
+            _mm256_mul_pd(
+                _mm256_mul_pd(_mm256_mul_pd(splat!(params.km1_kg), fp_fc), factor),
+                saturation,
+            ),
+        ),
+        m,
+    );
+    let finite =
+        _mm256_cmp_pd::<_CMP_LT_OQ>(_mm256_andnot_pd(splat!(-0.0), per_m), splat!(f64::INFINITY));
+    let left = _mm256_sub_pd(m, c);
+    let f = pick!(finite, _mm256_mul_pd(left, per_m), _mm256_div_pd(left, m),);
+    let before = _mm256_add_pd(w1, r1);
+    let w2 = _mm256_mul_pd(w1, f);
+    let r2 = _mm256_mul_pd(r1, f);
+    let consumed = _mm256_sub_pd(before, _mm256_add_pd(w2, r2));
+    let w2 = pick!(positive, w2, w0);
+    let r2 = pick!(positive, r2, r0);
+    let consumed = _mm256_and_pd(positive, consumed);
+    // The cap on each surface.
+    let m_max = splat!(params.m_max_kg);
+    let over_w = _mm256_cmp_pd::<_CMP_GT_OQ>(w2, m_max);
+    let over_r = _mm256_cmp_pd::<_CMP_GT_OQ>(r2, m_max);
+    let excess_w = _mm256_and_pd(over_w, _mm256_sub_pd(w2, m_max));
+    let excess_r = _mm256_and_pd(over_r, _mm256_sub_pd(r2, m_max));
+    let capped = _mm256_add_pd(excess_w, excess_r);
+    let wheel = store!(pick!(over_w, m_max, w2));
+    let rail = store!(pick!(over_r, m_max, r2));
+    let (consumed, capped) = (store!(consumed), store!(capped));
+    macro_rules! losses {
+        ($j:literal) => {
+            ContactLosses {
+                consumed_kg: consumed[$j],
+                capped_kg: capped[$j],
+            }
+        };
+    }
+    let losses = [losses!(0), losses!(1), losses!(2), losses!(3)];
+    (wheel, rail, losses)
+}
+
 /// Caps one surface at `m_max`; returns the mass squeezed out.
 #[inline]
 pub fn cap(params: &ProductParams, mass_kg: &mut f64) -> f64 {
@@ -433,6 +616,73 @@ mod tests {
 
     fn table2() -> ProductParams {
         ModelConfig::default().product
+    }
+
+    /// A lane's inputs for [`roll_given4`]: masses from clean to over the
+    /// cap (equal, zero and subnormal ones among them), with and without a
+    /// transfer.
+    fn lane_inputs() -> impl Strategy<Value = (f64, f64, ContactConditions, [f64; 2])> {
+        let mass = prop_oneof![
+            Just(0.0),
+            Just(1e-310),
+            Just(2e-4),
+            Just(5e-3),
+            (-12.0..-2.0f64).prop_map(|e| 10f64.powf(e)),
+        ];
+        (
+            mass.clone(),
+            mass,
+            prop::option::of(1e-3..1.0f64),
+            0.5..2.0f64,
+            0.0..1.5f64,
+            0.0..=1.0f64,
+            0.0..=1.0f64,
+        )
+            .prop_map(|(w, r, revolution, factor, fp_fc, e0, e1)| {
+                let conditions = ContactConditions {
+                    fp_fc,
+                    transfer_revolution: revolution,
+                    consumption_factor: factor,
+                };
+                (w, r, conditions, [e0, e1])
+            })
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    proptest! {
+        /// The vector roll gives the lane-by-lane roll's bits, masses and
+        /// losses, whatever each lane's case (the cap low enough to act;
+        /// m0 zero or not; a lane's masses equal).
+        #[test]
+        fn roll_given4_avx_is_roll_given_bit_for_bit(
+            lanes in prop::array::uniform4(lane_inputs()),
+            equal in 0..5usize,
+            m_max_kg in prop_oneof![Just(4e-3), Just(1.0)],
+            m0 in prop_oneof![Just(0.0), Just(1e-4)],
+        ) {
+            if !std::arch::is_x86_feature_detected!("avx") {
+                return Ok(());
+            }
+            let params = ProductParams { m_max_kg, m0_kg: m0, ..table2() };
+            let mut wheel = lanes.map(|l| l.0);
+            let rail = lanes.map(|l| l.1);
+            if equal < 4 {
+                wheel[equal] = rail[equal];
+            }
+            let conditions = lanes.map(|l| l.2);
+            let exps = (lanes.map(|l| l.3[0]), lanes.map(|l| l.3[1]));
+            let scalar = roll_given4(&params, (wheel, rail), &conditions, exps);
+            // SAFETY: the CPU has AVX (checked above).
+            let vector = unsafe { roll_given4_avx(&params, (wheel, rail), &conditions, exps) };
+            let bits = |(w, r, l): ([f64; 4], [f64; 4], [ContactLosses; 4])| {
+                (
+                    w.map(f64::to_bits),
+                    r.map(f64::to_bits),
+                    l.map(|l| (l.consumed_kg.to_bits(), l.capped_kg.to_bits())),
+                )
+            };
+            prop_assert_eq!(bits(vector), bits(scalar));
+        }
     }
 
     #[test]

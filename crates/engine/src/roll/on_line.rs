@@ -11,7 +11,7 @@
 #[cfg(target_arch = "x86_64")]
 use super::{div4_avx, exp4_inline, exp4_is_vectorised};
 use super::{
-    Div4, Engine, EngineError, Exp4, Lane, RollContext, SiteValue, TrackState, TrackWork,
+    Div4, Engine, EngineError, Exp4, Lane, Roll4, RollContext, SiteValue, TrackState, TrackWork,
     TrainRecord, Vector, LANES, NO_APPLICATOR, NO_AXLE, PARALLEL_MIN_CONTACTS,
 };
 use crate::line::{LineLayout, RAIL_BANDS};
@@ -323,6 +323,7 @@ impl RollContext<'_> {
             let v = Vector {
                 exp: |x: [f64; LANES]| x.map(f64::exp),
                 div: |a: [f64; LANES], b: [f64; LANES]| std::array::from_fn(|j| a[j] / b[j]),
+                roll: tortwin_model::product::roll_given4,
             };
             self.roll_group_line_with(record, rail, group, states, works, v);
         }
@@ -345,6 +346,13 @@ impl RollContext<'_> {
             exp: |x| unsafe { exp4_inline(x) },
             // SAFETY: as above.
             div: |a, b| unsafe { div4_avx(a, b) },
+            // SAFETY: as above.
+            roll: |p: &tortwin_model::product::ProductParams,
+                   m,
+                   c: &[tortwin_model::product::ContactConditions; LANES],
+                   e| unsafe {
+                tortwin_model::product::roll_given4_avx(p, m, c, e)
+            },
         };
         self.roll_group_line_with(record, rail, axles, states, works, v);
     }
@@ -365,7 +373,7 @@ impl RollContext<'_> {
         axles: std::ops::Range<usize>,
         states: &mut [TrackState],
         works: &mut [TrackWork],
-        v: Vector<impl Exp4, impl Div4>,
+        v: Vector<impl Exp4, impl Div4, impl Roll4>,
     ) {
         let Some(layout) = self.line else {
             return;
