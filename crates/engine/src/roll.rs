@@ -580,13 +580,12 @@ impl<F: Fn([f64; LANES]) -> [f64; LANES] + Copy> Exp4 for F {}
 trait Div4: Fn([f64; LANES], [f64; LANES]) -> [f64; LANES] + Copy {}
 impl<F: Fn([f64; LANES], [f64; LANES]) -> [f64; LANES] + Copy> Div4 for F {}
 
-/// Four lanes' steps 3 to 5 ([`product::roll_given4`]).
+/// Four lanes' steps 3 to 5, exponentials included ([`product::roll4`]).
 trait Roll4:
     Fn(
         &ProductParams,
         ([f64; LANES], [f64; LANES]),
         &[ContactConditions; LANES],
-        ([f64; LANES], [f64; LANES]),
     ) -> ([f64; LANES], [f64; LANES], [ContactLosses; LANES])
     + Copy
 {
@@ -596,7 +595,6 @@ impl<F> Roll4 for F where
             &ProductParams,
             ([f64; LANES], [f64; LANES]),
             &[ContactConditions; LANES],
-            ([f64; LANES], [f64; LANES]),
         ) -> ([f64; LANES], [f64; LANES], [ContactLosses; LANES])
         + Copy
 {
@@ -1203,7 +1201,7 @@ impl RollContext<'_> {
         let v = Vector {
             exp: |x: [f64; LANES]| x.map(f64::exp),
             div: |a: [f64; LANES], b: [f64; LANES]| std::array::from_fn(|j| a[j] / b[j]),
-            roll: product::roll_given4,
+            roll: product::roll4,
         };
         self.roll_group_with(group, state, work, v);
     }
@@ -1220,8 +1218,8 @@ impl RollContext<'_> {
             // SAFETY: as above.
             div: |a, b| unsafe { div4_avx(a, b) },
             // SAFETY: as above.
-            roll: |p: &ProductParams, m, c: &[ContactConditions; LANES], e| unsafe {
-                product::roll_given4_avx(p, m, c, e)
+            roll: |p: &ProductParams, m, c: &[ContactConditions; LANES]| unsafe {
+                product::roll4_fma(p, m, c)
             },
         };
         self.roll_group_with(group, state, work, v);
@@ -1462,22 +1460,13 @@ impl RollContext<'_> {
                 .roller
                 .conditions(&lanes[j].st, &touches[j], self.revolution, is[j])
         });
-        let args: [[f64; 2]; LANES] = std::array::from_fn(|j| {
-            product::roll_exp_args(self.product, lanes[j].st.wheel_kg, touches[j].rail_kg)
-        });
-        let transfer = exp4(args.map(|a| a[0]));
-        let consumption = exp4(args.map(|a| a[1]));
         let mut seen = [0.0; LANES];
         if W == 0 {
             // Steps 3 to 5 of the four lanes at once, then each lane's rest.
             let wheel = std::array::from_fn(|j| lanes[j].st.wheel_kg);
             let rail = std::array::from_fn(|j| touches[j].rail_kg);
-            let (wheel_after, rail_after, losses) = (v.roll)(
-                self.product,
-                (wheel, rail),
-                &conditions,
-                (transfer, consumption),
-            );
+            let (wheel_after, rail_after, losses) =
+                (v.roll)(self.product, (wheel, rail), &conditions);
             for (j, lane) in lanes.iter_mut().enumerate() {
                 let (state, work) = (&mut states[tracks[j]], &mut works[tracks[j]]);
                 seen[j] = lane.roller.rolled(
@@ -1492,6 +1481,11 @@ impl RollContext<'_> {
             }
             return seen;
         }
+        let args: [[f64; 2]; LANES] = std::array::from_fn(|j| {
+            product::roll_exp_args(self.product, lanes[j].st.wheel_kg, touches[j].rail_kg)
+        });
+        let transfer = exp4(args.map(|a| a[0]));
+        let consumption = exp4(args.map(|a| a[1]));
         for (j, lane) in lanes.iter_mut().enumerate() {
             let exps = [transfer[j], consumption[j]];
             let (state, work) = (&mut states[tracks[j]], &mut works[tracks[j]]);

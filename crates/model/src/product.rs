@@ -446,11 +446,13 @@ pub fn roll_given4(
 /// branch depends on the masses, so none is mispredicted where the donor
 /// changes from point to point.
 ///
+/// To be inlined into a caller compiled for AVX
+/// (`#[target_feature(enable = "avx")]`), as [`crate::exp::exp4_inline`].
+///
 /// # Safety
 /// The CPU must have AVX.
 #[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx")]
-#[inline]
+#[inline(always)]
 pub unsafe fn roll_given4_avx(
     params: &ProductParams,
     masses: ([f64; 4], [f64; 4]),
@@ -596,6 +598,62 @@ pub unsafe fn roll_given4_avx(
     (wheel, rail, losses)
 }
 
+/// [`roll`] for four contacts at once: each lane's [`roll_exp_args`], their
+/// exponentials by `f64::exp`, then [`roll_given4`]. [`roll4_fma`] computes
+/// the same in vector registers (the same bits where `f64::exp` is glibc's,
+/// as [`crate::exp::exp4`]).
+#[inline(always)]
+pub fn roll4(
+    params: &ProductParams,
+    masses: ([f64; 4], [f64; 4]),
+    conditions: &[ContactConditions; 4],
+) -> ([f64; 4], [f64; 4], [ContactLosses; 4]) {
+    let args: [[f64; 2]; 4] =
+        std::array::from_fn(|j| roll_exp_args(params, masses.0[j], masses.1[j]));
+    let exps = (args.map(|a| a[0].exp()), args.map(|a| a[1].exp()));
+    roll_given4(params, masses, conditions, exps)
+}
+
+/// [`roll4`] in AVX registers: [`roll_exp_args`] four at once (`max`, a
+/// sign flip and a product, as there), [`crate::exp::exp4_inline`], then
+/// [`roll_given4_avx`].
+///
+/// To be inlined into a caller compiled for AVX2 and FMA
+/// (`#[target_feature(enable = "avx2,fma")]`), as
+/// [`crate::exp::exp4_inline`].
+///
+/// # Safety
+/// The CPU must have AVX2 and FMA.
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+pub unsafe fn roll4_fma(
+    params: &ProductParams,
+    masses: ([f64; 4], [f64; 4]),
+    conditions: &[ContactConditions; 4],
+) -> ([f64; 4], [f64; 4], [ContactLosses; 4]) {
+    use std::arch::x86_64::*;
+    let wheel = _mm256_loadu_pd(masses.0.as_ptr());
+    let rail = _mm256_loadu_pd(masses.1.as_ptr());
+    let sign = _mm256_set1_pd(-0.0);
+    // -m1 (1 / cm), m1 the larger mass; -m (1 / (m0 km2)).
+    let transfer = _mm256_mul_pd(
+        _mm256_xor_pd(_mm256_max_pd(wheel, rail), sign),
+        _mm256_set1_pd(1.0 / params.cm_kg),
+    );
+    let saturation = _mm256_mul_pd(
+        _mm256_xor_pd(_mm256_add_pd(wheel, rail), sign),
+        _mm256_set1_pd(1.0 / (params.m0_kg * params.km2)),
+    );
+    let mut args = ([0.0; 4], [0.0; 4]);
+    _mm256_storeu_pd(args.0.as_mut_ptr(), transfer);
+    _mm256_storeu_pd(args.1.as_mut_ptr(), saturation);
+    let exps = (
+        crate::exp::exp4_inline(args.0),
+        crate::exp::exp4_inline(args.1),
+    );
+    roll_given4_avx(params, masses, conditions, exps)
+}
+
 /// Caps one surface at `m_max`; returns the mass squeezed out.
 #[inline]
 pub fn cap(params: &ProductParams, mass_kg: &mut f64) -> f64 {
@@ -654,7 +712,7 @@ mod tests {
         /// losses, whatever each lane's case (the cap low enough to act;
         /// m0 zero or not; a lane's masses equal).
         #[test]
-        fn roll_given4_avx_is_roll_given_bit_for_bit(
+        fn the_vector_rolls_are_roll_given_bit_for_bit(
             lanes in prop::array::uniform4(lane_inputs()),
             equal in 0..5usize,
             m_max_kg in prop_oneof![Just(4e-3), Just(1.0)],
@@ -672,8 +730,18 @@ mod tests {
             let conditions = lanes.map(|l| l.2);
             let exps = (lanes.map(|l| l.3[0]), lanes.map(|l| l.3[1]));
             let scalar = roll_given4(&params, (wheel, rail), &conditions, exps);
+            #[target_feature(enable = "avx")]
+            fn given(
+                p: &ProductParams,
+                m: ([f64; 4], [f64; 4]),
+                c: &[ContactConditions; 4],
+                e: ([f64; 4], [f64; 4]),
+            ) -> ([f64; 4], [f64; 4], [ContactLosses; 4]) {
+                // SAFETY: compiled for AVX, called only where it is.
+                unsafe { roll_given4_avx(p, m, c, e) }
+            }
             // SAFETY: the CPU has AVX (checked above).
-            let vector = unsafe { roll_given4_avx(&params, (wheel, rail), &conditions, exps) };
+            let vector = unsafe { given(&params, (wheel, rail), &conditions, exps) };
             let bits = |(w, r, l): ([f64; 4], [f64; 4], [ContactLosses; 4])| {
                 (
                     w.map(f64::to_bits),
@@ -682,6 +750,22 @@ mod tests {
                 )
             };
             prop_assert_eq!(bits(vector), bits(scalar));
+            // With the exponentials taken inside, from the masses.
+            if crate::exp::exp4_is_vectorised() && cfg!(target_env = "gnu") {
+                let scalar = roll4(&params, (wheel, rail), &conditions);
+                #[target_feature(enable = "avx2,fma")]
+                fn whole(
+                    p: &ProductParams,
+                    m: ([f64; 4], [f64; 4]),
+                    c: &[ContactConditions; 4],
+                ) -> ([f64; 4], [f64; 4], [ContactLosses; 4]) {
+                    // SAFETY: compiled for AVX2 and FMA, called only there.
+                    unsafe { roll4_fma(p, m, c) }
+                }
+                // SAFETY: the CPU has AVX2 and FMA (checked).
+                let vector = unsafe { whole(&params, (wheel, rail), &conditions) };
+                prop_assert_eq!(bits(vector), bits(scalar));
+            }
         }
     }
 

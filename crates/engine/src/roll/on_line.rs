@@ -323,7 +323,7 @@ impl RollContext<'_> {
             let v = Vector {
                 exp: |x: [f64; LANES]| x.map(f64::exp),
                 div: |a: [f64; LANES], b: [f64; LANES]| std::array::from_fn(|j| a[j] / b[j]),
-                roll: tortwin_model::product::roll_given4,
+                roll: tortwin_model::product::roll4,
             };
             self.roll_group_line_with(record, rail, group, states, works, v);
         }
@@ -349,9 +349,8 @@ impl RollContext<'_> {
             // SAFETY: as above.
             roll: |p: &tortwin_model::product::ProductParams,
                    m,
-                   c: &[tortwin_model::product::ContactConditions; LANES],
-                   e| unsafe {
-                tortwin_model::product::roll_given4_avx(p, m, c, e)
+                   c: &[tortwin_model::product::ContactConditions; LANES]| unsafe {
+                tortwin_model::product::roll4_fma(p, m, c)
             },
         };
         self.roll_group_line_with(record, rail, axles, states, works, v);
