@@ -464,6 +464,28 @@ impl Roller {
     }
 }
 
+/// The four lanes' clocks ([`wheel_time_s`]'s constants of each wheel),
+/// gathered once per group for the vector division of every step.
+#[derive(Clone, Copy)]
+struct Clocks {
+    t_passage_s: [f64; LANES],
+    offset_m: [f64; LANES],
+    speed_mps: [f64; LANES],
+    d_entry_m: [f64; LANES],
+}
+
+impl Clocks {
+    fn of(lanes: &[Lane; LANES]) -> Self {
+        let r = |j: usize| &lanes[j].roller;
+        Self {
+            t_passage_s: std::array::from_fn(|j| r(j).t_passage_s),
+            offset_m: std::array::from_fn(|j| r(j).offset_m),
+            speed_mps: std::array::from_fn(|j| r(j).speed_mps),
+            d_entry_m: std::array::from_fn(|j| r(j).d_entry_m),
+        }
+    }
+}
+
 /// What step 1 of a contact read.
 struct Touch<'w> {
     t: f64,
@@ -1249,6 +1271,7 @@ impl RollContext<'_> {
             Some(&a) if j > 0 => self.lane(record, track, a, first_row + j),
             _ => first.clone(),
         });
+        let clocks = Clocks::of(&lanes);
         let special = &self.special[track];
         for s in 0..points + n - 1 {
             let lo = s.saturating_sub(points - 1);
@@ -1262,11 +1285,14 @@ impl RollContext<'_> {
                     let one = (std::slice::from_mut(state), std::slice::from_mut(work));
                     let (states, works) = one;
                     let seen = match self.tangent_width {
-                        0 => self.contacts4::<0>(&mut lanes, states, works, [0; LANES], is, v),
+                        0 => self
+                            .contacts4::<0>(&mut lanes, &clocks, states, works, [0; LANES], is, v),
                         tangent::STATE_SLOTS => self.contacts4::<{ tangent::STATE_SLOTS }>(
-                            &mut lanes, states, works, [0; LANES], is, v,
+                            &mut lanes, &clocks, states, works, [0; LANES], is, v,
                         ),
-                        _ => self.contacts4::<SLOTS>(&mut lanes, states, works, [0; LANES], is, v),
+                        _ => self.contacts4::<SLOTS>(
+                            &mut lanes, &clocks, states, works, [0; LANES], is, v,
+                        ),
                     };
                     if self.keep_seen {
                         for (lane, (&i, &m)) in lanes.iter().zip(is.iter().zip(&seen)) {
@@ -1367,6 +1393,7 @@ impl RollContext<'_> {
     fn touches4(
         &self,
         lanes: &[Lane; LANES],
+        clocks: &Clocks,
         states: &[TrackState],
         tracks: [usize; LANES],
         is: [usize; LANES],
@@ -1375,9 +1402,10 @@ impl RollContext<'_> {
         use std::array::from_fn;
         let r = |j: usize| &lanes[j].roller;
         // wheel_time_s, the division four at once.
-        let path = from_fn(|j| wheel_path_m(self.d_m[is[j]], r(j).d_entry_m, r(j).offset_m));
-        let q = div4(path, from_fn(|j| r(j).speed_mps));
-        let t: [f64; LANES] = from_fn(|j| r(j).t_passage_s + q[j]);
+        let path =
+            from_fn(|j| wheel_path_m(self.d_m[is[j]], clocks.d_entry_m[j], clocks.offset_m[j]));
+        let q = div4(path, clocks.speed_mps);
+        let t: [f64; LANES] = from_fn(|j| clocks.t_passage_s[j] + q[j]);
         let weather: [&WeatherState; LANES] = from_fn(|j| self.timeline.at(t[j]));
         // WeatherState::precip_mm_at, likewise.
         let parts = from_fn(|j| weather[j].precip_parts(t[j]));
@@ -1414,6 +1442,7 @@ impl RollContext<'_> {
     fn contacts4<const W: usize>(
         &self,
         lanes: &mut [Lane; LANES],
+        clocks: &Clocks,
         states: &mut [TrackState],
         works: &mut [TrackWork],
         tracks: [usize; LANES],
@@ -1421,7 +1450,7 @@ impl RollContext<'_> {
         v: Vector<impl Exp4, impl Div4, impl Roll4>,
     ) -> [f64; LANES] {
         let exp4 = v.exp;
-        let mut touches = self.touches4(lanes, states, tracks, is, v.div);
+        let mut touches = self.touches4(lanes, clocks, states, tracks, is, v.div);
         // With tangents: the rail masses' tangents, aged with them.
         let mut dr: [Tangent; LANES] = [[0.0; SLOTS]; LANES];
         if W > 0 {

@@ -11,8 +11,8 @@
 #[cfg(target_arch = "x86_64")]
 use super::{div4_avx, exp4_inline, exp4_is_vectorised};
 use super::{
-    Div4, Engine, EngineError, Exp4, Lane, Roll4, RollContext, SiteValue, TrackState, TrackWork,
-    TrainRecord, Vector, LANES, NO_APPLICATOR, NO_AXLE, PARALLEL_MIN_CONTACTS,
+    Clocks, Div4, Engine, EngineError, Exp4, Lane, Roll4, RollContext, SiteValue, TrackState,
+    TrackWork, TrainRecord, Vector, LANES, NO_APPLICATOR, NO_AXLE, PARALLEL_MIN_CONTACTS,
 };
 use crate::line::{LineLayout, RAIL_BANDS};
 use crate::sink::Sink;
@@ -390,6 +390,7 @@ impl RollContext<'_> {
                 first.clone()
             }
         });
+        let clocks = Clocks::of(&lanes);
         let mut paths: [LinePath<'_>; LANES] =
             std::array::from_fn(|j| self.line_path(layout, record, rail, lanes[j].axle));
         let special = &self.special[rail * RAIL_BANDS];
@@ -405,7 +406,8 @@ impl RollContext<'_> {
                     for (j, (lane, path)) in lanes.iter_mut().zip(&mut paths).enumerate() {
                         (wheel_bands[j], rail_bands[j]) = path.enter(lane, is[j]);
                     }
-                    let seen = self.contacts4::<0>(&mut lanes, states, works, rail_bands, is, v);
+                    let seen =
+                        self.contacts4::<0>(&mut lanes, &clocks, states, works, rail_bands, is, v);
                     for (j, lane) in lanes.iter_mut().enumerate() {
                         self.leave_line(lane, wheel_bands[j], rail_bands[j], is[j], seen[j], works);
                     }
