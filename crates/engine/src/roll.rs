@@ -1438,6 +1438,7 @@ impl RollContext<'_> {
     /// once ([`exp4`]; bit for bit `f64::exp` with glibc on an FMA CPU).
     /// Lane j's contact is on track `tracks[j]` of `states` and `works`
     /// (a section's one track; a line's rail band of the lane's row).
+    #[allow(clippy::too_many_arguments)]
     #[inline(always)]
     fn contacts4<const W: usize>(
         &self,
