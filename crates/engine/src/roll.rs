@@ -159,7 +159,7 @@ impl Roller {
         }
         self.touched(track, &touch, i);
         let conditions = self.conditions(st, &touch, revolution, i);
-        self.finish(st, track, observed, &touch, &conditions, None, i)
+        self.finish(st, track, observed, &touch, &conditions, i)
     }
 
     /// [`Roller::contact`] with the tangents carried
@@ -407,9 +407,8 @@ impl Roller {
     }
 
     /// Step 2 (what a measurement of this contact sees, returned), steps 3
-    /// to 5 (transfer, consumption, cap; their exponentials given, or taken
-    /// here when `exps` is None) and 6 (wheel-side effects).
-    #[allow(clippy::too_many_arguments)]
+    /// to 5 (transfer, consumption, cap; their exponentials taken here) and
+    /// 6 (wheel-side effects), for one contact alone.
     #[inline(always)]
     fn finish(
         &self,
@@ -418,18 +417,12 @@ impl Roller {
         observed: &mut Observed,
         touch: &Touch<'_>,
         conditions: &ContactConditions,
-        exps: Option<[f64; 2]>,
         i: usize,
     ) -> f64 {
         let mut wheel_kg = st.wheel_kg;
         let mut rail_kg = touch.rail_kg;
         let m_kg = wheel_kg + rail_kg;
-        let losses = match exps {
-            Some(exps) => {
-                product::roll_given(&self.params, &mut wheel_kg, &mut rail_kg, conditions, exps)
-            }
-            None => product::roll(&self.params, &mut wheel_kg, &mut rail_kg, conditions),
-        };
+        let losses = product::roll(&self.params, &mut wheel_kg, &mut rail_kg, conditions);
         self.rolled(st, track, observed, m_kg, (wheel_kg, rail_kg), losses, i)
     }
 
@@ -1516,31 +1509,19 @@ impl RollContext<'_> {
         });
         let transfer = exp4(args.map(|a| a[0]));
         let consumption = exp4(args.map(|a| a[1]));
+        // With tangents (W > 0): lane by lane, the tangents beside.
         for (j, lane) in lanes.iter_mut().enumerate() {
-            let exps = [transfer[j], consumption[j]];
             let (state, work) = (&mut states[tracks[j]], &mut works[tracks[j]]);
-            seen[j] = if W > 0 {
-                lane.roller.finish_tangent::<W, false>(
-                    &mut lane.st,
-                    state,
-                    (&mut work.rail_tan, dr[j]),
-                    &mut work.observed,
-                    &touches[j],
-                    (&conditions[j], self.revolution),
-                    exps,
-                    is[j],
-                )
-            } else {
-                lane.roller.finish(
-                    &mut lane.st,
-                    state,
-                    &mut work.observed,
-                    &touches[j],
-                    &conditions[j],
-                    Some(exps),
-                    is[j],
-                )
-            };
+            seen[j] = lane.roller.finish_tangent::<W, false>(
+                &mut lane.st,
+                state,
+                (&mut work.rail_tan, dr[j]),
+                &mut work.observed,
+                &touches[j],
+                (&conditions[j], self.revolution),
+                [transfer[j], consumption[j]],
+                is[j],
+            );
         }
         seen
     }

@@ -419,7 +419,7 @@ fn roll_core(
 /// losses. Lane by lane here; [`roll_given4_avx`] computes the same bits in
 /// vector registers.
 #[inline(always)]
-pub fn roll_given4(
+fn roll_given4(
     params: &ProductParams,
     masses: ([f64; 4], [f64; 4]),
     conditions: &[ContactConditions; 4],
@@ -453,7 +453,7 @@ pub fn roll_given4(
 /// The CPU must have AVX.
 #[cfg(target_arch = "x86_64")]
 #[inline(always)]
-pub unsafe fn roll_given4_avx(
+unsafe fn roll_given4_avx(
     params: &ProductParams,
     masses: ([f64; 4], [f64; 4]),
     conditions: &[ContactConditions; 4],
