@@ -379,12 +379,37 @@ impl Roller {
             Some(constant) => constant,
             None => self.consumption_factor(t, weather),
         };
+        self.conditions_given(st, (transfer_factor, consumption_factor), revolution, i)
+    }
+
+    /// [`Roller::conditions`] given the contact's transfer and consumption
+    /// factors.
+    #[inline(always)]
+    fn conditions_given(
+        &self,
+        st: &WheelRoll,
+        (transfer_factor, consumption_factor): (f64, f64),
+        revolution: &[f64],
+        i: usize,
+    ) -> ContactConditions {
         ContactConditions {
             fp_fc: self.fp_fc,
             transfer_revolution: st
                 .applicator_point
                 .map(|ia| revolution[i.abs_diff(ia)] * transfer_factor),
             consumption_factor,
+        }
+    }
+
+    /// The transfer and consumption factors of every contact of this wheel
+    /// when no contact needs its time: no time effect is on, and neither
+    /// the time nor the weather moves the two factors. `None` otherwise.
+    fn clock_free(&self) -> Option<(f64, f64)> {
+        match self.consumption_constant {
+            Some(consumption) if !self.ages && !self.transfer_varies => {
+                Some((self.transfer_factor, consumption))
+            }
+            _ => None,
         }
     }
 
@@ -682,6 +707,15 @@ fn time_effect_sources(
 #[inline(always)]
 fn wheel_time_s(t_passage_s: f64, d_m: f64, d_entry_m: f64, offset_m: f64, speed_mps: f64) -> f64 {
     t_passage_s + wheel_path_m(d_m, d_entry_m, offset_m) / speed_mps
+}
+
+/// The four lanes' [`Roller::clock_free`] factors, when every lane has them.
+fn clock_free(lanes: &[Lane; LANES]) -> Option<[(f64, f64); LANES]> {
+    let mut factors = [(0.0, 0.0); LANES];
+    for (f, lane) in factors.iter_mut().zip(lanes) {
+        *f = lane.roller.clock_free()?;
+    }
+    Some(factors)
 }
 
 /// How far a wheel has come to reach a point: `|d - d_entry| + offset`.
@@ -1266,6 +1300,13 @@ impl RollContext<'_> {
         });
         let clocks = Clocks::of(&lanes);
         let special = &self.special[track];
+        // The portable kernel stores every contact's touch (the reference
+        // order, which the kernel test holds the vector kernel's stores to).
+        let clock_free = match self.portable {
+            true => None,
+            false => clock_free(&lanes),
+        };
+        let mut touches_left_out = false;
         for s in 0..points + n - 1 {
             let lo = s.saturating_sub(points - 1);
             let hi = n.min(s + 1);
@@ -1277,14 +1318,19 @@ impl RollContext<'_> {
                     // is left; without effect slots only the constants'.
                     let one = (std::slice::from_mut(state), std::slice::from_mut(work));
                     let (states, works) = one;
+                    let tracks = [0; LANES];
                     let seen = match self.tangent_width {
-                        0 => self
-                            .contacts4::<0>(&mut lanes, &clocks, states, works, [0; LANES], is, v),
+                        0 => {
+                            touches_left_out |= clock_free.is_some();
+                            self.contacts4::<0>(
+                                &mut lanes, &clocks, states, works, tracks, is, clock_free, v,
+                            )
+                        }
                         tangent::STATE_SLOTS => self.contacts4::<{ tangent::STATE_SLOTS }>(
-                            &mut lanes, &clocks, states, works, [0; LANES], is, v,
+                            &mut lanes, &clocks, states, works, tracks, is, None, v,
                         ),
                         _ => self.contacts4::<SLOTS>(
-                            &mut lanes, &clocks, states, works, [0; LANES], is, v,
+                            &mut lanes, &clocks, states, works, tracks, is, None, v,
                         ),
                     };
                     if self.keep_seen {
@@ -1314,6 +1360,9 @@ impl RollContext<'_> {
             if s + 1 >= points {
                 self.finish_lane(&lanes[s + 1 - points], state, work, points);
             }
+        }
+        if touches_left_out && group[n - 1] == self.last_axle[track] {
+            self.store_touches(&lanes[n - 1], state);
         }
     }
 
@@ -1441,8 +1490,80 @@ impl RollContext<'_> {
         works: &mut [TrackWork],
         tracks: [usize; LANES],
         is: [usize; LANES],
+        clock_free: Option<[(f64, f64); LANES]>,
         v: Vector<impl Exp4, impl Div4, impl Roll4>,
     ) -> [f64; LANES] {
+        let (rail, conditions) = match (W, clock_free) {
+            // No time, no weather and no touch to store: the rail masses and
+            // the conditions from the wheels' constant factors.
+            (0, Some(factors)) => (
+                std::array::from_fn(|j| states[tracks[j]].rail_mass_kg[is[j]]),
+                std::array::from_fn(|j| {
+                    lanes[j].roller.conditions_given(
+                        &lanes[j].st,
+                        factors[j],
+                        self.revolution,
+                        is[j],
+                    )
+                }),
+            ),
+            _ => {
+                let (touches, dr) = self.touch4::<W>(lanes, clocks, states, works, tracks, is, v);
+                let conditions: [ContactConditions; LANES] = std::array::from_fn(|j| {
+                    lanes[j]
+                        .roller
+                        .conditions(&lanes[j].st, &touches[j], self.revolution, is[j])
+                });
+                if W > 0 {
+                    return self.finish4_tangent::<W>(
+                        lanes,
+                        states,
+                        works,
+                        tracks,
+                        is,
+                        (&touches, dr),
+                        &conditions,
+                        v.exp,
+                    );
+                }
+                (std::array::from_fn(|j| touches[j].rail_kg), conditions)
+            }
+        };
+        // Steps 3 to 5 of the four lanes at once, then each lane's rest.
+        let wheel = std::array::from_fn(|j| lanes[j].st.wheel_kg);
+        let (wheel_after, rail_after, losses) = (v.roll)(self.product, (wheel, rail), &conditions);
+        let mut seen = [0.0; LANES];
+        for (j, lane) in lanes.iter_mut().enumerate() {
+            let (state, work) = (&mut states[tracks[j]], &mut works[tracks[j]]);
+            seen[j] = lane.roller.rolled(
+                &mut lane.st,
+                state,
+                &mut work.observed,
+                wheel[j] + rail[j],
+                (wheel_after[j], rail_after[j]),
+                losses[j],
+                is[j],
+            );
+        }
+        seen
+    }
+
+    /// Step 1 of four lanes ([`RollContext::touches4`]): the time effects
+    /// since each point's last touch (on the rail masses' tangents too,
+    /// with tangents) and the touches stored. Returns the touches and the
+    /// tangents of the aged rail masses.
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
+    fn touch4<const W: usize>(
+        &self,
+        lanes: &mut [Lane; LANES],
+        clocks: &Clocks,
+        states: &mut [TrackState],
+        works: &[TrackWork],
+        tracks: [usize; LANES],
+        is: [usize; LANES],
+        v: Vector<impl Exp4, impl Div4, impl Roll4>,
+    ) -> ([Touch<'_>; LANES], [Tangent; LANES]) {
         let exp4 = v.exp;
         let mut touches = self.touches4(lanes, clocks, states, tracks, is, v.div);
         // With tangents: the rail masses' tangents, aged with them.
@@ -1478,38 +1599,30 @@ impl RollContext<'_> {
         for (j, (lane, (touch, &i))) in lanes.iter().zip(touches.iter().zip(&is)).enumerate() {
             lane.roller.touched(&mut states[tracks[j]], touch, i);
         }
-        let conditions: [ContactConditions; LANES] = std::array::from_fn(|j| {
-            lanes[j]
-                .roller
-                .conditions(&lanes[j].st, &touches[j], self.revolution, is[j])
-        });
-        let mut seen = [0.0; LANES];
-        if W == 0 {
-            // Steps 3 to 5 of the four lanes at once, then each lane's rest.
-            let wheel = std::array::from_fn(|j| lanes[j].st.wheel_kg);
-            let rail = std::array::from_fn(|j| touches[j].rail_kg);
-            let (wheel_after, rail_after, losses) =
-                (v.roll)(self.product, (wheel, rail), &conditions);
-            for (j, lane) in lanes.iter_mut().enumerate() {
-                let (state, work) = (&mut states[tracks[j]], &mut works[tracks[j]]);
-                seen[j] = lane.roller.rolled(
-                    &mut lane.st,
-                    state,
-                    &mut work.observed,
-                    wheel[j] + rail[j],
-                    (wheel_after[j], rail_after[j]),
-                    losses[j],
-                    is[j],
-                );
-            }
-            return seen;
-        }
+        (touches, dr)
+    }
+
+    /// Steps 3 to 5 with tangents (W > 0), lane by lane, the four lanes'
+    /// exponentials taken at once; returns the step-2 masses.
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
+    fn finish4_tangent<const W: usize>(
+        &self,
+        lanes: &mut [Lane; LANES],
+        states: &mut [TrackState],
+        works: &mut [TrackWork],
+        tracks: [usize; LANES],
+        is: [usize; LANES],
+        (touches, dr): (&[Touch<'_>; LANES], [Tangent; LANES]),
+        conditions: &[ContactConditions; LANES],
+        exp4: impl Exp4,
+    ) -> [f64; LANES] {
         let args: [[f64; 2]; LANES] = std::array::from_fn(|j| {
             product::roll_exp_args(self.product, lanes[j].st.wheel_kg, touches[j].rail_kg)
         });
         let transfer = exp4(args.map(|a| a[0]));
         let consumption = exp4(args.map(|a| a[1]));
-        // With tangents (W > 0): lane by lane, the tangents beside.
+        let mut seen = [0.0; LANES];
         for (j, lane) in lanes.iter_mut().enumerate() {
             let (state, work) = (&mut states[tracks[j]], &mut works[tracks[j]]);
             seen[j] = lane.roller.finish_tangent::<W, false>(
@@ -1524,6 +1637,19 @@ impl RollContext<'_> {
             );
         }
         seen
+    }
+
+    /// Step 1's stores (the time of the touch and the rain by then) of
+    /// `lane`'s wheel at every point, as its contacts would have stored
+    /// them. The vector kernel leaves them out of clock-free contacts
+    /// ([`Roller::clock_free`]): with no time effect on, nothing reads
+    /// them while a train passes, and after it each point holds its last
+    /// touch, the track's last wheel's, which this writes.
+    fn store_touches(&self, lane: &Lane, state: &mut TrackState) {
+        for i in 0..self.d_m.len() {
+            let touch = lane.roller.touch(state, self.d_m, self.timeline, i);
+            lane.roller.touched(state, &touch, i);
+        }
     }
 
     /// A contact at a special point (an applicator or a measurement site):

@@ -406,8 +406,9 @@ impl RollContext<'_> {
                     for (j, (lane, path)) in lanes.iter_mut().zip(&mut paths).enumerate() {
                         (wheel_bands[j], rail_bands[j]) = path.enter(lane, is[j]);
                     }
-                    let seen =
-                        self.contacts4::<0>(&mut lanes, &clocks, states, works, rail_bands, is, v);
+                    let seen = self.contacts4::<0>(
+                        &mut lanes, &clocks, states, works, rail_bands, is, None, v,
+                    );
                     for (j, lane) in lanes.iter_mut().enumerate() {
                         self.leave_line(lane, wheel_bands[j], rail_bands[j], is[j], seen[j], works);
                     }
