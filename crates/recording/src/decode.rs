@@ -67,9 +67,14 @@ pub(crate) fn parse<'de, T: FromJson<'de>>(data: &'de [u8]) -> Result<T, DecodeE
     // Tracking the path costs about a third of the parse: a message that
     // parses needs no path, and one that does not is parsed again with it
     // (the same bytes fail at the same place).
-    let mut json = serde_json::Deserializer::from_slice(data);
-    if let Ok(value) = T::from_json(&mut json).and_then(|value| json.end().map(|()| value)) {
-        return Ok(value);
+    // Text checked as UTF-8 once is parsed without checking each string
+    // of it again (every key: a sixth of the parse, measured 2026-12-02);
+    // bytes that are not UTF-8 fail below, where the error says where.
+    if let Ok(text) = std::str::from_utf8(data) {
+        let mut json = serde_json::Deserializer::from_str(text);
+        if let Ok(value) = T::from_json(&mut json).and_then(|value| json.end().map(|()| value)) {
+            return Ok(value);
+        }
     }
     let mut json = serde_json::Deserializer::from_slice(data);
     let mut track = serde_path_to_error::Track::new();
