@@ -568,7 +568,15 @@ unsafe fn roll_given4_avx(
     let finite =
         _mm256_cmp_pd::<_CMP_LT_OQ>(_mm256_andnot_pd(splat!(-0.0), per_m), splat!(f64::INFINITY));
     let left = _mm256_sub_pd(m, c);
-    let f = pick!(finite, _mm256_mul_pd(left, per_m), _mm256_div_pd(left, m),);
+    let f = _mm256_mul_pd(left, per_m);
+    // The division only where a lane needs it (a subnormal m; a lane
+    // without mass keeps its masses whatever f is): off the chain of
+    // dependent steps that every contact waits for (measured 2026-12-02).
+    let f = if _mm256_movemask_pd(_mm256_andnot_pd(finite, positive)) == 0 {
+        f
+    } else {
+        pick!(finite, f, _mm256_div_pd(left, m))
+    };
     let before = _mm256_add_pd(w1, r1);
     let w2 = _mm256_mul_pd(w1, f);
     let r2 = _mm256_mul_pd(r1, f);
