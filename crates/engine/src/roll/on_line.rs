@@ -8,12 +8,13 @@
 //! band in `WheelRoll::wheel_kg` for its duration and `fp fc` of the
 //! point's segment: a line of one tangent is the section bit for bit.
 
+use super::{
+    clock_free, wheel_time_s, Clocks, Div4, Engine, EngineError, Exp4, Lane, Roll4, RollContext,
+    SiteValue, TrackState, TrackWork, TrainRecord, Vector, LANES, NO_APPLICATOR, NO_AXLE,
+    PARALLEL_MIN_CONTACTS,
+};
 #[cfg(target_arch = "x86_64")]
 use super::{div4_avx, exp4_inline, exp4_is_vectorised};
-use super::{
-    Clocks, Div4, Engine, EngineError, Exp4, Lane, Roll4, RollContext, SiteValue, TrackState,
-    TrackWork, TrainRecord, Vector, LANES, NO_APPLICATOR, NO_AXLE, PARALLEL_MIN_CONTACTS,
-};
 use crate::line::{LineLayout, RAIL_BANDS};
 use crate::sink::Sink;
 use crate::{enters_at_zero, SnapshotKind};
@@ -311,13 +312,15 @@ impl RollContext<'_> {
             return;
         }
         let mut first = axles.start;
+        let mut touches_left_out = false;
         while first < axles.end {
             let group = first..axles.end.min(first + LANES);
             first = group.end;
             #[cfg(target_arch = "x86_64")]
             if !self.portable && exp4_is_vectorised() {
                 // SAFETY: the CPU has AVX2 and FMA.
-                unsafe { self.roll_group_line_fma(record, rail, group, states, works) };
+                touches_left_out |=
+                    unsafe { self.roll_group_line_fma(record, rail, group, states, works) };
                 continue;
             }
             let v = Vector {
@@ -325,7 +328,55 @@ impl RollContext<'_> {
                 div: |a: [f64; LANES], b: [f64; LANES]| std::array::from_fn(|j| a[j] / b[j]),
                 roll: tortwin_model::product::roll4,
             };
-            self.roll_group_line_with(record, rail, group, states, works, v);
+            touches_left_out |= self.roll_group_line_with(record, rail, group, states, works, v);
+        }
+        if touches_left_out {
+            self.store_line_touches(record, rail, states);
+        }
+    }
+
+    /// Step 1's stores that clock-free contacts on `rail` of a line left
+    /// out ([`RollContext::store_touches`] on a section): at every point,
+    /// on each of the rail's bands, the touch of the last wheel that met
+    /// that band there, the train's last leading or last trailing axle
+    /// (a wheel's rows depend on the point and its bogie position alone),
+    /// unless a pulse landed there after it: the stores come in time order.
+    fn store_line_touches(&self, record: &TrainRecord, rail: usize, states: &mut [TrackState]) {
+        let Some(layout) = self.line else {
+            return;
+        };
+        let t_passage_s = self.time_s(record.log_time_ns);
+        let d_entry_m = match enters_at_zero(record.passage.direction) {
+            true => 0.0,
+            false => self.section.length_m,
+        };
+        let speed_mps = record.passage.speed_mps;
+        let last = [(self.observers[0], false), (self.observers[1], true)];
+        for i in 0..self.d_m.len() {
+            // Per rail band, the last axle whose row meets it at point i.
+            let mut toucher = [usize::MAX; RAIL_BANDS];
+            for &(a, trailing) in &last {
+                if a != usize::MAX {
+                    let rb = usize::from(layout.rows_of(rail, trailing)[i]) % RAIL_BANDS;
+                    if toucher[rb] == usize::MAX || a > toucher[rb] {
+                        toucher[rb] = a;
+                    }
+                }
+            }
+            for (state, &a) in states.iter_mut().zip(&toucher) {
+                if a == usize::MAX {
+                    continue;
+                }
+                let offset_m = record.passage.axles[a].offset_m;
+                let t = wheel_time_s(t_passage_s, self.d_m[i], d_entry_m, offset_m, speed_mps);
+                // A pulse after that wheel, run by a later wheel on the
+                // other band, touched this band last: its store stays.
+                if state.last_touch_s[i] > t {
+                    continue;
+                }
+                state.last_touch_s[i] = t;
+                state.precip_at_touch_mm[i] = self.timeline.at(t).precip_mm_at(t);
+            }
         }
     }
 
@@ -340,7 +391,7 @@ impl RollContext<'_> {
         axles: std::ops::Range<usize>,
         states: &mut [TrackState],
         works: &mut [TrackWork],
-    ) {
+    ) -> bool {
         let v = Vector {
             // SAFETY: this function runs only on a CPU with AVX2 and FMA.
             exp: |x| unsafe { exp4_inline(x) },
@@ -353,7 +404,7 @@ impl RollContext<'_> {
                 tortwin_model::product::roll4_fma(p, m, c)
             },
         };
-        self.roll_group_line_with(record, rail, axles, states, works, v);
+        self.roll_group_line_with(record, rail, axles, states, works, v)
     }
 
     /// The wheels of `axles` (at most [`LANES`] consecutive axles) on
@@ -364,6 +415,8 @@ impl RollContext<'_> {
     /// [`RollContext::contacts4`] on the four lanes' rail bands; a step
     /// with a special point among its four runs lane by lane
     /// ([`RollContext::step_line`]), as does a group's start and end.
+    /// Returns whether clock-free contacts left step 1's stores out
+    /// ([`RollContext::store_line_touches`] writes them).
     #[inline(always)]
     fn roll_group_line_with(
         &self,
@@ -373,9 +426,9 @@ impl RollContext<'_> {
         states: &mut [TrackState],
         works: &mut [TrackWork],
         v: Vector<impl Exp4, impl Div4, impl Roll4>,
-    ) {
+    ) -> bool {
         let Some(layout) = self.line else {
-            return;
+            return false;
         };
         let n = axles.len();
         debug_assert!((1..=LANES).contains(&n));
@@ -394,6 +447,12 @@ impl RollContext<'_> {
         let mut paths: [LinePath<'_>; LANES] =
             std::array::from_fn(|j| self.line_path(layout, record, rail, lanes[j].axle));
         let special = &self.special[rail * RAIL_BANDS];
+        // As on a section: the portable kernel stores every touch.
+        let clock_free = match self.portable {
+            true => None,
+            false => clock_free(&lanes),
+        };
+        let mut touches_left_out = false;
         for s in 0..points + n - 1 {
             let lo = s.saturating_sub(points - 1);
             let hi = n.min(s + 1);
@@ -406,8 +465,9 @@ impl RollContext<'_> {
                     for (j, (lane, path)) in lanes.iter_mut().zip(&mut paths).enumerate() {
                         (wheel_bands[j], rail_bands[j]) = path.enter(lane, is[j]);
                     }
+                    touches_left_out |= clock_free.is_some();
                     let seen = self.contacts4::<0>(
-                        &mut lanes, &clocks, states, works, rail_bands, is, None, v,
+                        &mut lanes, &clocks, states, works, rail_bands, is, clock_free, v,
                     );
                     for (j, lane) in lanes.iter_mut().enumerate() {
                         self.leave_line(lane, wheel_bands[j], rail_bands[j], is[j], seen[j], works);
@@ -428,6 +488,7 @@ impl RollContext<'_> {
                 self.finish_line_lane(&mut lanes[s + 1 - points], states, works);
             }
         }
+        touches_left_out
     }
 
     /// What a wheel of axle `a` on `rail` meets along the line: its row's
