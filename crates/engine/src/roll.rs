@@ -1301,12 +1301,12 @@ impl RollContext<'_> {
         let clocks = Clocks::of(&lanes);
         let special = &self.special[track];
         // The portable kernel stores every contact's touch (the reference
-        // order, which the kernel test holds the vector kernel's stores to).
-        let clock_free = match self.portable {
+        // order, which the kernel test holds the vector kernel's stores to);
+        // contacts with tangents take the clock.
+        let clock_free = match self.portable || self.tangent_width > 0 {
             true => None,
             false => clock_free(&lanes),
         };
-        let mut touches_left_out = false;
         for s in 0..points + n - 1 {
             let lo = s.saturating_sub(points - 1);
             let hi = n.min(s + 1);
@@ -1320,12 +1320,9 @@ impl RollContext<'_> {
                     let (states, works) = one;
                     let tracks = [0; LANES];
                     let seen = match self.tangent_width {
-                        0 => {
-                            touches_left_out |= clock_free.is_some();
-                            self.contacts4::<0>(
-                                &mut lanes, &clocks, states, works, tracks, is, clock_free, v,
-                            )
-                        }
+                        0 => self.contacts4::<0>(
+                            &mut lanes, &clocks, states, works, tracks, is, clock_free, v,
+                        ),
                         tangent::STATE_SLOTS => self.contacts4::<{ tangent::STATE_SLOTS }>(
                             &mut lanes, &clocks, states, works, tracks, is, None, v,
                         ),
@@ -1361,7 +1358,9 @@ impl RollContext<'_> {
                 self.finish_lane(&lanes[s + 1 - points], state, work, points);
             }
         }
-        if touches_left_out && group[n - 1] == self.last_axle[track] {
+        // The same stores again where no step left them out (a group of
+        // fewer than four wheels steps lane by lane): the same values.
+        if clock_free.is_some() && group[n - 1] == self.last_axle[track] {
             self.store_touches(&lanes[n - 1], state);
         }
     }

@@ -134,8 +134,11 @@ fn the_vector_kernel_gives_the_portable_kernels_bits() {
         for tangents in [false, true] {
             let (vector, vector_state) = replay(&rec, cfg, tangents, false);
             let (portable, portable_state) = replay(&rec, cfg, tangents, true);
+            // The field line has 32 measurements; every section recording
+            // more than 100.
+            let least = if rec.line.is_some() { 30 } else { 100 };
             assert!(
-                vector.len() > 20,
+                vector.len() > least,
                 "{}: {} measurements",
                 path.display(),
                 vector.len()
