@@ -691,7 +691,7 @@ pub(super) fn for_each_chunk_record(
     mut f: impl FnMut(u8, &[u8]) -> Result<(), String>,
 ) -> Result<(), String> {
     if let Some(records) = whole_chunk(record, header) {
-        for (opcode, body) in records.iter() {
+        for (opcode, body) in framed(&records) {
             if opcode == op::CHANNEL || opcode == op::MESSAGE {
                 f(opcode, body)?;
             }
@@ -748,7 +748,7 @@ fn streamed_chunk_records(
 /// [`MAX_CHUNK_BYTES`]) with the header's CRC (when it is not zero), and
 /// they frame exactly: what the streaming reader reads from such a chunk,
 /// record by record, without an error.
-fn whole_chunk(record: &[u8], header: &mcap::records::ChunkHeader) -> Option<WholeChunk> {
+fn whole_chunk(record: &[u8], header: &mcap::records::ChunkHeader) -> Option<Vec<u8>> {
     if header.uncompressed_size > MAX_CHUNK_BYTES {
         return None;
     }
@@ -767,36 +767,27 @@ fn whole_chunk(record: &[u8], header: &mcap::records::ChunkHeader) -> Option<Who
     {
         return None;
     }
-    let chunk = WholeChunk { bytes };
-    let mut framed = 0;
-    for (_, body) in chunk.iter() {
-        framed += RECORD_HEADER_BYTES as usize + body.len();
-    }
-    (framed == size).then_some(chunk)
+    let framed_bytes: usize = framed(&bytes)
+        .map(|(_, body)| RECORD_HEADER_BYTES as usize + body.len())
+        .sum();
+    (framed_bytes == size).then_some(bytes)
 }
 
-/// A chunk's records, decompressed ([`whole_chunk`]).
-struct WholeChunk {
-    bytes: Vec<u8>,
-}
-
-impl WholeChunk {
-    /// The records (opcode, body) in order, as long as they frame: each an
-    /// opcode, a u64 length and that many bytes.
-    fn iter(&self) -> impl Iterator<Item = (u8, &[u8])> {
-        let mut rest: &[u8] = &self.bytes;
-        std::iter::from_fn(move || {
-            let (&opcode, after) = rest.split_first()?;
-            let (len, after) = after.split_first_chunk::<8>()?;
-            let len = usize::try_from(u64::from_le_bytes(*len)).ok()?;
-            if len > after.len() {
-                return None;
-            }
-            let (body, after) = after.split_at(len);
-            rest = after;
-            Some((opcode, body))
-        })
-    }
+/// The records (opcode, body) of decompressed chunk bytes, in order, as
+/// long as they frame: each an opcode, a u64 length and that many bytes.
+fn framed(bytes: &[u8]) -> impl Iterator<Item = (u8, &[u8])> {
+    let mut rest = bytes;
+    std::iter::from_fn(move || {
+        let (&opcode, after) = rest.split_first()?;
+        let (len, after) = after.split_first_chunk::<8>()?;
+        let len = usize::try_from(u64::from_le_bytes(*len)).ok()?;
+        if len > after.len() {
+            return None;
+        }
+        let (body, after) = after.split_at(len);
+        rest = after;
+        Some((opcode, body))
+    })
 }
 
 pub(super) fn read_at(
