@@ -892,27 +892,30 @@ impl Engine {
         // the occupation in integer nanoseconds, rounded up (through a double
         // of nanoseconds since the epoch it would be off by up to 128 ns).
         let end_ns = log_time_ns.saturating_add((occupation_s * 1e9).ceil() as u64);
-        let mut record = match self.recent.len() {
-            n if n >= RECENT_TRAINS => self.recent.pop_front().map(|mut r| {
-                r.passage = passage.clone();
+        // The oldest record's buffers are reused once the window is full.
+        let oldest = match self.recent.len() >= RECENT_TRAINS {
+            true => self.recent.pop_front(),
+            false => None,
+        };
+        let mut record = match oldest {
+            Some(mut r) => {
+                r.passage = passage;
                 r
-            }),
-            _ => None,
-        }
-        .unwrap_or_else(|| TrainRecord {
-            passage: passage.clone(),
-            log_time_ns,
-            index_in_file,
-            end_s,
-            end_ns,
-            wheels: Vec::new(),
-            site_mass_kg: Vec::new(),
-            site_levels: Vec::new(),
-            site_at: Vec::new(),
-            site_tan: Vec::new(),
-            seg_wheels: Vec::new(),
-        });
-        drop(passage);
+            }
+            None => TrainRecord {
+                passage,
+                log_time_ns,
+                index_in_file,
+                end_s,
+                end_ns,
+                wheels: Vec::new(),
+                site_mass_kg: Vec::new(),
+                site_levels: Vec::new(),
+                site_at: Vec::new(),
+                site_tan: Vec::new(),
+                seg_wheels: Vec::new(),
+            },
+        };
         record.log_time_ns = log_time_ns;
         record.index_in_file = index_in_file;
         record.end_s = end_s;
