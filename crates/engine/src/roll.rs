@@ -193,7 +193,7 @@ impl Roller {
         let exps = product::roll_exp_args(&self.params, st.wheel_kg, touch.rail_kg).map(f64::exp);
         let tan = (rail_tan, dr);
         let given = (&conditions, revolution);
-        self.finish_tangent::<W, true>(st, track, tan, observed, &touch, given, exps, i)
+        self.finish_tangent::<W>(true, st, track, tan, observed, &touch, given, exps, i)
     }
 
     /// [`Roller::age`] with the rail mass's tangent `dr`: the time effects
@@ -225,13 +225,13 @@ impl Roller {
 
     /// [`Roller::finish`] with the tangents (`dr`: the rail mass's after
     /// step 1, written back to `rail_tan[i]`), the exponentials given.
-    /// `SEEN`: keep the step-2 mass's tangent (`WheelRoll::seen_tan`, what
-    /// a site's measurement of this contact reads; the wavefront's contacts
-    /// are never at a site).
+    /// `seen`: keep the step-2 mass's tangent (`WheelRoll::seen_tan`, what
+    /// a site's measurement of this contact reads).
     #[allow(clippy::too_many_arguments)]
     #[inline(always)]
-    fn finish_tangent<const W: usize, const SEEN: bool>(
+    fn finish_tangent<const W: usize>(
         &self,
+        seen: bool,
         st: &mut WheelRoll,
         track: &mut TrackState,
         (rail_tan, mut dr): (&mut [Tangent], Tangent),
@@ -256,7 +256,7 @@ impl Roller {
         };
         let mut rail_kg = touch.rail_kg;
         let m_kg = st.wheel_kg + rail_kg;
-        if SEEN {
+        if seen {
             st.seen_tan = tangent::add(&st.wheel_tan, &dr);
         }
         let losses = tangent::roll_given::<W>(
@@ -1313,33 +1313,42 @@ impl RollContext<'_> {
             if lo == 0 && hi == LANES {
                 let is: [usize; LANES] =
                     std::array::from_fn(|j| if up { s - j } else { points - 1 - (s - j) });
-                if !is.iter().any(|&i| special[i]) {
-                    // Compiled three times: without tangents nothing of them
-                    // is left; without effect slots only the constants'.
-                    let one = (std::slice::from_mut(state), std::slice::from_mut(work));
-                    let (states, works) = one;
-                    let tracks = [0; LANES];
-                    let seen = match self.tangent_width {
-                        0 => self.contacts4::<0>(
-                            &mut lanes, &clocks, states, works, tracks, is, clock_free, v,
-                        ),
-                        tangent::STATE_SLOTS => self.contacts4::<{ tangent::STATE_SLOTS }>(
-                            &mut lanes, &clocks, states, works, tracks, is, None, v,
-                        ),
-                        _ => self.contacts4::<SLOTS>(
-                            &mut lanes, &clocks, states, works, tracks, is, None, v,
-                        ),
-                    };
-                    if self.keep_seen {
-                        for (lane, (&i, &m)) in lanes.iter().zip(is.iter().zip(&seen)) {
-                            work.wheel_seen[lane.row * points + i] = m;
-                        }
-                    }
-                    if s + 1 >= points {
-                        self.finish_lane(&lanes[s + 1 - points], state, work, points);
-                    }
-                    continue;
+                // A special point's events before its wheel, then the four
+                // contacts at once, then its sites: the four points are
+                // distinct and each event acts on its own point only, so
+                // this is the order of the contacts one by one.
+                let specials = is.map(|i| special[i]);
+                let mut at_s = [f64::NAN; LANES];
+                for j in (0..LANES).filter(|&j| specials[j]) {
+                    at_s[j] = self.special_before(track, state, work, &mut lanes[j], is[j]);
                 }
+                // Compiled three times: without tangents nothing of them is
+                // left; without effect slots only the constants'.
+                let (states, works) = (std::slice::from_mut(state), std::slice::from_mut(work));
+                let tracks = [0; LANES];
+                let seen = match self.tangent_width {
+                    0 => self.contacts4::<0>(
+                        &mut lanes, &clocks, states, works, tracks, is, clock_free, v,
+                    ),
+                    tangent::STATE_SLOTS => self.contacts4::<{ tangent::STATE_SLOTS }>(
+                        &mut lanes, &clocks, states, works, tracks, is, None, v,
+                    ),
+                    _ => self.contacts4::<SLOTS>(
+                        &mut lanes, &clocks, states, works, tracks, is, None, v,
+                    ),
+                };
+                for j in (0..LANES).filter(|&j| specials[j]) {
+                    self.special_after(record, track, work, &lanes[j], is[j], at_s[j], seen[j]);
+                }
+                if self.keep_seen {
+                    for (lane, (&i, &m)) in lanes.iter().zip(is.iter().zip(&seen)) {
+                        work.wheel_seen[lane.row * points + i] = m;
+                    }
+                }
+                if s + 1 >= points {
+                    self.finish_lane(&lanes[s + 1 - points], state, work, points);
+                }
+                continue;
             }
             for (j, lane) in lanes.iter_mut().enumerate().take(hi).skip(lo) {
                 let step = s - j;
@@ -1507,7 +1516,12 @@ impl RollContext<'_> {
                 }),
             ),
             _ => {
-                let (touches, dr) = self.touch4::<W>(lanes, clocks, states, works, tracks, is, v);
+                // Filled with tangents only (W > 0); left out of the code
+                // without them. An argument, not a returned value: a
+                // returned array of this size was copied twice per step.
+                let mut dr: [Tangent; LANES] = [[0.0; SLOTS]; LANES];
+                let touches =
+                    self.touch4::<W>(lanes, clocks, states, works, tracks, is, &mut dr, v);
                 let conditions: [ContactConditions; LANES] = std::array::from_fn(|j| {
                     lanes[j]
                         .roller
@@ -1520,7 +1534,7 @@ impl RollContext<'_> {
                         works,
                         tracks,
                         is,
-                        (&touches, dr),
+                        (&touches, &dr),
                         &conditions,
                         v.exp,
                     );
@@ -1549,8 +1563,8 @@ impl RollContext<'_> {
 
     /// Step 1 of four lanes ([`RollContext::touches4`]): the time effects
     /// since each point's last touch (on the rail masses' tangents too,
-    /// with tangents) and the touches stored. Returns the touches and the
-    /// tangents of the aged rail masses.
+    /// with tangents) and the touches stored. Returns the touches; with
+    /// tangents `dr` takes the tangents of the aged rail masses.
     #[allow(clippy::too_many_arguments)]
     #[inline(always)]
     fn touch4<const W: usize>(
@@ -1561,12 +1575,12 @@ impl RollContext<'_> {
         works: &[TrackWork],
         tracks: [usize; LANES],
         is: [usize; LANES],
+        dr: &mut [Tangent; LANES],
         v: Vector<impl Exp4, impl Div4, impl Roll4>,
-    ) -> ([Touch<'_>; LANES], [Tangent; LANES]) {
+    ) -> [Touch<'_>; LANES] {
         let exp4 = v.exp;
         let mut touches = self.touches4(lanes, clocks, states, tracks, is, v.div);
         // With tangents: the rail masses' tangents, aged with them.
-        let mut dr: [Tangent; LANES] = [[0.0; SLOTS]; LANES];
         if W > 0 {
             for (j, (d, &i)) in dr.iter_mut().zip(&is).enumerate() {
                 *d = works[tracks[j]].rail_tan[i];
@@ -1598,7 +1612,7 @@ impl RollContext<'_> {
         for (j, (lane, (touch, &i))) in lanes.iter().zip(touches.iter().zip(&is)).enumerate() {
             lane.roller.touched(&mut states[tracks[j]], touch, i);
         }
-        (touches, dr)
+        touches
     }
 
     /// Steps 3 to 5 with tangents (W > 0), lane by lane, the four lanes'
@@ -1612,7 +1626,7 @@ impl RollContext<'_> {
         works: &mut [TrackWork],
         tracks: [usize; LANES],
         is: [usize; LANES],
-        (touches, dr): (&[Touch<'_>; LANES], [Tangent; LANES]),
+        (touches, dr): (&[Touch<'_>; LANES], &[Tangent; LANES]),
         conditions: &[ContactConditions; LANES],
         exp4: impl Exp4,
     ) -> [f64; LANES] {
@@ -1624,7 +1638,10 @@ impl RollContext<'_> {
         let mut seen = [0.0; LANES];
         for (j, lane) in lanes.iter_mut().enumerate() {
             let (state, work) = (&mut states[tracks[j]], &mut works[tracks[j]]);
-            seen[j] = lane.roller.finish_tangent::<W, false>(
+            // A site's measurement reads the contact's tangent there.
+            let at_site = !self.sites_at[is[j]].is_empty();
+            seen[j] = lane.roller.finish_tangent::<W>(
+                at_site,
                 &mut lane.st,
                 state,
                 (&mut work.rail_tan, dr[j]),
@@ -1662,16 +1679,48 @@ impl RollContext<'_> {
         lane: &mut Lane,
         i: usize,
     ) -> f64 {
+        let t = self.special_before(track, state, work, lane, i);
+        let m_kg = self.contact(lane, state, work, i);
+        self.special_after(record, track, work, lane, i, t, m_kg);
+        m_kg
+    }
+
+    /// What comes before `lane`'s contact at the special point `i`: the
+    /// pulses and readings there before its wheel, and N's count from an
+    /// applicator. Returns the wheel's time there.
+    fn special_before(
+        &self,
+        track: usize,
+        state: &mut TrackState,
+        work: &mut TrackWork,
+        lane: &mut Lane,
+        i: usize,
+    ) -> f64 {
         let t = lane.roller.time_at(self.d_m, i);
         self.run_events_before(track, state, work, lane, i, t);
         if self.applicator_at[track][i] != NO_APPLICATOR {
             // The wheel passes this applicator: N counts from here.
             lane.st.applicator_point = Some(i);
         }
-        let m_kg = self.contact(lane, state, work, i);
+        t
+    }
+
+    /// What comes after `lane`'s contact at the special point `i` (at time
+    /// `t`, step-2 mass `m_kg`): the contact kept for the sites there.
+    #[allow(clippy::too_many_arguments)]
+    fn special_after(
+        &self,
+        record: &TrainRecord,
+        track: usize,
+        work: &mut TrackWork,
+        lane: &Lane,
+        i: usize,
+        t: f64,
+        m_kg: f64,
+    ) {
         let sites_here = &self.sites_at[i];
         if sites_here.is_empty() {
-            return m_kg;
+            return;
         }
         let rail = self.track_info[track].rail;
         let weather = self.timeline.at(t).current;
@@ -1697,7 +1746,6 @@ impl RollContext<'_> {
                 tangent: lane.st.seen_tan,
             });
         }
-        m_kg
     }
 
     /// The pulses and readings of `track` at point `i` that come before
