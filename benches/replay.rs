@@ -10,13 +10,14 @@
 //!
 //! `cargo bench --bench replay`
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
-use criterion::{criterion_group, criterion_main, Criterion, Throughput};
+use criterion::measurement::WallTime;
+use criterion::{criterion_group, criterion_main, BenchmarkGroup, Criterion, Throughput};
 
 use tortwin_jobs::replay::{replay, ReplayArgs};
 
-fn args(recording: PathBuf, out: &std::path::Path) -> ReplayArgs {
+fn args(recording: PathBuf, out: &Path) -> ReplayArgs {
     ReplayArgs {
         out_mcap: Some(out.join("bench.mcap")),
         out_rrd: Some(out.join("bench.rrd")),
@@ -45,25 +46,48 @@ fn replay_with_outputs(c: &mut Criterion) {
         });
     }
     // Issue 16's yardstick: 3 days on the 600 m curve, MCAP out.
-    let recording = out.path().join("curve_3day.mcap");
+    let curve = ["--days", "3", "--trains-per-day", "56", "--seed", "1"];
+    synthetic(&mut group, out.path(), "curve_3day_mcap_out", &curve);
+    // Issue 45's comparison: a line's contacts per second against a
+    // section's, the same freight traffic (40 trains a day, seed 1), MCAP
+    // out, in one run of one binary: the 10 km example line for 2 days
+    // and the 1.5 km section for 8 (70 and 42 M contacts).
+    let layout = format!(
+        "{}/docs/examples/line-10km.toml",
+        env!("CARGO_MANIFEST_DIR")
+    );
+    let freight = ["--passenger-share", "0", "--seed", "1"];
+    let line = [&freight[..], &["--days", "2", "--layout", &layout]].concat();
+    synthetic(&mut group, out.path(), "line_10km_2day_mcap_out", &line);
+    let section = [&freight[..], &["--days", "8", "--length-m", "1500"]].concat();
+    synthetic(
+        &mut group,
+        out.path(),
+        "section_1500m_8day_mcap_out",
+        &section,
+    );
+    group.finish();
+}
+
+/// `tortwin synth` with `synth_args` into `out`, and that recording's
+/// replay with MCAP out benchmarked as `name`.
+fn synthetic(
+    group: &mut BenchmarkGroup<'_, WallTime>,
+    out: &Path,
+    name: &str,
+    synth_args: &[&str],
+) {
+    let recording = out.join(format!("{name}.mcap"));
     let status = std::process::Command::new(env!("CARGO_BIN_EXE_tortwin"))
-        .args([
-            "synth",
-            "--days",
-            "3",
-            "--trains-per-day",
-            "56",
-            "--seed",
-            "1",
-            "-q",
-            "--out",
-        ])
+        .arg("synth")
+        .args(synth_args)
+        .args(["-q", "--out"])
         .arg(&recording)
         .status()
         .expect("tortwin synth runs");
     assert!(status.success(), "tortwin synth failed");
     let a = ReplayArgs {
-        out_mcap: Some(out.path().join("bench.mcap")),
+        out_mcap: Some(out.join("bench.mcap")),
         ..ReplayArgs::new(recording)
     };
     let contacts = replay(&a, None, &mut [], &tortwin_study::Silent)
@@ -71,43 +95,9 @@ fn replay_with_outputs(c: &mut Criterion) {
         .summary
         .contacts;
     group.throughput(Throughput::Elements(contacts));
-    group.bench_function("curve_3day_mcap_out", |b| {
+    group.bench_function(name, |b| {
         b.iter(|| replay(&a, None, &mut [], &tortwin_study::Silent).expect("replays"))
     });
-    // Issue 45's comparison: a line's contacts per second against a
-    // section's, the same freight traffic (40 trains a day, seed 1), MCAP
-    // out, in one run of one binary: the 10 km example line for 2 days
-    // and the 1.5 km section for 8 (both about 70 M contacts).
-    let here = env!("CARGO_MANIFEST_DIR");
-    let layout = format!("{here}/docs/examples/line-10km.toml");
-    for (name, days, shape) in [
-        ("line_10km_2day_mcap_out", "2", ["--layout", layout.as_str()]),
-        ("section_1500m_8day_mcap_out", "8", ["--length-m", "1500"]),
-    ] {
-        let recording = out.path().join(format!("{name}.mcap"));
-        let status = std::process::Command::new(env!("CARGO_BIN_EXE_tortwin"))
-            .args(["synth", "--days", days, "--passenger-share", "0"])
-            .args(["--seed", "1", "-q"])
-            .args(shape)
-            .arg("--out")
-            .arg(&recording)
-            .status()
-            .expect("tortwin synth runs");
-        assert!(status.success(), "tortwin synth failed");
-        let a = ReplayArgs {
-            out_mcap: Some(out.path().join("bench.mcap")),
-            ..ReplayArgs::new(recording)
-        };
-        let contacts = replay(&a, None, &mut [], &tortwin_study::Silent)
-            .expect("replays")
-            .summary
-            .contacts;
-        group.throughput(Throughput::Elements(contacts));
-        group.bench_function(name, |b| {
-            b.iter(|| replay(&a, None, &mut [], &tortwin_study::Silent).expect("replays"))
-        });
-    }
-    group.finish();
 }
 
 criterion_group!(benches, replay_with_outputs);
