@@ -36,14 +36,7 @@ fn replay_with_outputs(c: &mut Criterion) {
             .join("tests/reference/recordings")
             .join(format!("{name}.mcap"));
         let a = args(recording, out.path());
-        let contacts = replay(&a, None, &mut [], &tortwin_study::Silent)
-            .expect("the reference recording replays")
-            .summary
-            .contacts;
-        group.throughput(Throughput::Elements(contacts));
-        group.bench_function(format!("{name}_mcap_and_rrd_out"), |b| {
-            b.iter(|| replay(&a, None, &mut [], &tortwin_study::Silent).expect("replays"))
-        });
+        bench_replay(&mut group, &format!("{name}_mcap_and_rrd_out"), &a);
     }
     // Issue 16's yardstick: 3 days on the 600 m curve, MCAP out.
     let curve = ["--days", "3", "--trains-per-day", "56", "--seed", "1"];
@@ -90,13 +83,18 @@ fn synthetic(
         out_mcap: Some(out.join("bench.mcap")),
         ..ReplayArgs::new(recording)
     };
-    let contacts = replay(&a, None, &mut [], &tortwin_study::Silent)
-        .expect("replays")
+    bench_replay(group, name, &a);
+}
+
+/// The replay of `a` benchmarked as `name`, its throughput in contacts.
+fn bench_replay(group: &mut BenchmarkGroup<'_, WallTime>, name: &str, a: &ReplayArgs) {
+    let contacts = replay(a, None, &mut [], &tortwin_study::Silent)
+        .expect("the recording replays")
         .summary
         .contacts;
     group.throughput(Throughput::Elements(contacts));
     group.bench_function(name, |b| {
-        b.iter(|| replay(&a, None, &mut [], &tortwin_study::Silent).expect("replays"))
+        b.iter(|| replay(a, None, &mut [], &tortwin_study::Silent).expect("replays"))
     });
 }
 
