@@ -54,6 +54,7 @@ impl SinkThread {
         let thread = std::thread::Builder::new()
             .name(name.to_owned())
             .spawn(move || {
+                tortwin_handover::behind_the_engine();
                 let result = run(sink, &calls);
                 if result.is_err() {
                     flag.store(true, Ordering::Release);

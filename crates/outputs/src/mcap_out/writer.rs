@@ -70,6 +70,7 @@ impl WriterThread {
         let thread = std::thread::Builder::new()
             .name("tortwin-mcap".to_owned())
             .spawn(move || {
+                tortwin_handover::behind_the_engine();
                 let mut writer = writer;
                 while let Some(batch) = incoming.take() {
                     for e in &batch.entries {

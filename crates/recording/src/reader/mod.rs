@@ -638,6 +638,7 @@ pub fn read_ahead<T>(
     let (mut batches, incoming) = tortwin_handover::channel::<Batch>(READ_AHEAD_QUEUE);
     std::thread::scope(|scope| {
         let producer = scope.spawn(move || {
+            tortwin_handover::behind_the_engine();
             let mut reader = reader;
             loop {
                 let batch = batches.batch();
