@@ -31,6 +31,13 @@ pub const BEHIND_NICE: i32 = 19;
 /// example line with MCAP out): without it the engine's thread waited,
 /// runnable, a sixth of the replay for a core these threads held.
 ///
+/// The price: such a thread yields to every thread of normal priority in
+/// its scheduling group (on a desktop, the terminal session's processes),
+/// not only to its engine, so beside other busy work the replay's reading
+/// and writing wait for it. A batch replay's threads are put behind; a
+/// live twin's (`tortwin live`, which must keep up with the recording as
+/// it is written) are not.
+///
 /// Linux keeps a nice value per thread, so only the calling thread
 /// changes; it cannot be lowered again without privileges, so call it on
 /// a thread of your own only. Elsewhere, and where the call fails, nothing

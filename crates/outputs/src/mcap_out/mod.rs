@@ -233,7 +233,7 @@ impl McapSink {
         compression: McapCompression,
         line: bool,
     ) -> Result<McapSink, McapError> {
-        let file = McapFile::create(path, provenance, compression, line)?;
+        let file = McapFile::create(path, provenance, compression, line, true)?;
         Ok(Self::with_file(Some(file), path.to_path_buf(), None))
     }
 
@@ -326,7 +326,15 @@ impl McapSink {
         if path.exists() {
             return Ok(());
         }
-        let mut file = McapFile::create(&path, provenance.as_ref(), McapCompression::Fast, line)?;
+        // Not behind the engine: a live twin's day must reach its file while
+        // other work at normal priority has the cores.
+        let mut file = McapFile::create(
+            &path,
+            provenance.as_ref(),
+            McapCompression::Fast,
+            line,
+            false,
+        )?;
         if let Some((json, at)) = section {
             file.write_raw(Topic::Section, at, &json)?;
         }
@@ -337,12 +345,14 @@ impl McapSink {
 
 impl McapFile {
     /// Opens `.NAME.partial-XXXXXX` next to `path` and registers every
-    /// channel (see [`McapSink::create`]).
+    /// channel (see [`McapSink::create`]); `behind`: the writer thread runs
+    /// behind the engine ([`tortwin_handover::behind_the_engine`]).
     fn create(
         path: &Path,
         provenance: Option<&Provenance>,
         compression: McapCompression,
         line: bool,
+        behind: bool,
     ) -> Result<McapFile, McapError> {
         let temp = PartialFile::beside(path)?;
         let file = File::create(temp.temp_path()).map_err(|source| McapError::Io {
@@ -422,7 +432,7 @@ impl McapFile {
         }
 
         Ok(McapFile {
-            writer: WriterThread::start(writer, path)?,
+            writer: WriterThread::start(writer, path, behind)?,
             temp,
             channel_ids,
         })

@@ -63,14 +63,22 @@ pub(super) struct WriterThread {
 }
 
 impl WriterThread {
-    /// Starts the thread that writes to `writer`; `path` names the output in errors.
-    pub(super) fn start(writer: Writer, path: &Path) -> Result<WriterThread, McapError> {
+    /// Starts the thread that writes to `writer`; `path` names the output in
+    /// errors; `behind`: the thread runs behind the engine (a replay's
+    /// output, not a live twin's: [`tortwin_handover::behind_the_engine`]).
+    pub(super) fn start(
+        writer: Writer,
+        path: &Path,
+        behind: bool,
+    ) -> Result<WriterThread, McapError> {
         let (jobs, incoming) = tortwin_handover::channel::<Batch>(QUEUE);
         let thread_path = path.to_path_buf();
         let thread = std::thread::Builder::new()
             .name("tortwin-mcap".to_owned())
             .spawn(move || {
-                tortwin_handover::behind_the_engine();
+                if behind {
+                    tortwin_handover::behind_the_engine();
+                }
                 let mut writer = writer;
                 while let Some(batch) = incoming.take() {
                     for e in &batch.entries {
