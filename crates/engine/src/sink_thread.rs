@@ -46,7 +46,8 @@ pub struct SinkThread {
 }
 
 impl SinkThread {
-    /// Starts `sink` on a thread named `name`.
+    /// Starts `sink` on a thread named `name`, which runs behind the engine
+    /// ([`tortwin_handover::behind_the_engine`]: a batch replay's outputs).
     pub fn spawn<S: Sink + Send + 'static>(name: &str, sink: S) -> std::io::Result<Self> {
         let (to_thread, calls) = tortwin_handover::channel::<Vec<Event<'static>>>(QUEUE);
         let failed = Arc::new(AtomicBool::new(false));

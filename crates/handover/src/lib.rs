@@ -27,9 +27,10 @@ pub const BEHIND_NICE: i32 = 19;
 /// in the time they leave (while the engine settles a train, emits, or
 /// waits for it). It cannot stall the engine: the hand-over is bounded, so
 /// an engine that runs ahead of this thread blocks on it, and the core is
-/// this thread's again. Measured on a 2-core machine (a month of the
-/// example line with MCAP out): without it the engine's thread waited,
-/// runnable, a sixth of the replay for a core these threads held.
+/// this thread's again. Measured on a 2-core machine (8 days of the
+/// example line with MCAP out, `perf sched`): without it the engine's
+/// thread waited, runnable, a sixth of the replay for a core these threads
+/// held.
 ///
 /// The price: such a thread yields to every thread of normal priority in
 /// its scheduling group (on a desktop, the terminal session's processes),

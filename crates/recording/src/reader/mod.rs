@@ -629,7 +629,8 @@ fn read_ahead_weight(event: &Result<Event, InputError>) -> usize {
 /// every rule), a few batches in front; returns what `consume` returned
 /// and the reader (for its counts). The events come in the same order as
 /// from the reader itself; when `consume` stops early, the thread stops at
-/// its next batch.
+/// its next batch. The reading thread runs behind the engine
+/// ([`tortwin_handover::behind_the_engine`]): a batch replay's reader.
 pub fn read_ahead<T>(
     reader: RecordingReader,
     consume: impl FnOnce(&mut ReadAhead) -> T,
