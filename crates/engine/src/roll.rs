@@ -180,20 +180,19 @@ impl Roller {
         i: usize,
     ) -> f64 {
         let mut touch = self.touch(track, d_m, timeline, i);
-        let mut dr = rail_tan[i];
+        let dr = &mut rail_tan[i];
         if touch.aged {
             let exps = self
                 .time_effects
                 .exp_args(touch.dt_s, touch.rain_mm)
                 .map(f64::exp);
-            self.age_tangent::<W>(st, &mut touch, &mut dr, exps);
+            self.age_tangent::<W>(st, &mut touch, dr, exps);
         }
         self.touched(track, &touch, i);
         let conditions = self.conditions(st, &touch, revolution, i);
         let exps = product::roll_exp_args(&self.params, st.wheel_kg, touch.rail_kg).map(f64::exp);
-        let tan = (rail_tan, dr);
         let given = (&conditions, revolution);
-        self.finish_tangent::<W>(true, st, track, tan, observed, &touch, given, exps, i)
+        self.finish_tangent::<W>(true, st, track, dr, observed, &touch, given, exps, i)
     }
 
     /// [`Roller::age`] with the rail mass's tangent `dr`: the time effects
@@ -224,7 +223,8 @@ impl Roller {
     }
 
     /// [`Roller::finish`] with the tangents (`dr`: the rail mass's after
-    /// step 1, written back to `rail_tan[i]`), the exponentials given.
+    /// step 1, in its place in the track's tangents, stepped there), the
+    /// exponentials given.
     /// `seen`: keep the step-2 mass's tangent (`WheelRoll::seen_tan`, what
     /// a site's measurement of this contact reads).
     #[allow(clippy::too_many_arguments)]
@@ -234,7 +234,7 @@ impl Roller {
         seen: bool,
         st: &mut WheelRoll,
         track: &mut TrackState,
-        (rail_tan, mut dr): (&mut [Tangent], Tangent),
+        dr: &mut Tangent,
         observed: &mut Observed,
         touch: &Touch<'_>,
         (conditions, revolution): (&ContactConditions, &[f64]),
@@ -257,7 +257,7 @@ impl Roller {
         let mut rail_kg = touch.rail_kg;
         let m_kg = st.wheel_kg + rail_kg;
         if seen {
-            st.seen_tan = tangent::add(&st.wheel_tan, &dr);
+            st.seen_tan = tangent::add(&st.wheel_tan, dr);
         }
         let losses = tangent::roll_given::<W>(
             &self.params,
@@ -265,7 +265,7 @@ impl Roller {
             &mut rail_kg,
             conditions,
             &tangents,
-            (&mut st.wheel_tan, &mut dr),
+            (&mut st.wheel_tan, dr),
             exps,
         );
         st.consumed_kg += losses.consumed_kg;
@@ -296,7 +296,6 @@ impl Roller {
             }
         }
         track.rail_mass_kg[i] = rail_kg;
-        rail_tan[i] = dr;
         if self.observe {
             observed.mass_kg[i] = m_kg;
             observed.wheel_mass_kg[i] = st.wheel_kg;
@@ -1516,12 +1515,7 @@ impl RollContext<'_> {
                 }),
             ),
             _ => {
-                // Filled with tangents only (W > 0); left out of the code
-                // without them. An argument, not a returned value: a
-                // returned array of this size was copied twice per step.
-                let mut dr: [Tangent; LANES] = [[0.0; SLOTS]; LANES];
-                let touches =
-                    self.touch4::<W>(lanes, clocks, states, works, tracks, is, &mut dr, v);
+                let touches = self.touch4::<W>(lanes, clocks, states, works, tracks, is, v);
                 let conditions: [ContactConditions; LANES] = std::array::from_fn(|j| {
                     lanes[j]
                         .roller
@@ -1534,7 +1528,7 @@ impl RollContext<'_> {
                         works,
                         tracks,
                         is,
-                        (&touches, &dr),
+                        &touches,
                         &conditions,
                         v.exp,
                     );
@@ -1563,8 +1557,8 @@ impl RollContext<'_> {
 
     /// Step 1 of four lanes ([`RollContext::touches4`]): the time effects
     /// since each point's last touch (on the rail masses' tangents too,
-    /// with tangents) and the touches stored. Returns the touches; with
-    /// tangents `dr` takes the tangents of the aged rail masses.
+    /// with tangents, in their places in the track's tangents) and the
+    /// touches stored. Returns the touches.
     #[allow(clippy::too_many_arguments)]
     #[inline(always)]
     fn touch4<const W: usize>(
@@ -1572,20 +1566,13 @@ impl RollContext<'_> {
         lanes: &mut [Lane; LANES],
         clocks: &Clocks,
         states: &mut [TrackState],
-        works: &[TrackWork],
+        works: &mut [TrackWork],
         tracks: [usize; LANES],
         is: [usize; LANES],
-        dr: &mut [Tangent; LANES],
         v: Vector<impl Exp4, impl Div4, impl Roll4>,
     ) -> [Touch<'_>; LANES] {
         let exp4 = v.exp;
         let mut touches = self.touches4(lanes, clocks, states, tracks, is, v.div);
-        // With tangents: the rail masses' tangents, aged with them.
-        if W > 0 {
-            for (j, (d, &i)) in dr.iter_mut().zip(&is).enumerate() {
-                *d = works[tracks[j]].rail_tan[i];
-            }
-        }
         if touches.iter().any(|t| t.aged) {
             let args: [[f64; 2]; LANES] = std::array::from_fn(|j| {
                 self.time_effects
@@ -1601,8 +1588,12 @@ impl RollContext<'_> {
                 if touch.aged {
                     let exps = [ageing[j], washoff[j]];
                     if W > 0 {
-                        lane.roller
-                            .age_tangent::<W>(&mut lane.st, touch, &mut dr[j], exps);
+                        // The rail mass's tangent aged in its place: a
+                        // copy out and back, stepped slot by slot between,
+                        // stalled on the wide reloads of the narrow stores
+                        // (perf: the copy back was 7 % of a calibration).
+                        let dr = &mut works[tracks[j]].rail_tan[is[j]];
+                        lane.roller.age_tangent::<W>(&mut lane.st, touch, dr, exps);
                     } else {
                         lane.roller.age(&mut lane.st, touch, exps);
                     }
@@ -1626,7 +1617,7 @@ impl RollContext<'_> {
         works: &mut [TrackWork],
         tracks: [usize; LANES],
         is: [usize; LANES],
-        (touches, dr): (&[Touch<'_>; LANES], &[Tangent; LANES]),
+        touches: &[Touch<'_>; LANES],
         conditions: &[ContactConditions; LANES],
         exp4: impl Exp4,
     ) -> [f64; LANES] {
@@ -1644,7 +1635,7 @@ impl RollContext<'_> {
                 at_site,
                 &mut lane.st,
                 state,
-                (&mut work.rail_tan, dr[j]),
+                &mut work.rail_tan[is[j]],
                 &mut work.observed,
                 &touches[j],
                 (&conditions[j], self.revolution),
