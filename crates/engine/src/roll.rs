@@ -1588,10 +1588,10 @@ impl RollContext<'_> {
                 if touch.aged {
                     let exps = [ageing[j], washoff[j]];
                     if W > 0 {
-                        // The rail mass's tangent aged in its place: a
-                        // copy out and back, stepped slot by slot between,
-                        // stalled on the wide reloads of the narrow stores
-                        // (perf: the copy back was 7 % of a calibration).
+                        // The rail mass's tangent aged in its place, not
+                        // copied out and back (perf put 7 % of a
+                        // calibration's samples on the copy back; its time
+                        // moved to the loads, the outputs are the same).
                         let dr = &mut works[tracks[j]].rail_tan[is[j]];
                         lane.roller.age_tangent::<W>(&mut lane.st, touch, dr, exps);
                     } else {
