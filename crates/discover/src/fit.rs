@@ -553,6 +553,12 @@ impl Cost {
         self
     }
 
+    /// The replay the run-equivalents are counted in: its mean time (ms)
+    /// and how many replays that mean rests on (`None` before the first).
+    pub fn replay_unit(&self) -> Option<(f64, usize)> {
+        (self.engine_runs > 0).then(|| (self.per_replay_ns() * 1e-6, self.engine_runs))
+    }
+
     /// The mean replay's time so far.
     fn per_replay_ns(&self) -> f64 {
         self.replay_ns as f64 / self.engine_runs.max(1) as f64

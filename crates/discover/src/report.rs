@@ -428,8 +428,13 @@ pub(crate) fn cost_text(d: &Discovery) -> String {
             )
         })
         .collect();
+    let unit = match (d.replay_ms, d.replays_timed) {
+        (Some(ms), 1) => format!(" of {ms:.0} ms (the one replay timed)"),
+        (Some(ms), n) => format!(" of {ms:.0} ms (the mean of {n} replays timed)"),
+        (None, _) => String::new(),
+    };
     format!(
-        "{:.1} run-equivalents: {} replays, {} with tangents, {} read-outs; {}",
+        "{:.1} run-equivalents{unit}: {} replays, {} with tangents, {} read-outs; {}",
         d.run_equivalents,
         d.engine_runs,
         d.tangent_runs(),

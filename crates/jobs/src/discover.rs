@@ -112,9 +112,12 @@ pub fn calibrate_with_data(
 /// What a run read and what its evaluations cost, one line (discover and
 /// calibrate print it alike).
 fn work_line(d: &Discovery, elapsed_s: f64) -> String {
+    let unit = d
+        .replay_ms
+        .map_or_else(String::new, |ms| format!(" of {ms:.0} ms"));
     format!(
         "  {} measurements over {} days; {} engine runs and {} with tangents, {:.1} \
-         run-equivalents in {elapsed_s:.1} s",
+         run-equivalents{unit} in {elapsed_s:.1} s",
         d.measurements,
         d.days,
         d.engine_runs,
