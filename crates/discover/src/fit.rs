@@ -553,10 +553,10 @@ impl Cost {
         self
     }
 
-    /// The replay the run-equivalents are counted in: its mean time (ms)
-    /// and how many replays that mean rests on (`None` before the first).
-    pub fn replay_unit(&self) -> Option<(f64, usize)> {
-        (self.engine_runs > 0).then(|| (self.per_replay_ns() * 1e-6, self.engine_runs))
+    /// The replay the run-equivalents are counted in: the mean time (ms)
+    /// of the replays so far (`None` before the first).
+    pub fn replay_ms(&self) -> Option<f64> {
+        (self.engine_runs > 0).then(|| self.per_replay_ns() * 1e-6)
     }
 
     /// The mean replay's time so far.

@@ -364,11 +364,10 @@ pub struct Discovery {
     /// in replays (measured).
     pub run_equivalents: f64,
     /// The replay `run_equivalents` are counted in: the mean time (ms) of
-    /// this run's replays from the start, measured, and how many they were
-    /// (the machine's speed and a replay's warm-up move it: a run of few
-    /// replays rests on early ones).
+    /// this run's replays from the start but the first (`engine_runs - 1`
+    /// of them), measured (the machine's speed and a replay's warm-up move
+    /// it: a run of few replays rests on early ones).
     pub replay_ms: Option<f64>,
-    pub replays_timed: usize,
     /// What each stage cost.
     pub cost: Vec<fit::StageCost>,
     pub elapsed_s: f64,
@@ -691,8 +690,7 @@ pub fn discover(
         options: *options,
         engine_runs: ev.runs() + 1,
         run_equivalents: ev.cost.now().run_equivalents + 1.0,
-        replay_ms: ev.cost.now().replay_unit().map(|(ms, _)| ms),
-        replays_timed: ev.cost.now().replay_unit().map_or(0, |(_, n)| n),
+        replay_ms: ev.cost.now().replay_ms(),
         cost: ev.cost.by_stage(),
         elapsed_s: t0.elapsed().as_secs_f64(),
         provenance: None,

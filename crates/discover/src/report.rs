@@ -428,7 +428,8 @@ pub(crate) fn cost_text(d: &Discovery) -> String {
             )
         })
         .collect();
-    let unit = match (d.replay_ms, d.replays_timed) {
+    // Every replay but the first (which finds the outliers) is timed.
+    let unit = match (d.replay_ms, d.engine_runs.saturating_sub(1)) {
         (Some(ms), 1) => format!(" of {ms:.0} ms (the one replay timed)"),
         (Some(ms), n) => format!(" of {ms:.0} ms (the mean of {n} replays timed)"),
         (None, _) => String::new(),
