@@ -191,8 +191,9 @@ impl Roller {
         self.touched(track, &touch, i);
         let conditions = self.conditions(st, &touch, revolution, i);
         let exps = product::roll_exp_args(&self.params, st.wheel_kg, touch.rail_kg).map(f64::exp);
-        let given = (&conditions, revolution);
-        self.finish_tangent::<W>(true, st, track, dr, observed, &touch, given, exps, i)
+        let effect = self.effect_tangents_of::<W>(st, &touch, revolution, i);
+        let given = (&conditions, effect);
+        self.finish_tangent::<W>(true, st, track, dr, observed, touch.rail_kg, given, exps, i)
     }
 
     /// [`Roller::age`] with the rail mass's tangent `dr`: the time effects
@@ -224,7 +225,8 @@ impl Roller {
 
     /// [`Roller::finish`] with the tangents (`dr`: the rail mass's after
     /// step 1, in its place in the track's tangents, stepped there), the
-    /// exponentials given.
+    /// rail mass after step 1, the effect tangents of the conditions
+    /// ([`Roller::effect_tangents_of`]) and the exponentials given.
     /// `seen`: keep the step-2 mass's tangent (`WheelRoll::seen_tan`, what
     /// a site's measurement of this contact reads).
     #[allow(clippy::too_many_arguments)]
@@ -236,15 +238,12 @@ impl Roller {
         track: &mut TrackState,
         dr: &mut Tangent,
         observed: &mut Observed,
-        touch: &Touch<'_>,
-        (conditions, revolution): (&ContactConditions, &[f64]),
+        mut rail_kg: f64,
+        (conditions, effect): (&ContactConditions, EffectTangents),
         exps: [f64; 2],
         i: usize,
     ) -> f64 {
-        let (transfer_effect, consumption_effect) = match W > tangent::STATE_SLOTS {
-            true => self.effect_tangents(st, touch, revolution, i),
-            false => Default::default(),
-        };
+        let (transfer_effect, consumption_effect) = effect;
         let tangents = ConditionTangents {
             fp_fc: self.fp_fc_tan,
             transfer_revolution: match (conditions.transfer_revolution, st.applicator_point) {
@@ -254,7 +253,6 @@ impl Roller {
             transfer_effect,
             consumption_effect,
         };
-        let mut rail_kg = touch.rail_kg;
         let m_kg = st.wheel_kg + rail_kg;
         if seen {
             st.seen_tan = tangent::add(&st.wheel_tan, dr);
@@ -503,6 +501,10 @@ impl Clocks {
     }
 }
 
+/// The derivatives of a contact's transfer and consumption factors in the
+/// effect parameters followed ([`Roller::effect_tangents`]).
+type EffectTangents = ([f64; EFFECT_SLOTS], [f64; EFFECT_SLOTS]);
+
 /// What step 1 of a contact read.
 struct Touch<'w> {
     t: f64,
@@ -516,6 +518,22 @@ struct Touch<'w> {
 }
 
 impl Roller {
+    /// [`Roller::effect_tangents`] where the tangents have effect slots
+    /// (`W` beyond the state's), zeros otherwise.
+    #[inline(always)]
+    fn effect_tangents_of<const W: usize>(
+        &self,
+        st: &WheelRoll,
+        touch: &Touch<'_>,
+        revolution: &[f64],
+        i: usize,
+    ) -> EffectTangents {
+        match W > tangent::STATE_SLOTS {
+            true => self.effect_tangents(st, touch, revolution, i),
+            false => Default::default(),
+        }
+    }
+
     /// The derivatives of a contact's transfer factor (with the revolution
     /// decay, as `ContactConditions::transfer_revolution`) and consumption
     /// factor in the effect parameters followed
@@ -527,7 +545,7 @@ impl Roller {
         touch: &Touch<'_>,
         revolution: &[f64],
         i: usize,
-    ) -> ([f64; EFFECT_SLOTS], [f64; EFFECT_SLOTS]) {
+    ) -> EffectTangents {
         let mut transfer = [0.0; EFFECT_SLOTS];
         let mut consumption = [0.0; EFFECT_SLOTS];
         let (t, weather) = (touch.t, touch.weather);
@@ -1301,8 +1319,9 @@ impl RollContext<'_> {
         let special = &self.special[track];
         // The portable kernel stores every contact's touch (the reference
         // order, which the kernel test holds the vector kernel's stores to);
-        // contacts with tangents take the clock.
-        let clock_free = match self.portable || self.tangent_width > 0 {
+        // contacts with effect tangents take the clock (their factors'
+        // derivatives read the time and the weather).
+        let clock_free = match self.portable || self.tangent_width > tangent::STATE_SLOTS {
             true => None,
             false => clock_free(&lanes),
         };
@@ -1330,7 +1349,7 @@ impl RollContext<'_> {
                         &mut lanes, &clocks, states, works, tracks, is, clock_free, v,
                     ),
                     tangent::STATE_SLOTS => self.contacts4::<{ tangent::STATE_SLOTS }>(
-                        &mut lanes, &clocks, states, works, tracks, is, None, v,
+                        &mut lanes, &clocks, states, works, tracks, is, clock_free, v,
                     ),
                     _ => self.contacts4::<SLOTS>(
                         &mut lanes, &clocks, states, works, tracks, is, None, v,
@@ -1500,12 +1519,14 @@ impl RollContext<'_> {
         clock_free: Option<[(f64, f64); LANES]>,
         v: Vector<impl Exp4, impl Div4, impl Roll4>,
     ) -> [f64; LANES] {
-        let (rail, conditions) = match (W, clock_free) {
+        use std::array::from_fn;
+        let (rail, conditions, effects) = match clock_free {
             // No time, no weather and no touch to store: the rail masses and
-            // the conditions from the wheels' constant factors.
-            (0, Some(factors)) => (
-                std::array::from_fn(|j| states[tracks[j]].rail_mass_kg[is[j]]),
-                std::array::from_fn(|j| {
+            // the conditions from the wheels' constant factors (and no
+            // effect slot: those take the clock).
+            Some(factors) => (
+                from_fn(|j| states[tracks[j]].rail_mass_kg[is[j]]),
+                from_fn(|j| {
                     lanes[j].roller.conditions_given(
                         &lanes[j].st,
                         factors[j],
@@ -1513,29 +1534,26 @@ impl RollContext<'_> {
                         is[j],
                     )
                 }),
+                [EffectTangents::default(); LANES],
             ),
-            _ => {
+            None => {
                 let touches = self.touch4::<W>(lanes, clocks, states, works, tracks, is, v);
-                let conditions: [ContactConditions; LANES] = std::array::from_fn(|j| {
+                let conditions: [ContactConditions; LANES] = from_fn(|j| {
                     lanes[j]
                         .roller
                         .conditions(&lanes[j].st, &touches[j], self.revolution, is[j])
                 });
-                if W > 0 {
-                    return self.finish4_tangent::<W>(
-                        lanes,
-                        states,
-                        works,
-                        tracks,
-                        is,
-                        &touches,
-                        &conditions,
-                        v.exp,
-                    );
-                }
-                (std::array::from_fn(|j| touches[j].rail_kg), conditions)
+                let effects = from_fn(|j| {
+                    let (lane, touch) = (&lanes[j], &touches[j]);
+                    (lane.roller).effect_tangents_of::<W>(&lane.st, touch, self.revolution, is[j])
+                });
+                (from_fn(|j| touches[j].rail_kg), conditions, effects)
             }
         };
+        if W > 0 {
+            let given = (rail, &conditions, effects);
+            return self.finish4_tangent::<W>(lanes, states, works, tracks, is, given, v.exp);
+        }
         // Steps 3 to 5 of the four lanes at once, then each lane's rest.
         let wheel = std::array::from_fn(|j| lanes[j].st.wheel_kg);
         let (wheel_after, rail_after, losses) = (v.roll)(self.product, (wheel, rail), &conditions);
@@ -1606,8 +1624,9 @@ impl RollContext<'_> {
         touches
     }
 
-    /// Steps 3 to 5 with tangents (W > 0), lane by lane, the four lanes'
-    /// exponentials taken at once; returns the step-2 masses.
+    /// Steps 3 to 5 with tangents (W > 0), lane by lane, given the rail
+    /// masses after step 1, the conditions and their effect tangents, the
+    /// four lanes' exponentials taken at once; returns the step-2 masses.
     #[allow(clippy::too_many_arguments)]
     #[inline(always)]
     fn finish4_tangent<const W: usize>(
@@ -1617,12 +1636,15 @@ impl RollContext<'_> {
         works: &mut [TrackWork],
         tracks: [usize; LANES],
         is: [usize; LANES],
-        touches: &[Touch<'_>; LANES],
-        conditions: &[ContactConditions; LANES],
+        (rail, conditions, effects): (
+            [f64; LANES],
+            &[ContactConditions; LANES],
+            [EffectTangents; LANES],
+        ),
         exp4: impl Exp4,
     ) -> [f64; LANES] {
         let args: [[f64; 2]; LANES] = std::array::from_fn(|j| {
-            product::roll_exp_args(self.product, lanes[j].st.wheel_kg, touches[j].rail_kg)
+            product::roll_exp_args(self.product, lanes[j].st.wheel_kg, rail[j])
         });
         let transfer = exp4(args.map(|a| a[0]));
         let consumption = exp4(args.map(|a| a[1]));
@@ -1637,8 +1659,8 @@ impl RollContext<'_> {
                 state,
                 &mut work.rail_tan[is[j]],
                 &mut work.observed,
-                &touches[j],
-                (&conditions[j], self.revolution),
+                rail[j],
+                (&conditions[j], effects[j]),
                 [transfer[j], consumption[j]],
                 is[j],
             );
