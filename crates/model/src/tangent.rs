@@ -261,10 +261,19 @@ pub fn roll_given<const W: usize>(
         // ∂f = (∂m - ∂c - f ∂m) / m; both surfaces are scaled by f.
         let keep = over_m(1.0 - f - slope);
         let before = *wheel_kg + *rail_kg;
+        // The slots' own terms over m first, the branch taken once: the
+        // loop below is then straight-line work the compiler puts in
+        // vector registers (the same operations on each slot, the same
+        // bits; callgrind had the branch at every slot).
+        let own_over_m: [f64; W] = match per_m.is_finite() {
+            true => std::array::from_fn(|k| own[k] * per_m),
+            false => std::array::from_fn(|k| own[k] / m),
+        };
+        let (w, r) = (*wheel_kg, *rail_kg);
         for k in 0..W {
-            let df = keep * dm[k] - over_m(own[k]);
-            wheel_tan[k] = wheel_tan[k] * f + *wheel_kg * df;
-            rail_tan[k] = rail_tan[k] * f + *rail_kg * df;
+            let df = keep * dm[k] - own_over_m[k];
+            wheel_tan[k] = wheel_tan[k] * f + w * df;
+            rail_tan[k] = rail_tan[k] * f + r * df;
         }
         *wheel_kg *= f;
         *rail_kg *= f;
@@ -310,11 +319,11 @@ fn transfer<const W: usize>(
     own[CM] = -per_m1 * m1;
     own[KT] = raw;
     let on_donor = per_m1 * gap + t;
-    let steps = donor.1.iter_mut().zip(receiver.1.iter_mut()).zip(own);
-    for ((d, r), o) in steps.take(W) {
-        let d_moved = on_donor * *d - t * *r + gap * o;
-        *d -= d_moved;
-        *r += d_moved;
+    let (d, r) = (donor.1, receiver.1);
+    for k in 0..W {
+        let d_moved = on_donor * d[k] - t * r[k] + gap * own[k];
+        d[k] -= d_moved;
+        r[k] += d_moved;
     }
     *donor.0 = m1 - moved;
     *receiver.0 = m2 + moved;
