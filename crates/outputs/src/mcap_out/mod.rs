@@ -38,6 +38,7 @@
 //! error that names the topic, the field and the log_time. Every other
 //! failure is a [`McapError`] that names the file.
 
+mod numbers;
 mod writer;
 mod ws;
 
@@ -50,9 +51,9 @@ use std::io::BufWriter;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
-use serde::ser::{SerializeSeq, Serializer};
 use serde::Serialize;
 
+use self::numbers::Precision;
 use crate::files::{FileError, PartialFile};
 use crate::foxglove::{below_band_warning, Label, Log, LogLevel, TrackScene};
 use crate::geometry::Plan;
@@ -492,6 +493,19 @@ impl McapSink {
         log_time_ns: u64,
         message: &T,
     ) -> Result<(), McapError> {
+        self.write_with(topic, log_time_ns, |buf| {
+            serde_json::to_writer(buf, message)
+        })
+    }
+
+    /// Writes the message `json` appends to the buffer it is given, with
+    /// log_time = publish_time = `log_time_ns`.
+    fn write_with(
+        &mut self,
+        topic: Topic,
+        log_time_ns: u64,
+        json: impl FnOnce(&mut Vec<u8>) -> serde_json::Result<()>,
+    ) -> Result<(), McapError> {
         self.last_log_time_ns = self.last_log_time_ns.max(log_time_ns);
         self.next_day(log_time_ns)?;
         let path = &self.path;
@@ -502,7 +516,7 @@ impl McapSink {
         };
         if let Some(server) = &self.server {
             self.tee.clear();
-            serde_json::to_writer(&mut self.tee, message).map_err(json_error)?;
+            json(&mut self.tee).map_err(json_error)?;
             server.publish(topic, log_time_ns, &self.tee);
             return match self.file.as_mut() {
                 Some(file) => file.write_raw(topic, log_time_ns, &self.tee),
@@ -515,7 +529,7 @@ impl McapSink {
         };
         let header = file.header(topic, log_time_ns);
         file.writer.push(header, topic.name(), |bytes| {
-            serde_json::to_writer(bytes, message).map_err(json_error)
+            json(bytes).map_err(json_error)
         })
     }
 
@@ -886,23 +900,13 @@ impl Sink for McapSink {
         finite_or_missing(topic, "adhesion", t, &f.adhesion, 1.0)?;
         finite_all(topic, "rail_mass_mg", t, &f.rail_mass_kg, MG_PER_KG)?;
         finite_or_missing(topic, "wheel_mass_mg", t, &f.wheel_mass_kg, MG_PER_KG)?;
-        let message = FieldMsg {
-            train_id: &f.train_id,
-            rail: &f.rail_name,
-            band: &f.band,
-            wheel_pass: f.wheel_pass,
-            mu: Rounded(&f.mu, Precision::Decimals(MU_DECIMALS)),
-            adhesion: Rounded(&f.adhesion, Precision::Decimals(MU_DECIMALS)),
-            rail_mass_mg: Rounded(&f.rail_mass_kg, Precision::MASS_MG),
-            wheel_mass_mg: Rounded(&f.wheel_mass_kg, Precision::MASS_MG),
-        };
         // The scene of the train before this one is complete.
         let dirty = self.scene_dirty.get(f.track).copied().unwrap_or(false);
         if self.scene_pending.is_some_and(|pending| pending != t) || dirty {
             self.flush_scene()?;
         }
         self.flush_pulses(t)?;
-        self.write(topic, t, &message)?;
+        self.write_with(topic, t, |buf| field_json(buf, f))?;
         if let Some(scene) = self.scene.as_mut() {
             scene.set(f.track, &f.mu, &f.train_id, f.wheel_pass);
             if let Some(d) = self.scene_dirty.get_mut(f.track) {
@@ -1085,19 +1089,6 @@ pub const MASS_DIGITS: i32 = 3;
 /// colour scale.
 pub const MASS_FLOOR_MG: f64 = 1e-4;
 
-/// How a number of `/twin/field` is rounded.
-#[derive(Debug, Clone, Copy)]
-enum Precision {
-    /// To this many decimals.
-    Decimals(i32),
-    /// Scaled by `factor`, to `digits` significant digits; below `floor`, 0.
-    Significant {
-        factor: f64,
-        digits: i32,
-        floor: f64,
-    },
-}
-
 impl Precision {
     /// The product masses, kg in, mg out.
     const MASS_MG: Precision = Precision::Significant {
@@ -1105,50 +1096,6 @@ impl Precision {
         digits: MASS_DIGITS,
         floor: MASS_FLOOR_MG,
     };
-
-    /// `x` rounded. Rounding divides by an exact power of ten, so the
-    /// result is the double nearest the decimal and JSON prints it short.
-    fn round(self, x: f64) -> f64 {
-        match self {
-            Precision::Decimals(decimals) => round_decimals(x, decimals),
-            Precision::Significant {
-                factor,
-                digits,
-                floor,
-            } => {
-                let x = x * factor;
-                if x.abs() < floor {
-                    return 0.0;
-                }
-                let magnitude = x.abs().log10().floor() as i32;
-                round_decimals(x, digits - 1 - magnitude)
-            }
-        }
-    }
-}
-
-/// `x` to `decimals` decimals (negative: to tens, hundreds, ...).
-fn round_decimals(x: f64, decimals: i32) -> f64 {
-    if decimals >= 0 {
-        let scale = 10f64.powi(decimals);
-        (x * scale).round() / scale
-    } else {
-        let scale = 10f64.powi(-decimals);
-        (x / scale).round() * scale
-    }
-}
-
-/// A slice written rounded, without a rounded copy.
-struct Rounded<'a>(&'a [f64], Precision);
-
-impl Serialize for Rounded<'_> {
-    fn serialize<S: Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
-        let mut seq = serializer.serialize_seq(Some(self.0.len()))?;
-        for &v in self.0 {
-            seq.serialize_element(&self.1.round(v))?;
-        }
-        seq.end()
-    }
 }
 
 #[derive(Serialize)]
@@ -1226,16 +1173,29 @@ struct MeasurementMsg<'a> {
     index_in_file: u64,
 }
 
-#[derive(Serialize)]
-struct FieldMsg<'a> {
-    train_id: &'a str,
-    rail: &'a str,
-    band: &'a str,
-    wheel_pass: u64,
-    mu: Rounded<'a>,
-    adhesion: Rounded<'a>,
-    rail_mass_mg: Rounded<'a>,
-    wheel_mass_mg: Rounded<'a>,
+/// A `/twin/field` message as JSON, written by hand: its numbers are most
+/// of a long replay's output ([`numbers`]). The keys in this order, as the
+/// schema lists them; the strings escaped by serde_json.
+fn field_json(buf: &mut Vec<u8>, f: &FieldSnapshot<'_>) -> serde_json::Result<()> {
+    buf.extend_from_slice(br#"{"train_id":"#);
+    serde_json::to_writer(&mut *buf, &*f.train_id)?;
+    buf.extend_from_slice(br#","rail":"#);
+    serde_json::to_writer(&mut *buf, &*f.rail_name)?;
+    buf.extend_from_slice(br#","band":"#);
+    serde_json::to_writer(&mut *buf, &*f.band)?;
+    buf.extend_from_slice(br#","wheel_pass":"#);
+    buf.extend_from_slice(itoa::Buffer::new().format(f.wheel_pass).as_bytes());
+    let mu = Precision::Decimals(MU_DECIMALS);
+    buf.extend_from_slice(br#","mu":"#);
+    numbers::push_array(buf, &f.mu, mu)?;
+    buf.extend_from_slice(br#","adhesion":"#);
+    numbers::push_array(buf, &f.adhesion, mu)?;
+    buf.extend_from_slice(br#","rail_mass_mg":"#);
+    numbers::push_array(buf, &f.rail_mass_kg, Precision::MASS_MG)?;
+    buf.extend_from_slice(br#","wheel_mass_mg":"#);
+    numbers::push_array(buf, &f.wheel_mass_kg, Precision::MASS_MG)?;
+    buf.push(b'}');
+    Ok(())
 }
 
 /// The output channels, in the order they are registered.
@@ -1331,7 +1291,67 @@ pub const LINE_FIELD_SCHEMA: &str = include_str!("../../schemas/tortwin/line_fie
 
 #[cfg(test)]
 mod tests {
-    use super::Precision;
+    use std::borrow::Cow;
+
+    use serde::Serialize;
+    use tortwin_engine::sink::{FieldSnapshot, SnapshotKind};
+
+    use super::{field_json, Precision};
+
+    /// The hand-written `/twin/field` message is serde_json's text of the
+    /// same message derived: keys, escaped strings, rounded numbers and the
+    /// null of a missing one. It fails on a key out of order or a string
+    /// left unescaped (tried).
+    #[test]
+    fn a_field_message_is_what_serde_json_writes_for_it() {
+        #[derive(Serialize)]
+        struct Reference<'a> {
+            train_id: &'a str,
+            rail: &'a str,
+            band: &'a str,
+            wheel_pass: u64,
+            mu: Vec<f64>,
+            adhesion: Vec<f64>,
+            rail_mass_mg: Vec<f64>,
+            wheel_mass_mg: Vec<f64>,
+        }
+        let mu = [0.58, 0.382_649_9, f64::NAN, 0.1 + 0.2, 1.0];
+        let adhesion = [0.21, 0.0, f64::NAN, 0.333_333_33, 0.5];
+        let rail = [0.0, 3.105_157e-6, 0.123_456, 4.567_89e-9, 1e-12];
+        let wheel = [1e-7, f64::NAN, 2.5e-5, 0.0, 7.77e-3];
+        let snapshot = FieldSnapshot {
+            kind: SnapshotKind::Train,
+            log_time_ns: 1,
+            train_id: Cow::Borrowed("F-\"quoted\"\t\u{e9}"),
+            track: 0,
+            rail_name: Cow::Borrowed("high"),
+            band: Cow::Borrowed("top"),
+            wheel_pass: 18_446_744_073_709_551_615,
+            d_m: Cow::Owned(vec![0.0; 5]),
+            mu: Cow::Borrowed(&mu),
+            adhesion: Cow::Borrowed(&adhesion),
+            rail_mass_kg: Cow::Borrowed(&rail),
+            wheel_mass_kg: Cow::Borrowed(&wheel),
+        };
+        let decimals = Precision::Decimals(super::MU_DECIMALS);
+        let round = |xs: &[f64], p: Precision| xs.iter().map(|&x| p.round(x)).collect();
+        let reference = Reference {
+            train_id: &snapshot.train_id,
+            rail: &snapshot.rail_name,
+            band: &snapshot.band,
+            wheel_pass: snapshot.wheel_pass,
+            mu: round(&mu, decimals),
+            adhesion: round(&adhesion, decimals),
+            rail_mass_mg: round(&rail, Precision::MASS_MG),
+            wheel_mass_mg: round(&wheel, Precision::MASS_MG),
+        };
+        let mut ours = Vec::new();
+        field_json(&mut ours, &snapshot).unwrap();
+        assert_eq!(
+            String::from_utf8(ours).unwrap(),
+            serde_json::to_string(&reference).unwrap()
+        );
+    }
 
     #[test]
     fn field_numbers_are_written_at_the_precision_the_data_has() {

@@ -1,0 +1,285 @@
+//! The numbers of `/twin/field`, rounded to the precision the data has and
+//! written as JSON text straight from the rounded integer.
+//!
+//! A field snapshot is about 2 000 numbers; in a year's replay they were a
+//! tenth of the output thread's time in serde_json's float printer (the
+//! shortest digits that read back to the double), which works out the
+//! digits of a double it knows nothing about. A rounded number is an integer
+//! `units` and a power of ten, so its shortest text is that integer's digits
+//! with the decimal point put in: [`push`] writes exactly what serde_json
+//! writes for the rounded double, and hands every number it cannot show to
+//! be so (not finite, too large, too many decimals) to serde_json itself.
+
+/// How a number of `/twin/field` is rounded.
+#[derive(Debug, Clone, Copy)]
+pub(super) enum Precision {
+    /// To this many decimals.
+    Decimals(i32),
+    /// Scaled by `factor`, to `digits` significant digits; below `floor`, 0.
+    Significant {
+        factor: f64,
+        digits: i32,
+        floor: f64,
+    },
+}
+
+/// A number rounded: `value` is `units` x 10^-`decimals`, computed as the
+/// nearest double to it.
+#[derive(Debug, Clone, Copy)]
+struct Rounding {
+    value: f64,
+    /// An integer (a double with no fraction; NaN for NaN).
+    units: f64,
+    /// Negative: to tens, hundreds, ...
+    decimals: i32,
+}
+
+impl Precision {
+    /// `x` rounded. Rounding divides by an exact power of ten, so the
+    /// result is the double nearest the decimal and JSON prints it short.
+    #[cfg(test)]
+    pub(super) fn round(self, x: f64) -> f64 {
+        self.rounding(x).value
+    }
+
+    fn rounding(self, x: f64) -> Rounding {
+        match self {
+            Precision::Decimals(decimals) => round_decimals(x, decimals),
+            Precision::Significant {
+                factor,
+                digits,
+                floor,
+            } => {
+                let x = x * factor;
+                if x.abs() < floor {
+                    return Rounding {
+                        value: 0.0,
+                        units: 0.0,
+                        decimals: 0,
+                    };
+                }
+                let magnitude = x.abs().log10().floor() as i32;
+                round_decimals(x, digits - 1 - magnitude)
+            }
+        }
+    }
+}
+
+/// `x` to `decimals` decimals (negative: to tens, hundreds, ...).
+fn round_decimals(x: f64, decimals: i32) -> Rounding {
+    if decimals >= 0 {
+        let scale = 10f64.powi(decimals);
+        let units = (x * scale).round();
+        Rounding {
+            value: units / scale,
+            units,
+            decimals,
+        }
+    } else {
+        let scale = 10f64.powi(-decimals);
+        let units = (x / scale).round();
+        Rounding {
+            value: units * scale,
+            units,
+            decimals,
+        }
+    }
+}
+
+/// Appends `x` rounded by `precision` as serde_json writes the rounded
+/// double (`null` if it is not finite).
+///
+/// Why the digits of `units` are the shortest text: with `decimals` = k
+/// from 0 to [`MAX_DECIMALS`], `value` is `units / 10^k` correctly rounded
+/// (both exact doubles), so the decimal D = units x 10^-k reads back to it;
+/// any other decimal with as few digits differs from D by at least 10^-k,
+/// more than the spacing of doubles below [`MAX_VALUE`] (2^-22 < 10^-6), so
+/// it reads back to another double: D trimmed of its trailing zeros is the
+/// one shortest text. With k < 0, `value` is the integer units x 10^-k
+/// exactly (below 2^53). From 10^-5 to below 10^16 serde_json writes it
+/// without an exponent, as [`push`] does; smaller ones are its own.
+pub(super) fn push(buf: &mut Vec<u8>, x: f64, precision: Precision) -> serde_json::Result<()> {
+    let r = precision.rounding(x);
+    let plain = r.value.is_finite()
+        && r.value.abs() < MAX_VALUE
+        && (r.value == 0.0 || r.value.abs() >= MIN_VALUE)
+        && r.units.abs() < MAX_UNITS
+        && (MIN_DECIMALS..=MAX_DECIMALS).contains(&r.decimals);
+    if !plain {
+        return serde_json::to_writer(buf, &r.value);
+    }
+    if r.value.is_sign_negative() {
+        buf.push(b'-');
+    }
+    // An integer below 10^15: exact in u64.
+    let mut units = r.units.abs() as u64;
+    let mut decimals = r.decimals;
+    while decimals > 0 && units != 0 && units.is_multiple_of(10) {
+        units /= 10;
+        decimals -= 1;
+    }
+    if units == 0 {
+        decimals = 0;
+    }
+    let mut text = itoa::Buffer::new();
+    let digits = text.format(units).as_bytes();
+    if decimals <= 0 {
+        // 123 x 10^2 -> 12300.0
+        buf.extend_from_slice(digits);
+        buf.resize(buf.len() + decimals.unsigned_abs() as usize, b'0');
+        buf.extend_from_slice(b".0");
+    } else {
+        let decimals = decimals as usize;
+        if digits.len() > decimals {
+            // 1234 x 10^-2 -> 12.34
+            let (whole, fraction) = digits.split_at(digits.len() - decimals);
+            buf.extend_from_slice(whole);
+            buf.push(b'.');
+            buf.extend_from_slice(fraction);
+        } else {
+            // 12 x 10^-4 -> 0.0012
+            buf.extend_from_slice(b"0.");
+            buf.resize(buf.len() + decimals - digits.len(), b'0');
+            buf.extend_from_slice(digits);
+        }
+    }
+    Ok(())
+}
+
+/// Appends `xs` rounded by `precision` as a JSON array.
+pub(super) fn push_array(
+    buf: &mut Vec<u8>,
+    xs: &[f64],
+    precision: Precision,
+) -> serde_json::Result<()> {
+    buf.push(b'[');
+    for (i, &x) in xs.iter().enumerate() {
+        if i > 0 {
+            buf.push(b',');
+        }
+        push(buf, x, precision)?;
+    }
+    buf.push(b']');
+    Ok(())
+}
+
+/// The largest magnitude [`push`] writes itself (the spacing of doubles
+/// below it is under 10^-6).
+const MAX_VALUE: f64 = 1e9;
+/// The smallest magnitude but zero that serde_json writes without an
+/// exponent.
+const MIN_VALUE: f64 = 1e-5;
+/// The largest rounded integer it writes itself (exact in a double).
+const MAX_UNITS: f64 = 1e15;
+const MAX_DECIMALS: i32 = 6;
+const MIN_DECIMALS: i32 = -15;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn serde_text(x: f64, p: Precision) -> String {
+        serde_json::to_string(&p.round(x)).unwrap()
+    }
+
+    fn our_text(x: f64, p: Precision) -> String {
+        let mut buf = Vec::new();
+        push(&mut buf, x, p).unwrap();
+        String::from_utf8(buf).unwrap()
+    }
+
+    const MASS_MG: Precision = Precision::Significant {
+        factor: 1e6,
+        digits: 3,
+        floor: 1e-4,
+    };
+
+    fn precisions() -> Vec<Precision> {
+        let mut all: Vec<Precision> = (-3..=9).map(Precision::Decimals).collect();
+        all.push(MASS_MG);
+        all.push(Precision::Significant {
+            factor: 1.0,
+            digits: 7,
+            floor: 1e-300,
+        });
+        all
+    }
+
+    /// Every number written as serde_json writes the rounded double: at the
+    /// edges (zero of both signs, halves, powers of ten, the limits of the
+    /// plain path, not finite) and at random magnitudes from 1e-12 to 1e18.
+    /// It fails when the decimal point, the trailing zeros, the sign of
+    /// zero or the exponent form are got wrong (tried).
+    #[test]
+    fn numbers_are_written_as_serde_json_writes_the_rounded_double() {
+        let mut edges = vec![
+            0.0,
+            -0.0,
+            1.0,
+            -1.0,
+            0.5,
+            0.05,
+            0.00005,
+            -0.00004,
+            1e-5,
+            1e-6,
+            1e-7,
+            0.58,
+            0.3826,
+            0.1 + 0.2,
+            99.99995,
+            999_999_999.4,
+            999_999_999.6,
+            1e9,
+            1e15,
+            1e16,
+            123_456_789_012_345.6,
+            f64::MAX,
+            f64::MIN_POSITIVE,
+            5e-324,
+            f64::NAN,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+        ];
+        for e in -12..=18 {
+            edges.push(10f64.powi(e));
+            edges.push(-(10f64.powi(e)));
+            edges.push(0.5 * 10f64.powi(e));
+        }
+        // xorshift: the same numbers every run.
+        let mut state = 0x9e37_79b9_7f4a_7c15_u64;
+        let mut next = || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            state
+        };
+        let mut random = Vec::new();
+        for _ in 0..200_000 {
+            let mantissa = (next() >> 11) as f64 / (1u64 << 53) as f64;
+            let exponent = (next() % 31) as i32 - 12;
+            let sign = if next() % 4 == 0 { -1.0 } else { 1.0 };
+            random.push(sign * mantissa * 10f64.powi(exponent));
+        }
+        for p in precisions() {
+            for &x in edges.iter().chain(&random) {
+                assert_eq!(our_text(x, p), serde_text(x, p), "{x:e} {p:?}");
+            }
+        }
+    }
+
+    #[test]
+    fn an_array_is_the_numbers_between_brackets() {
+        let mut buf = Vec::new();
+        push_array(
+            &mut buf,
+            &[0.123_456, f64::NAN, -2.0],
+            Precision::Decimals(4),
+        )
+        .unwrap();
+        assert_eq!(String::from_utf8(buf).unwrap(), "[0.1235,null,-2.0]");
+        let mut buf = Vec::new();
+        push_array(&mut buf, &[], Precision::Decimals(4)).unwrap();
+        assert_eq!(buf, b"[]");
+    }
+}
