@@ -135,16 +135,36 @@ struct KeyValuePair {
 
 /// `foxglove.LinePrimitive`.
 #[derive(Serialize)]
-struct LinePrimitive {
+struct LinePrimitive<'a> {
     #[serde(rename = "type")]
     kind: u8,
     pose: Pose,
     thickness: f64,
     scale_invariant: bool,
-    points: Box<RawValue>,
+    points: Kept<'a>,
     color: Color,
-    colors: Box<RawValue>,
+    colors: Kept<'a>,
     indices: [u32; 0],
+}
+
+/// A JSON array of a track's kept points ([`TrackScene::kept`]): each
+/// item's text, serialized once, written as it is (no parse of the whole
+/// array every train, which a `RawValue` made of it would take).
+struct Kept<'a> {
+    scene: &'a TrackScene,
+    track: usize,
+    item: fn(&'a TrackScene, usize, usize) -> &'a RawValue,
+}
+
+impl Serialize for Kept<'_> {
+    fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        use serde::ser::SerializeSeq as _;
+        let mut seq = serializer.serialize_seq(None)?;
+        for i in self.scene.kept(self.track) {
+            seq.serialize_element((self.item)(self.scene, self.track, i))?;
+        }
+        seq.end()
+    }
 }
 
 /// `foxglove.TextPrimitive`.
@@ -160,7 +180,7 @@ struct TextPrimitive {
 
 /// `foxglove.SceneEntity`.
 #[derive(Serialize)]
-struct SceneEntity {
+struct SceneEntity<'a> {
     timestamp: Time,
     frame_id: &'static str,
     id: String,
@@ -171,7 +191,7 @@ struct SceneEntity {
     cubes: [u8; 0],
     spheres: [u8; 0],
     cylinders: [u8; 0],
-    lines: Vec<LinePrimitive>,
+    lines: Vec<LinePrimitive<'a>>,
     triangles: [u8; 0],
     texts: Vec<TextPrimitive>,
     models: [u8; 0],
@@ -179,9 +199,9 @@ struct SceneEntity {
 
 /// `foxglove.SceneUpdate`.
 #[derive(Serialize)]
-pub(crate) struct SceneUpdate {
+pub(crate) struct SceneUpdate<'a> {
     deletions: [u8; 0],
-    entities: Vec<SceneEntity>,
+    entities: Vec<SceneEntity<'a>>,
 }
 
 /// Metres rounded to the millimetre (the plan is drawn, not surveyed).
@@ -193,13 +213,13 @@ fn mm(x: f64) -> f64 {
 pub(crate) struct TrackScene {
     /// Per track, the plan position of each grid point as JSON text,
     /// serialized once.
-    points: Vec<Vec<String>>,
+    points: Vec<Vec<Box<RawValue>>>,
     /// The longest step between two points of a line: where the class does
     /// not change, a line of this step strays from the arc by at most a
     /// fortieth of the drawn gauge.
     max_step: usize,
     /// Per mu class, its colour as JSON.
-    palette: Vec<String>,
+    palette: Vec<Box<RawValue>>,
     /// Per track, "track/<rail>/<band>".
     ids: Vec<String>,
     /// Per track, the mu class of each grid point at the last snapshot.
@@ -238,10 +258,7 @@ impl TrackScene {
                         }
                     })
                     .collect();
-                points
-                    .iter()
-                    .map(|p| serde_json::to_string(p).unwrap_or_else(|_| "{}".to_owned()))
-                    .collect()
+                points.iter().map(raw_json).collect()
             })
             .collect();
         // A chord of length s strays s²/(8R) from its arc.
@@ -255,10 +272,7 @@ impl TrackScene {
         }
         .clamp(1.0, 1e9) as usize;
         let palette = (0..=MU_CLASSES)
-            .map(|class| {
-                serde_json::to_string(&Color::rgb(mu_class_color(class)))
-                    .unwrap_or_else(|_| "{}".to_owned())
-            })
+            .map(|class| raw_json(&Color::rgb(mu_class_color(class))))
             .collect();
         let ids = tracks
             .iter()
@@ -324,7 +338,7 @@ impl TrackScene {
 
     /// The scene as it stands: every track that has had a snapshot, and the
     /// labels.
-    pub(crate) fn update(&self, log_time_ns: u64) -> SceneUpdate {
+    pub(crate) fn update(&self, log_time_ns: u64) -> SceneUpdate<'_> {
         let mut entities = Vec::with_capacity(self.ids.len() + 1);
         for (track, id) in self.ids.iter().enumerate() {
             let Some((train_id, wheel_pass)) = &self.last[track] else {
@@ -346,9 +360,19 @@ impl TrackScene {
                     pose: IDENTITY,
                     thickness: self.thickness_m,
                     scale_invariant: false,
-                    points: self.points_json(track),
+                    points: Kept {
+                        scene: self,
+                        track,
+                        item: |scene, track, i| &scene.points[track][i],
+                    },
                     color: Color::rgb([128, 128, 128]),
-                    colors: self.colors_json(track),
+                    colors: Kept {
+                        scene: self,
+                        track,
+                        item: |scene, track, i| {
+                            &scene.palette[usize::from(scene.classes[track][i].min(MU_CLASSES))]
+                        },
+                    },
                     indices: [],
                 }],
                 texts: Vec::new(),
@@ -402,40 +426,16 @@ impl TrackScene {
             keep
         })
     }
-
-    /// `items` of the kept points as a JSON array.
-    fn array<'s>(&self, track: usize, item: impl Fn(usize) -> &'s str) -> Box<RawValue> {
-        let mut text = String::with_capacity(64 * self.classes[track].len());
-        text.push('[');
-        for (k, i) in self.kept(track).enumerate() {
-            if k > 0 {
-                text.push(',');
-            }
-            text.push_str(item(i));
-        }
-        text.push(']');
-        RawValue::from_string(text).unwrap_or_else(|_| empty_array())
-    }
-
-    fn points_json(&self, track: usize) -> Box<RawValue> {
-        let points = &self.points[track];
-        self.array(track, |i| points[i].as_str())
-    }
-
-    fn colors_json(&self, track: usize) -> Box<RawValue> {
-        let classes = &self.classes[track];
-        self.array(track, |i| {
-            self.palette[usize::from(classes[i].min(MU_CLASSES))].as_str()
-        })
-    }
 }
 
-fn empty_array() -> Box<RawValue> {
-    RawValue::from_string("[]".to_owned()).unwrap_or_default()
+/// `value` as JSON text kept as it is (serialized, not parsed again).
+fn raw_json(value: &impl Serialize) -> Box<RawValue> {
+    serde_json::value::to_raw_value(value)
+        .unwrap_or_else(|_| serde_json::value::to_raw_value(&()).unwrap_or_default())
 }
 
 /// An empty entity in the section frame that stays until replaced.
-fn entity(log_time_ns: u64, id: String) -> SceneEntity {
+fn entity<'a>(log_time_ns: u64, id: String) -> SceneEntity<'a> {
     SceneEntity {
         timestamp: Time::from_ns(log_time_ns),
         frame_id: FRAME_ID,
