@@ -752,7 +752,10 @@ impl Detector {
                     self.close_charts(&[(key, m.log_time_ns)], out);
                 }
                 let chart = self.charts.entry(key).or_default();
-                chart.open_train = Some(train.to_string());
+                // A train's readings come together: its id is copied once.
+                if chart.open_train.as_deref() != Some(train.as_ref()) {
+                    chart.open_train = Some(train.to_string());
+                }
                 chart.open.push(residual);
                 chart.open_last_ns = m.log_time_ns;
             }
