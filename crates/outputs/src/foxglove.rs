@@ -428,10 +428,10 @@ impl TrackScene {
     }
 }
 
-/// `value` as JSON text kept as it is (serialized, not parsed again).
+/// `value` as JSON text kept as it is (serialized, not parsed again;
+/// `null` if it cannot be, which a point or a colour of numbers never is).
 fn raw_json(value: &impl Serialize) -> Box<RawValue> {
-    serde_json::value::to_raw_value(value)
-        .unwrap_or_else(|_| serde_json::value::to_raw_value(&()).unwrap_or_default())
+    serde_json::value::to_raw_value(value).unwrap_or_default()
 }
 
 /// An empty entity in the section frame that stays until replaced.
