@@ -58,17 +58,65 @@ impl Precision {
                         decimals: 0,
                     };
                 }
-                let magnitude = x.abs().log10().floor() as i32;
-                round_decimals(x, digits - 1 - magnitude)
+                round_decimals(x, digits - 1 - magnitude(x.abs()))
             }
         }
+    }
+}
+
+/// `a.log10().floor() as i32`, without the logarithm where the answer is
+/// plain: a number further than a relative 1e-12 from every power of ten
+/// lies between two of them whose logarithms are integers more than 4e-13
+/// away from its own, and `log10` (within an ulp, 4e-16 here) cannot round
+/// across them. Near a power of ten, and outside 1e-29..1e29, it is
+/// `log10`'s own answer.
+fn magnitude(a: f64) -> i32 {
+    const NEAR: f64 = 1.0 + 1e-12;
+    if a.is_finite() && (1e-29..1e29).contains(&a) {
+        // floor(e2 log10 2) from the binary exponent, then corrected.
+        let e2 = ((a.to_bits() >> 52) & 0x7ff) as i32 - 1023;
+        let mut k = ((e2 * 78_913) >> 18).clamp(-29, 28);
+        while k < 28 && pow10(k + 1) <= a {
+            k += 1;
+        }
+        while k > -29 && pow10(k) > a {
+            k -= 1;
+        }
+        let (below, above) = (pow10(k), pow10(k + 1));
+        if below <= a && a > below * NEAR && a * NEAR < above {
+            return k;
+        }
+    }
+    a.log10().floor() as i32
+}
+
+/// The double nearest 10^k, for k from -30 to 30 (exact from 0 to 22).
+fn pow10(k: i32) -> f64 {
+    const POW10: [f64; 61] = [
+        1e-30, 1e-29, 1e-28, 1e-27, 1e-26, 1e-25, 1e-24, 1e-23, 1e-22, 1e-21, 1e-20, 1e-19, 1e-18,
+        1e-17, 1e-16, 1e-15, 1e-14, 1e-13, 1e-12, 1e-11, 1e-10, 1e-9, 1e-8, 1e-7, 1e-6, 1e-5, 1e-4,
+        1e-3, 1e-2, 1e-1, 1e0, 1e1, 1e2, 1e3, 1e4, 1e5, 1e6, 1e7, 1e8, 1e9, 1e10, 1e11, 1e12, 1e13,
+        1e14, 1e15, 1e16, 1e17, 1e18, 1e19, 1e20, 1e21, 1e22, 1e23, 1e24, 1e25, 1e26, 1e27, 1e28,
+        1e29, 1e30,
+    ];
+    POW10[(k + 30) as usize]
+}
+
+/// `10f64.powi(d)` for `d` >= 0: from the table where it is exact (each
+/// product of the powers of ten up to 10^22 is exact, so `powi` gives
+/// these bits too), `powi` above.
+fn scale(d: i32) -> f64 {
+    if (0..=22).contains(&d) {
+        pow10(d)
+    } else {
+        10f64.powi(d)
     }
 }
 
 /// `x` to `decimals` decimals (negative: to tens, hundreds, ...).
 fn round_decimals(x: f64, decimals: i32) -> Rounding {
     if decimals >= 0 {
-        let scale = 10f64.powi(decimals);
+        let scale = scale(decimals);
         let units = (x * scale).round();
         Rounding {
             value: units / scale,
@@ -76,7 +124,7 @@ fn round_decimals(x: f64, decimals: i32) -> Rounding {
             decimals,
         }
     } else {
-        let scale = 10f64.powi(-decimals);
+        let scale = scale(-decimals);
         let units = (x / scale).round();
         Rounding {
             value: units * scale,
@@ -265,6 +313,50 @@ mod tests {
             for &x in edges.iter().chain(&random) {
                 assert_eq!(our_text(x, p), serde_text(x, p), "{x:e} {p:?}");
             }
+        }
+    }
+
+    /// The magnitude without the logarithm is the logarithm's, at random
+    /// over 60 decades and at every power of ten and its neighbours (where
+    /// `log10` rounds up to the integer); the table's powers are `powi`'s.
+    /// It fails when the nearness guard is left out (tried).
+    #[test]
+    fn magnitudes_and_scales_are_those_of_log10_and_powi() {
+        let mut state = 0x2545_f491_4f6c_dd1d_u64;
+        let mut next = || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            state
+        };
+        let mut values = Vec::new();
+        for _ in 0..1_000_000 {
+            let u = (next() >> 11) as f64 / (1u64 << 53) as f64;
+            values.push(10f64.powf(70.0 * u - 35.0));
+        }
+        for k in -35..=35 {
+            let p: f64 = format!("1e{k}").parse().unwrap();
+            let mut up = p;
+            let mut down = p;
+            for _ in 0..2_000 {
+                values.extend([up, down]);
+                up = f64::from_bits(up.to_bits() + 1);
+                down = f64::from_bits(down.to_bits() - 1);
+            }
+        }
+        values.extend([
+            0.0,
+            5e-324,
+            f64::MIN_POSITIVE,
+            f64::MAX,
+            f64::INFINITY,
+            f64::NAN,
+        ]);
+        for a in values {
+            assert_eq!(magnitude(a), a.log10().floor() as i32, "{a:e}");
+        }
+        for d in 0..=40 {
+            assert_eq!(scale(d).to_bits(), 10f64.powi(d).to_bits(), "{d}");
         }
     }
 
