@@ -226,6 +226,21 @@ const MIN_DECIMALS: i32 = -15;
 mod tests {
     use super::*;
 
+    /// xorshift from `seed`: the same numbers every run.
+    fn xorshift(mut state: u64) -> impl FnMut() -> u64 {
+        move || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            state
+        }
+    }
+
+    /// A draw in [0, 1) from 53 of its bits.
+    fn unit(bits: u64) -> f64 {
+        (bits >> 11) as f64 / (1u64 << 53) as f64
+    }
+
     fn serde_text(x: f64, p: Precision) -> String {
         serde_json::to_string(&p.round(x)).unwrap()
     }
@@ -294,19 +309,12 @@ mod tests {
             edges.push(-(10f64.powi(e)));
             edges.push(0.5 * 10f64.powi(e));
         }
-        // xorshift: the same numbers every run.
-        let mut state = 0x9e37_79b9_7f4a_7c15_u64;
-        let mut next = || {
-            state ^= state << 13;
-            state ^= state >> 7;
-            state ^= state << 17;
-            state
-        };
+        let mut next = xorshift(0x9e37_79b9_7f4a_7c15);
         let mut random = Vec::new();
         for _ in 0..200_000 {
-            let mantissa = (next() >> 11) as f64 / (1u64 << 53) as f64;
+            let mantissa = unit(next());
             let exponent = (next() % 31) as i32 - 12;
-            let sign = if next() % 4 == 0 { -1.0 } else { 1.0 };
+            let sign = if next().is_multiple_of(4) { -1.0 } else { 1.0 };
             random.push(sign * mantissa * 10f64.powi(exponent));
         }
         for p in precisions() {
@@ -322,17 +330,10 @@ mod tests {
     /// It fails when the nearness guard is left out (tried).
     #[test]
     fn magnitudes_and_scales_are_those_of_log10_and_powi() {
-        let mut state = 0x2545_f491_4f6c_dd1d_u64;
-        let mut next = || {
-            state ^= state << 13;
-            state ^= state >> 7;
-            state ^= state << 17;
-            state
-        };
+        let mut next = xorshift(0x2545_f491_4f6c_dd1d);
         let mut values = Vec::new();
         for _ in 0..1_000_000 {
-            let u = (next() >> 11) as f64 / (1u64 << 53) as f64;
-            values.push(10f64.powf(70.0 * u - 35.0));
+            values.push(10f64.powf(70.0 * unit(next()) - 35.0));
         }
         for k in -35..=35 {
             let p: f64 = format!("1e{k}").parse().unwrap();
