@@ -1079,15 +1079,6 @@ pub const MASS_DIGITS: i32 = 3;
 /// colour scale.
 pub const MASS_FLOOR_MG: f64 = 1e-4;
 
-impl Precision {
-    /// The product masses, kg in, mg out.
-    const MASS_MG: Precision = Precision::Significant {
-        factor: MG_PER_KG,
-        digits: MASS_DIGITS,
-        floor: MASS_FLOOR_MG,
-    };
-}
-
 #[derive(Serialize)]
 struct SectionMsg<'a> {
     section_id: &'a str,
@@ -1192,11 +1183,10 @@ fn field_json(buf: &mut Vec<u8>, f: &FieldSnapshot<'_>) -> serde_json::Result<()
     serde_json::to_writer(&mut *buf, &*f.band)?;
     buf.extend_from_slice(br#","wheel_pass":"#);
     buf.extend_from_slice(itoa::Buffer::new().format(f.wheel_pass).as_bytes());
-    let mu = Precision::Decimals(MU_DECIMALS);
     buf.extend_from_slice(br#","mu":"#);
-    numbers::push_array(buf, &f.mu, mu)?;
+    numbers::push_array(buf, &f.mu, Precision::MU)?;
     buf.extend_from_slice(br#","adhesion":"#);
-    numbers::push_array(buf, &f.adhesion, mu)?;
+    numbers::push_array(buf, &f.adhesion, Precision::MU)?;
     buf.extend_from_slice(br#","rail_mass_mg":"#);
     numbers::push_array(buf, &f.rail_mass_kg, Precision::MASS_MG)?;
     buf.extend_from_slice(br#","wheel_mass_mg":"#);
@@ -1411,7 +1401,7 @@ mod tests {
             rail_mass_kg: Cow::Borrowed(&rail),
             wheel_mass_kg: Cow::Borrowed(&wheel),
         };
-        let decimals = Precision::Decimals(super::MU_DECIMALS);
+        let decimals = Precision::MU;
         let round = |xs: &[f64], p: Precision| xs.iter().map(|&x| p.round(x)).collect();
         let reference = Reference {
             train_id: &snapshot.train_id,
@@ -1434,7 +1424,7 @@ mod tests {
     #[test]
     fn field_numbers_are_written_at_the_precision_the_data_has() {
         let text = |p: Precision, x: f64| serde_json::to_string(&p.round(x)).unwrap();
-        let mu = Precision::Decimals(super::MU_DECIMALS);
+        let mu = Precision::MU;
         assert_eq!(text(mu, 0.338_649_999_9), "0.3386");
         assert_eq!(text(mu, 0.1 + 0.2), "0.3");
         assert_eq!(text(mu, 0.580_000_000_1), "0.58");

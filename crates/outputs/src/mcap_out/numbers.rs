@@ -10,6 +10,8 @@
 //! writes for the rounded double, and hands every number it cannot show to
 //! be so (not finite, too large, too many decimals) to serde_json itself.
 
+use super::{MASS_DIGITS, MASS_FLOOR_MG, MG_PER_KG, MU_DECIMALS};
+
 /// How a number of `/twin/field` is rounded.
 #[derive(Debug, Clone, Copy)]
 pub(super) enum Precision {
@@ -35,6 +37,17 @@ struct Rounding {
 }
 
 impl Precision {
+    /// mu and adhesion: [`MU_DECIMALS`] decimals.
+    pub(super) const MU: Precision = Precision::Decimals(MU_DECIMALS);
+
+    /// The product masses, kg in, mg out: [`MASS_DIGITS`] significant
+    /// digits, 0 below [`MASS_FLOOR_MG`].
+    pub(super) const MASS_MG: Precision = Precision::Significant {
+        factor: MG_PER_KG,
+        digits: MASS_DIGITS,
+        floor: MASS_FLOOR_MG,
+    };
+
     /// `x` rounded. Rounding divides by an exact power of ten, so the
     /// result is the double nearest the decimal and JSON prints it short.
     #[cfg(test)]
@@ -251,15 +264,9 @@ mod tests {
         String::from_utf8(buf).unwrap()
     }
 
-    const MASS_MG: Precision = Precision::Significant {
-        factor: 1e6,
-        digits: 3,
-        floor: 1e-4,
-    };
-
     fn precisions() -> Vec<Precision> {
         let mut all: Vec<Precision> = (-3..=9).map(Precision::Decimals).collect();
-        all.push(MASS_MG);
+        all.push(Precision::MASS_MG);
         all.push(Precision::Significant {
             factor: 1.0,
             digits: 7,
