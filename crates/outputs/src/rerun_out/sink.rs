@@ -8,6 +8,7 @@ use std::time::Duration;
 
 use crate::rerun_sdk::components::{MarkerShape, TextLogLevel};
 use crate::rerun_sdk::log::ChunkBatcherConfig;
+use crate::rerun_sdk::sink::SinkFlushError;
 use crate::rerun_sdk::{
     ApplicationId, AsComponents, EntityPath, RecordingStream, RecordingStreamBuilder, TimeCell,
 };
@@ -41,6 +42,13 @@ fn checked_id(target: &Path, id: &str) -> Result<ApplicationId, RerunError> {
 
 /// How long the end of a recording waits for a viewer to take what was sent.
 const STREAM_FLUSH_TIMEOUT: Duration = Duration::from_secs(10);
+
+/// How long a flush into the file waits between looks at the file.
+const FLUSH_STEP: Duration = Duration::from_millis(500);
+
+/// A flush into the file is given up when the file has not grown for this
+/// long ([`RerunSink::flush_file`]).
+const STALLED_WRITER: Duration = Duration::from_secs(10);
 
 /// Writes the twin's results to a rerun `.rrd` (see the module docs).
 pub struct RerunSink {
@@ -230,6 +238,36 @@ impl RerunSink {
         let target = std::path::PathBuf::from(url);
         let application_id = checked_id(&target, &options.application_id)?;
         Ok(RerunSink::new(rec, None, target, application_id, options))
+    }
+
+    /// Flushes `rec` into the file. rerun 0.36's file sink can leave a
+    /// flush unanswered when its writer thread has stopped on a write
+    /// error (seen under a file-size limit: a replay waited in
+    /// `flush_blocking` for ever, now and then). So the flush is waited for
+    /// in steps, and given up as [`SinkFlushError::Timeout`] once the file
+    /// has not grown for [`STALLED_WRITER`]: a writer that is writing
+    /// makes the file grow.
+    fn flush_file(&self, rec: &RecordingStream) -> Result<(), SinkFlushError> {
+        let size = || {
+            self.file
+                .as_ref()
+                .and_then(|f| std::fs::metadata(f.temp_path()).ok())
+                .map(|m| m.len())
+        };
+        let mut last = (size(), std::time::Instant::now());
+        loop {
+            match rec.flush_with_timeout(FLUSH_STEP) {
+                Err(SinkFlushError::Timeout) => {
+                    let now = size();
+                    if now != last.0 {
+                        last = (now, std::time::Instant::now());
+                    } else if last.1.elapsed() >= STALLED_WRITER {
+                        return Err(SinkFlushError::Timeout);
+                    }
+                }
+                done => return done,
+            }
+        }
     }
 
     /// The output's final path (or the viewer's URL), which the errors name.
@@ -475,20 +513,23 @@ impl RerunSink {
             let _ = rec.flush_async();
             return Ok(());
         }
-        if let Err(source) = rec.flush_blocking() {
+        if let Err(source) = self.flush_file(&rec) {
             // The SDK's error does not say why; the file does.
-            return Err(
-                match self.file.as_ref().map_or(Ok(()), PartialFile::probe_write) {
-                    Err(io) => RerunError::Write {
-                        path: self.path().to_path_buf(),
-                        source: io,
-                    },
-                    Ok(()) => RerunError::Flush {
-                        path: self.path().to_path_buf(),
-                        source,
-                    },
+            let error = match self.file.as_ref().map_or(Ok(()), PartialFile::probe_write) {
+                Err(io) => RerunError::Write {
+                    path: self.path().to_path_buf(),
+                    source: io,
                 },
-            );
+                Ok(()) => RerunError::Flush {
+                    path: self.path().to_path_buf(),
+                    source,
+                },
+            };
+            // Its threads may be waiting on the flush that never ends:
+            // dropping the handle would join them. The temporary file is
+            // deleted with the sink.
+            std::mem::forget(rec);
+            return Err(error);
         }
         // Dropping the only handle joins the SDK's threads; the file sink
         // writes the rrd footer and closes the file before this returns.
