@@ -28,6 +28,34 @@ use crate::wire::{
     SectionMsg, WeatherMsg,
 };
 
+mod compact;
+pub(crate) use compact::compact_measurement;
+
+/// A `/measurement/friction` message's fields, borrowed: from its wire
+/// struct, or straight from its text ([`compact_measurement`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct MeasurementFields<'a> {
+    pub site_id: &'a str,
+    pub rail: &'a str,
+    pub quantity: Quantity,
+    pub train_id: Option<&'a str>,
+    pub axle_index: Option<usize>,
+    pub value: f64,
+}
+
+impl<'a> From<&'a MeasurementMsg> for MeasurementFields<'a> {
+    fn from(msg: &'a MeasurementMsg) -> Self {
+        Self {
+            site_id: &msg.site_id,
+            rail: &msg.rail,
+            quantity: msg.quantity,
+            train_id: msg.train_id.as_deref(),
+            axle_index: msg.axle_index,
+            value: msg.value,
+        }
+    }
+}
+
 /// Why a message breaks the format: a sentence, and the field it is about
 /// (its path in the message, e.g. `axles[3].offset_m`; `log_time` for the
 /// message's time) where there is one.
@@ -799,7 +827,10 @@ impl Decoder {
 
     /// A `/measurement/friction`: a `mu` or `adhesion` measurement names a
     /// train already seen and one of its axles.
-    pub(crate) fn measurement(&self, msg: MeasurementMsg) -> Result<Measurement, DecodeError> {
+    pub(crate) fn measurement(
+        &self,
+        msg: MeasurementFields<'_>,
+    ) -> Result<Measurement, DecodeError> {
         let section = &self.section;
         let site = section
             .sites
@@ -814,16 +845,16 @@ impl Decoder {
                     ),
                 )
             })?;
-        let rail = resolve_rail(&section.rails, &msg.rail, "rail")?;
+        let rail = resolve_rail(&section.rails, msg.rail, "rail")?;
         let of = match msg.quantity {
             Quantity::RailMu => {
-                if let Some(train_id) = &msg.train_id {
+                if let Some(train_id) = msg.train_id {
                     return Err(DecodeError::at(
                         "train_id",
                         format!(
                             "a `rail_mu` measurement is of the rail alone, but it has \
                              `train_id` = {}",
-                            Value::from(train_id.as_str())
+                            Value::from(train_id)
                         ),
                     ));
                 }
@@ -856,7 +887,7 @@ impl Decoder {
                         ),
                     )
                 })?;
-                let Some(train) = self.trains.get(&train_id) else {
+                let Some(train) = self.trains.get(train_id) else {
                     return Err(DecodeError::at(
                         "train_id",
                         format!(
@@ -876,7 +907,7 @@ impl Decoder {
                     ));
                 }
                 let axle = AxleRef {
-                    train_id,
+                    train_id: train_id.to_owned(),
                     train_seq: train.train_seq,
                     axle_index,
                 };

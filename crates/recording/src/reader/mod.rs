@@ -385,12 +385,24 @@ impl RecordingReader {
                 let p = decoder.pulse(&msg)?;
                 Ok((EventKind::Pulse(p), keep_wire.then_some(Wire::Pulse(msg))))
             }),
-            Topic::Measurement => decode::parse::<MeasurementMsg>(data).and_then(|msg| {
-                let wire = keep(&|| Wire::Measurement(msg.clone()));
-                decoder
-                    .measurement(msg)
-                    .map(|m| (EventKind::Measurement(m), wire))
-            }),
+            // Most messages are measurements: those in the compact shape are
+            // read without serde (decode/compact.rs), unless the wire
+            // message is kept.
+            Topic::Measurement => match (!keep_wire)
+                .then(|| decode::compact_measurement(data))
+                .flatten()
+            {
+                Some(fields) => decoder
+                    .measurement(fields)
+                    .map(|m| (EventKind::Measurement(m), None)),
+                None => decode::parse::<MeasurementMsg>(data).and_then(|msg| {
+                    let m = decoder.measurement((&msg).into())?;
+                    Ok((
+                        EventKind::Measurement(m),
+                        keep_wire.then_some(Wire::Measurement(msg)),
+                    ))
+                }),
+            },
             Topic::Weather => decode::parse::<WeatherMsg>(data).and_then(|msg| {
                 let w = decoder.weather(&msg)?;
                 Ok((

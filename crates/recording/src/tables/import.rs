@@ -95,7 +95,7 @@ pub fn import_dir(dir: &Path, out: &Path) -> Result<ImportSummary, ConvertError>
             Msg::Passage(m) => decoder.passage(m.clone(), item.log_time_ns).map(drop),
             Msg::Pulse(m) => decoder.pulse(m).map(drop),
             Msg::Weather(m) => decoder.weather(m).map(drop),
-            Msg::Measurement(m) => decoder.measurement(m.clone()).map(drop),
+            Msg::Measurement(m) => decoder.measurement(m.into()).map(drop),
         };
         if let Err(e) = result {
             return Err(item.origin.error(e.field.as_deref(), e.message).into());
