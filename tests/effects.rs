@@ -135,7 +135,7 @@ fn mu_of(t_s: u64, train_at_s: u64, site: usize, rail: usize, axle_index: usize)
             site,
             rail,
             of: Measured::Mu(AxleRef {
-                train_id: format!("T{train_at_s}"),
+                train_id: format!("T{train_at_s}").into(),
                 train_seq: 0,
                 axle_index,
             }),

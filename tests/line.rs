@@ -475,7 +475,7 @@ mod sharing {
 
     fn mu(t_s: f64, seq: usize, axle_index: usize, rail: usize) -> (f64, EventKind) {
         let axle = AxleRef {
-            train_id: format!("T{seq}"),
+            train_id: format!("T{seq}").into(),
             train_seq: seq,
             axle_index,
         };

@@ -71,13 +71,13 @@ fn tracks() -> Vec<TrackInfo> {
     ]
 }
 
-fn measurement<'a>(
+fn measurement(
     log_time_ns: u64,
     quantity: Quantity,
     axle_index: Option<usize>,
     measured: f64,
     simulated: f64,
-) -> MeasurementOutput<'a> {
+) -> MeasurementOutput {
     MeasurementOutput {
         log_time_ns,
         index_in_file: log_time_ns % 1000,

@@ -186,7 +186,7 @@ fn feed(sink: &mut dyn Sink, trains: u64) -> Result<Logged, tortwin_engine::sink
                 index_in_file: train * 10 + rail as u64,
                 site_id: "S1".into(),
                 site: 0,
-                rail_name: (&section.rails[rail]).into(),
+                rail_name: section.rails[rail].as_str().into(),
                 rail,
                 quantity,
                 train_id: (quantity == Quantity::Mu).then(|| train_id.as_str().into()),

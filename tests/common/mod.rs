@@ -212,7 +212,7 @@ impl Sink for Recorder {
         Ok(())
     }
 
-    fn measurement(&mut self, m: &MeasurementOutput<'_>) -> tortwin_engine::sink::SinkResult {
+    fn measurement(&mut self, m: &MeasurementOutput) -> tortwin_engine::sink::SinkResult {
         self.measurements.push(MeasurementRow {
             index_in_file: m.index_in_file,
             log_time_ns: m.log_time_ns,

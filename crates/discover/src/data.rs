@@ -464,7 +464,7 @@ struct Collect<'a> {
 }
 
 impl Sink for Collect<'_> {
-    fn measurement(&mut self, m: &MeasurementOutput<'_>) -> tortwin_engine::sink::SinkResult {
+    fn measurement(&mut self, m: &MeasurementOutput) -> tortwin_engine::sink::SinkResult {
         if let Some(&k) = self.row_of_index.get(&m.index_in_file) {
             self.simulated[k] = m.simulated;
             if let Some(slot) = self.readouts.get_mut(k) {

@@ -213,7 +213,7 @@ impl<S: Sink> Sink for Alerting<S> {
         }
         self.emit()
     }
-    fn measurement(&mut self, m: &MeasurementOutput<'_>) -> SinkResult {
+    fn measurement(&mut self, m: &MeasurementOutput) -> SinkResult {
         self.inner.measurement(m)?;
         if let Some(d) = self.detector.as_mut() {
             d.measurement(m, &mut self.raised);
@@ -740,7 +740,7 @@ impl Detector {
         }
     }
 
-    fn measurement(&mut self, m: &MeasurementOutput<'_>, out: &mut Vec<Alert>) {
+    fn measurement(&mut self, m: &MeasurementOutput, out: &mut Vec<Alert>) {
         let key = (m.site, m.rail, m.quantity);
         let residual = m.measured - m.simulated;
         self.check_stuck(key, m, out);
@@ -773,7 +773,7 @@ impl Detector {
     fn check_stuck(
         &mut self,
         key: (usize, usize, Quantity),
-        m: &MeasurementOutput<'_>,
+        m: &MeasurementOutput,
         out: &mut Vec<Alert>,
     ) {
         let cfg = &self.config.stuck;
@@ -1367,16 +1367,16 @@ mod tests {
         t: u64,
         measured: f64,
         simulated: f64,
-    ) -> MeasurementOutput<'static> {
+    ) -> MeasurementOutput {
         MeasurementOutput {
             log_time_ns: t,
             index_in_file: 0,
-            site_id: Cow::Owned(["M1", "M2"][site].into()),
+            site_id: ["M1", "M2"][site].into(),
             site,
-            rail_name: Cow::Owned(["high", "low"][rail].into()),
+            rail_name: ["high", "low"][rail].into(),
             rail,
             quantity: Quantity::Mu,
-            train_id: Some(Cow::Owned(train.into())),
+            train_id: Some(train.into()),
             axle_index: Some(0),
             measured,
             simulated,

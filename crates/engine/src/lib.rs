@@ -351,6 +351,11 @@ pub struct Engine {
     cfg: ModelConfig,
     opts: EngineOptions,
     section: Section,
+    /// The section's site ids and rail names, shared with the measurements'
+    /// outputs (a sink thread's copy of an output is then a count, not an
+    /// allocation per name).
+    site_ids: Vec<Arc<str>>,
+    rail_names: Vec<Arc<str>>,
     grid: Grid,
     steel: Steel,
     tracks: Vec<TrackState>,
@@ -519,6 +524,8 @@ impl Engine {
             origin_ns,
         ));
         Self {
+            site_ids: section.sites.iter().map(|s| Arc::from(s.id.as_str())).collect(),
+            rail_names: section.rails.iter().map(|r| Arc::from(r.as_str())).collect(),
             steel: Steel {
                 e_pa: cfg.contact.e_pa,
                 nu: cfg.contact.nu,
@@ -1176,7 +1183,7 @@ impl Engine {
         {
             Some(record) => Ok(record),
             None => Err(EngineError::MeasurementTooLate {
-                train_id: axle.train_id.clone(),
+                train_id: axle.train_id.to_string(),
                 log_time_ns: event.log_time_ns,
                 index_in_file: event.index_in_file,
             }),
@@ -1319,12 +1326,12 @@ impl Engine {
         sink.measurement(&MeasurementOutput {
             log_time_ns: event.log_time_ns,
             index_in_file: event.index_in_file,
-            site_id: self.section.sites[m.site].id.as_str().into(),
+            site_id: Arc::clone(&self.site_ids[m.site]),
             site: m.site,
-            rail_name: self.section.rails[m.rail].as_str().into(),
+            rail_name: Arc::clone(&self.rail_names[m.rail]),
             rail: m.rail,
             quantity: m.quantity(),
-            train_id: m.axle().map(|a| a.train_id.as_str().into()),
+            train_id: m.axle().map(|a| Arc::clone(&a.train_id)),
             axle_index: m.axle().map(|a| a.axle_index),
             measured: m.value,
             simulated,

@@ -14,6 +14,7 @@
 //! made again there.
 
 use std::borrow::Cow;
+use std::sync::Arc;
 
 use tortwin_recording::{Direction, Quantity, Section};
 
@@ -75,16 +76,20 @@ pub struct PulseEvent<'a> {
 
 /// The simulated value for one input measurement.
 #[derive(Debug, Clone)]
-pub struct MeasurementOutput<'a> {
+///
+/// Its names are shared (`Arc`), not borrowed: measurements are most of a
+/// recording's events, and a sink thread's copy of each would otherwise
+/// allocate three strings that the thread frees again.
+pub struct MeasurementOutput {
     pub log_time_ns: u64,
     pub index_in_file: u64,
-    pub site_id: Cow<'a, str>,
+    pub site_id: Arc<str>,
     pub site: usize,
-    pub rail_name: Cow<'a, str>,
+    pub rail_name: Arc<str>,
     pub rail: usize,
     pub quantity: Quantity,
     /// `None` for `rail_mu`.
-    pub train_id: Option<Cow<'a, str>>,
+    pub train_id: Option<Arc<str>>,
     pub axle_index: Option<usize>,
     pub measured: f64,
     pub simulated: f64,
@@ -231,7 +236,7 @@ pub enum Event<'a> {
     Begin(SectionInfo<'a>),
     Train(TrainEvent<'a>),
     Pulse(PulseEvent<'a>),
-    Measurement(MeasurementOutput<'a>),
+    Measurement(MeasurementOutput),
     Field(FieldSnapshot<'a>),
     WheelContacts(WheelContacts<'a>),
     LineWheels(LineWheels<'a>),
@@ -274,20 +279,7 @@ impl Event<'_> {
                 rail_name: owned(p.rail_name),
                 mass_kg: p.mass_kg,
             }),
-            Event::Measurement(m) => Event::Measurement(MeasurementOutput {
-                log_time_ns: m.log_time_ns,
-                index_in_file: m.index_in_file,
-                site_id: owned(m.site_id),
-                site: m.site,
-                rail_name: owned(m.rail_name),
-                rail: m.rail,
-                quantity: m.quantity,
-                train_id: m.train_id.map(owned),
-                axle_index: m.axle_index,
-                measured: m.measured,
-                simulated: m.simulated,
-                readout: m.readout,
-            }),
+            Event::Measurement(m) => Event::Measurement(m),
             Event::Field(f) => Event::Field(FieldSnapshot {
                 kind: f.kind,
                 log_time_ns: f.log_time_ns,
@@ -385,7 +377,7 @@ pub trait Sink {
     fn pulse(&mut self, _pulse: &PulseEvent<'_>) -> SinkResult {
         Ok(())
     }
-    fn measurement(&mut self, _m: &MeasurementOutput<'_>) -> SinkResult {
+    fn measurement(&mut self, _m: &MeasurementOutput) -> SinkResult {
         Ok(())
     }
     /// Whether [`MeasurementOutput::readout`] is wanted (it costs a Polach
@@ -445,7 +437,7 @@ where
     fn pulse(&mut self, pulse: &PulseEvent<'_>) -> SinkResult {
         self.sinks.iter_mut().try_for_each(|s| s.pulse(pulse))
     }
-    fn measurement(&mut self, m: &MeasurementOutput<'_>) -> SinkResult {
+    fn measurement(&mut self, m: &MeasurementOutput) -> SinkResult {
         self.sinks.iter_mut().try_for_each(|s| s.measurement(m))
     }
     fn wants_readouts(&self) -> bool {

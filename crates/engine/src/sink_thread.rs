@@ -129,7 +129,7 @@ impl Sink for SinkThread {
         self.push(Event::Pulse(p.clone()))
     }
 
-    fn measurement(&mut self, m: &MeasurementOutput<'_>) -> SinkResult {
+    fn measurement(&mut self, m: &MeasurementOutput) -> SinkResult {
         self.push(Event::Measurement(m.clone()))
     }
 
@@ -225,7 +225,7 @@ mod tests {
                 p.applicator_id, p.rail_name, p.mass_kg
             ))
         }
-        fn measurement(&mut self, m: &MeasurementOutput<'_>) -> SinkResult {
+        fn measurement(&mut self, m: &MeasurementOutput) -> SinkResult {
             self.line(format!(
                 "measurement {} {} {} {:?} {:?} {}",
                 m.index_in_file, m.site_id, m.rail_name, m.train_id, m.axle_index, m.simulated
@@ -312,7 +312,7 @@ mod tests {
                     index_in_file: (3 * k + j) as u64,
                     site_id: "S1".into(),
                     site: 0,
-                    rail_name: (&section.rails[j % 2]).into(),
+                    rail_name: section.rails[j % 2].as_str().into(),
                     rail: j % 2,
                     quantity: Quantity::Mu,
                     train_id: (j < 2).then(|| id.as_str().into()),

@@ -40,7 +40,7 @@ fn truth_of(recording: &std::path::Path) -> ModelConfig {
 struct Collect(Vec<String>);
 
 impl Sink for Collect {
-    fn measurement(&mut self, m: &MeasurementOutput<'_>) -> SinkResult {
+    fn measurement(&mut self, m: &MeasurementOutput) -> SinkResult {
         let readout = m.readout.map(|r| (r.mass_kg, r.mass_tangent));
         self.0.push(format!(
             "{} {:?} {:?}",

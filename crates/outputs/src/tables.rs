@@ -452,7 +452,7 @@ impl Sink for TableSink {
         Ok(())
     }
 
-    fn measurement(&mut self, m: &MeasurementOutput<'_>) -> SinkResult {
+    fn measurement(&mut self, m: &MeasurementOutput) -> SinkResult {
         self.measurements.push(&[
             Value::Time(m.log_time_ns),
             Value::Count(m.index_in_file),

@@ -547,8 +547,10 @@ pub(crate) fn section(msg: &SectionMsg) -> Result<Section, DecodeError> {
 }
 
 /// A train the replay has seen, for measurements and the duplicate check.
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone)]
 struct TrainSeen {
+    /// Its id, shared by its measurements' [`AxleRef`]s.
+    id: std::sync::Arc<str>,
     train_seq: usize,
     axle_count: usize,
     log_time_ns: u64,
@@ -768,6 +770,7 @@ impl Decoder {
         self.trains.insert(
             msg.train_id.clone(),
             TrainSeen {
+                id: msg.train_id.as_str().into(),
                 train_seq,
                 axle_count: axles.len(),
                 log_time_ns,
@@ -907,7 +910,7 @@ impl Decoder {
                     ));
                 }
                 let axle = AxleRef {
-                    train_id: train_id.to_owned(),
+                    train_id: std::sync::Arc::clone(&train.id),
                     train_seq: train.train_seq,
                     axle_index,
                 };

@@ -110,7 +110,8 @@ pub use tortwin_model::Quantity;
 /// Which wheel a `mu`/`adhesion` measurement saw.
 #[derive(Debug, Clone, PartialEq)]
 pub struct AxleRef {
-    pub train_id: String,
+    /// Shared by the train's measurements (see [`crate::decode`]'s trains).
+    pub train_id: std::sync::Arc<str>,
     /// The passage's [`Passage::train_seq`].
     pub train_seq: usize,
     /// Checked to be in range of that train's axles.

@@ -245,7 +245,7 @@ fn base_recording_replays_in_order_with_si_units_in_every_layout() {
         assert_eq!((mu.site, mu.rail, mu.quantity()), (0, 1, Quantity::Mu));
         let axle = mu.axle().unwrap();
         assert_eq!(
-            (axle.train_id.as_str(), axle.train_seq, axle.axle_index),
+            (&*axle.train_id, axle.train_seq, axle.axle_index),
             ("F-1", 0, 1)
         );
         assert_eq!(mu.value, 0.312);
@@ -663,7 +663,7 @@ fn check_reference(name: &str) {
             section.sites[m.site].id.clone(),
             section.rails[m.rail].clone(),
             m.quantity().as_str().to_string(),
-            axle.map_or(String::new(), |a| a.train_id.clone()),
+            axle.map_or(String::new(), |a| a.train_id.to_string()),
             axle.map_or(String::new(), |a| a.axle_index.to_string()),
         ];
         assert_eq!(got.as_slice(), &f[..7], "row {row}");

@@ -436,7 +436,7 @@ impl<'p> Planner<'p> {
                                 rail,
                                 of: {
                                     let axle = AxleRef {
-                                        train_id: train.passage.train_id.clone(),
+                                        train_id: train.passage.train_id.as_str().into(),
                                         train_seq: train.passage.train_seq,
                                         axle_index,
                                     };

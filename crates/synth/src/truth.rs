@@ -315,7 +315,7 @@ pub fn generate(
 fn simulate(engine: &mut Engine, events: &[Event]) -> Result<Vec<f64>> {
     struct Collect<'a>(&'a mut [f64]);
     impl Sink for Collect<'_> {
-        fn measurement(&mut self, m: &MeasurementOutput<'_>) -> tortwin_engine::sink::SinkResult {
+        fn measurement(&mut self, m: &MeasurementOutput) -> tortwin_engine::sink::SinkResult {
             let slot = self.0.get_mut(m.index_in_file as usize).ok_or_else(|| {
                 Error::Inconsistent(format!(
                     "measurement index {} out of range",

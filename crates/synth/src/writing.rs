@@ -228,7 +228,7 @@ pub(super) fn measurement_msg(
         site_id: section.sites[m.site].id.clone(),
         rail: section.rails[m.rail].clone(),
         quantity: m.quantity(),
-        train_id: m.axle().map(|a| a.train_id.clone()),
+        train_id: m.axle().map(|a| a.train_id.to_string()),
         axle_index: m.axle().map(|a| a.axle_index),
         value,
     })

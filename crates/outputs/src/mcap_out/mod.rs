@@ -855,7 +855,7 @@ impl Sink for McapSink {
         Ok(())
     }
 
-    fn measurement(&mut self, m: &MeasurementOutput<'_>) -> tortwin_engine::sink::SinkResult {
+    fn measurement(&mut self, m: &MeasurementOutput) -> tortwin_engine::sink::SinkResult {
         let topic = Topic::Measurement;
         finite(topic, "measured", m.log_time_ns, m.measured)?;
         finite(topic, "simulated", m.log_time_ns, m.simulated)?;
@@ -1146,7 +1146,7 @@ struct PulseMsg<'a> {
 /// keys in the schema's order; `train_id` and `axle_index` left out for
 /// `rail_mu`; the strings escaped and the two values written by serde_json
 /// (every digit).
-fn measurement_json(buf: &mut Vec<u8>, m: &MeasurementOutput<'_>) -> serde_json::Result<()> {
+fn measurement_json(buf: &mut Vec<u8>, m: &MeasurementOutput) -> serde_json::Result<()> {
     buf.extend_from_slice(br#"{"site_id":"#);
     serde_json::to_writer(&mut *buf, &*m.site_id)?;
     buf.extend_from_slice(br#","rail":"#);
@@ -1336,12 +1336,12 @@ mod tests {
             let m = MeasurementOutput {
                 log_time_ns: 7,
                 index_in_file: u64::MAX,
-                site_id: Cow::Borrowed("M\u{e9}\\1"),
+                site_id: "M\u{e9}\\1".into(),
                 site: 0,
-                rail_name: Cow::Borrowed("low"),
+                rail_name: "low".into(),
                 rail: 1,
                 quantity,
-                train_id: train_id.map(Cow::Borrowed),
+                train_id: train_id.map(Into::into),
                 axle_index,
                 measured,
                 simulated,

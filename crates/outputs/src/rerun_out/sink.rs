@@ -384,7 +384,7 @@ impl RerunSink {
 
     /// The first measurement of its site, rail and quantity: the entity,
     /// its style, and the blueprint's note that it was measured.
-    fn first_measurement(&mut self, m: &MeasurementOutput<'_>) -> Result<EntityPath, RerunError> {
+    fn first_measurement(&mut self, m: &MeasurementOutput) -> Result<EntityPath, RerunError> {
         let path = entity(&["sites", &m.site_id, &m.rail_name, m.quantity.as_str()]);
         let color = rail_color(m.rail);
         let pale = lighten(color, 0.45);
@@ -644,7 +644,7 @@ impl Sink for RerunSink {
         Ok(())
     }
 
-    fn measurement(&mut self, m: &MeasurementOutput<'_>) -> SinkResult {
+    fn measurement(&mut self, m: &MeasurementOutput) -> SinkResult {
         let key = (m.site, m.rail, m.quantity);
         let path = match self.measurement_paths.get(&key) {
             Some(path) => path.clone(),
