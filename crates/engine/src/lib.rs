@@ -524,8 +524,16 @@ impl Engine {
             origin_ns,
         ));
         Self {
-            site_ids: section.sites.iter().map(|s| Arc::from(s.id.as_str())).collect(),
-            rail_names: section.rails.iter().map(|r| Arc::from(r.as_str())).collect(),
+            site_ids: section
+                .sites
+                .iter()
+                .map(|s| Arc::from(s.id.as_str()))
+                .collect(),
+            rail_names: section
+                .rails
+                .iter()
+                .map(|r| Arc::from(r.as_str()))
+                .collect(),
             steel: Steel {
                 e_pa: cfg.contact.e_pa,
                 nu: cfg.contact.nu,
