@@ -547,10 +547,8 @@ pub(crate) fn section(msg: &SectionMsg) -> Result<Section, DecodeError> {
 }
 
 /// A train the replay has seen, for measurements and the duplicate check.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, Copy)]
 struct TrainSeen {
-    /// Its id, shared by its measurements' [`AxleRef`]s.
-    id: std::sync::Arc<str>,
     train_seq: usize,
     axle_count: usize,
     log_time_ns: u64,
@@ -565,7 +563,8 @@ pub(crate) struct Decoder {
     /// The section's `/line`, if the recording is a line.
     line: Option<Line>,
     origin_ns: i64,
-    trains: HashMap<String, TrainSeen>,
+    /// By id, the key shared by the train's measurements' [`AxleRef`]s.
+    trains: HashMap<std::sync::Arc<str>, TrainSeen>,
     /// `train_id` of the last passage, for the two-trains message.
     last_train_id: Option<String>,
     occupied_until_s: f64,
@@ -685,7 +684,7 @@ impl Decoder {
         }
 
         let train_seq = self.trains.len();
-        if let Some(seen) = self.trains.get(&msg.train_id) {
+        if let Some(seen) = self.trains.get(msg.train_id.as_str()) {
             return Err(DecodeError::at(
                 "train_id",
                 format!(
@@ -768,9 +767,8 @@ impl Decoder {
             speed_mps,
         ));
         self.trains.insert(
-            msg.train_id.clone(),
+            msg.train_id.as_str().into(),
             TrainSeen {
-                id: msg.train_id.as_str().into(),
                 train_seq,
                 axle_count: axles.len(),
                 log_time_ns,
@@ -890,7 +888,7 @@ impl Decoder {
                         ),
                     )
                 })?;
-                let Some(train) = self.trains.get(train_id) else {
+                let Some((id, train)) = self.trains.get_key_value(train_id) else {
                     return Err(DecodeError::at(
                         "train_id",
                         format!(
@@ -910,7 +908,7 @@ impl Decoder {
                     ));
                 }
                 let axle = AxleRef {
-                    train_id: std::sync::Arc::clone(&train.id),
+                    train_id: std::sync::Arc::clone(id),
                     train_seq: train.train_seq,
                     axle_index,
                 };

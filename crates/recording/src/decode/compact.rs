@@ -49,22 +49,8 @@ pub(crate) fn compact_measurement(data: &[u8]) -> Option<MeasurementFields<'_>> 
                 };
                 once(&mut quantity, q)?
             }
-            "train_id" => {
-                let id = if scan.null() {
-                    None
-                } else {
-                    Some(scan.string()?)
-                };
-                once(&mut train_id, id)?
-            }
-            "axle_index" => {
-                let index = if scan.null() {
-                    None
-                } else {
-                    Some(scan.index()?)
-                };
-                once(&mut axle_index, index)?
-            }
+            "train_id" => once(&mut train_id, scan.or_null(Scan::string)?)?,
+            "axle_index" => once(&mut axle_index, scan.or_null(Scan::index)?)?,
             "value" => once(&mut value, scan.number()?)?,
             _ => return None,
         }
@@ -131,12 +117,14 @@ impl<'a> Scan<'a> {
         self.text.get(start..start + len)
     }
 
-    fn null(&mut self) -> bool {
-        let null = self.text.as_bytes()[self.at..].starts_with(b"null");
-        if null {
+    /// `null` (absent, as serde reads an optional field) or what `read` reads.
+    fn or_null<T>(&mut self, read: impl FnOnce(&mut Self) -> Option<T>) -> Option<Option<T>> {
+        if self.text.as_bytes()[self.at..].starts_with(b"null") {
             self.at += 4;
+            Some(None)
+        } else {
+            read(self).map(Some)
         }
-        null
     }
 
     /// A JSON integer of at most 18 digits (no sign, fraction or exponent:
