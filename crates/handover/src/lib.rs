@@ -14,23 +14,33 @@
 
 use std::sync::mpsc::{sync_channel, Receiver, SyncSender};
 
-/// How much a thread that feeds or drains the engine yields to it when
-/// the cores are short ([`behind_the_engine`]): the highest nice value,
-/// 19 (a weight of 15 against a normal thread's 1024 under Linux's
-/// scheduler).
+/// The nice value a thread behind the engine ([`behind_the_engine`])
+/// takes where Linux refuses it the idle policy: the highest, 19 (a weight
+/// of 15 against a normal thread's 1024).
 pub const BEHIND_NICE: i32 = 19;
 
 /// Marks the calling thread as one that feeds or drains the engine (the
-/// recording's read-ahead, the sink thread, the MCAP writer): on Linux its
-/// nice value is raised to [`BEHIND_NICE`], so that while the engine's
-/// stepping threads want both cores they keep them, and this thread runs
-/// in the time they leave (while the engine settles a train, emits, or
-/// waits for it). It cannot stall the engine: the hand-over is bounded, so
-/// an engine that runs ahead of this thread blocks on it, and the core is
-/// this thread's again. Measured on a 2-core machine (8 days of the
-/// example line with MCAP out, `perf sched`): without it the engine's
-/// thread waited, runnable, a sixth of the replay for a core these threads
-/// held.
+/// recording's read-ahead, the sink thread, the MCAP writer): on Linux it
+/// takes the scheduling policy `SCHED_IDLE` (or, where that is refused,
+/// the nice value [`BEHIND_NICE`]), so that while the engine's stepping
+/// threads want both cores they keep them, and this thread runs in the
+/// time they leave (while the engine settles a train, emits, or waits for
+/// it). It cannot stall the engine: the hand-over is bounded, so an engine
+/// that runs ahead of this thread blocks on it, and the core is this
+/// thread's again.
+///
+/// Why the idle policy rather than only the nice value: a core that runs
+/// nothing but idle-policy threads counts as free when the scheduler
+/// places a thread that wakes, a core running a thread at nice 19 does not.
+/// The engine wakes a rayon worker for a train's second rail; at nice 19
+/// that worker was queued behind the engine on the engine's own core (for
+/// 2-3 ms, longer than the rail takes) while the helper held the other
+/// core, and the engine's thread rolled both rails itself (`perf sched`, the
+/// 3-day curve benchmark: the worker ran 7 ms against the engine's 74;
+/// with the idle policy 23 against 63, and the run took 4 % less time).
+/// Measured before that on 8 days of the example line with MCAP out:
+/// without either, the engine's thread waited, runnable, a sixth of the
+/// replay for a core these threads held.
 ///
 /// The price: such a thread yields to every thread of normal priority in
 /// its scheduling group (on a desktop, the terminal session's processes),
@@ -39,18 +49,23 @@ pub const BEHIND_NICE: i32 = 19;
 /// live twin's (`tortwin live`, which must keep up with the recording as
 /// it is written) are not.
 ///
-/// Linux keeps a nice value per thread, so only the calling thread
-/// changes; it cannot be lowered again without privileges, so call it on
-/// a thread of your own only. Elsewhere, and where the call fails, nothing
-/// changes (the order of the work does not depend on it).
+/// Linux keeps the policy and the nice value per thread, so only the
+/// calling thread changes; neither can be undone without privileges, so
+/// call it on a thread of your own only. Elsewhere, and where the calls
+/// fail, nothing changes (the order of the work does not depend on it).
 pub fn behind_the_engine() {
     #[cfg(target_os = "linux")]
     {
-        // SAFETY: gettid and setpriority take and return plain integers;
+        // SAFETY: sched_setscheduler reads the parameter it is given (a
+        // plain struct that lives through the call); pid 0 is the calling
+        // thread. gettid and setpriority take and return plain integers;
         // PRIO_PROCESS with a thread id acts on that thread only (Linux).
         unsafe {
-            let tid = libc::gettid() as libc::id_t;
-            libc::setpriority(libc::PRIO_PROCESS, tid, BEHIND_NICE);
+            let param = libc::sched_param { sched_priority: 0 };
+            if libc::sched_setscheduler(0, libc::SCHED_IDLE, &param) != 0 {
+                let tid = libc::gettid() as libc::id_t;
+                libc::setpriority(libc::PRIO_PROCESS, tid, BEHIND_NICE);
+            }
         }
     }
 }
@@ -164,27 +179,28 @@ impl<B: Batch> Taker<B> {
 mod tests {
     use super::*;
 
-    /// The calling thread's nice value.
+    /// The calling thread's scheduling policy.
     #[cfg(target_os = "linux")]
-    fn nice_of_this_thread() -> i32 {
-        // SAFETY: plain integers in and out.
-        unsafe { libc::getpriority(libc::PRIO_PROCESS, libc::gettid() as libc::id_t) }
+    fn policy_of_this_thread() -> i32 {
+        // SAFETY: plain integers in and out; pid 0 is the calling thread.
+        unsafe { libc::sched_getscheduler(0) }
     }
 
     #[cfg(target_os = "linux")]
     #[test]
     fn a_thread_behind_the_engine_yields_and_the_others_do_not() {
-        let before = nice_of_this_thread();
+        let before = policy_of_this_thread();
+        assert_ne!(before, libc::SCHED_IDLE);
         let behind = std::thread::spawn(|| {
             behind_the_engine();
-            nice_of_this_thread()
+            policy_of_this_thread()
         })
         .join()
         .expect("the thread");
-        assert_eq!(behind, BEHIND_NICE);
+        assert_eq!(behind, libc::SCHED_IDLE);
         // Only the thread that asked: not the process, not its spawner.
-        assert_eq!(nice_of_this_thread(), before);
-        let sibling = std::thread::spawn(nice_of_this_thread).join();
+        assert_eq!(policy_of_this_thread(), before);
+        let sibling = std::thread::spawn(policy_of_this_thread).join();
         assert_eq!(sibling.expect("the thread"), before);
     }
 
