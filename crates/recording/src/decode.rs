@@ -17,8 +17,8 @@ use std::collections::HashMap;
 use serde_json::Value;
 
 use crate::event::{
-    Applicator, Axle, AxleRef, AxleSegment, Creepage, Direction, Measured, Measurement, Passage,
-    Pulse, Quantity, Section, Site, Weather,
+    Applicator, Axle, AxleRef, AxleSegment, BogiePosition, Creepage, Direction, Measured,
+    Measurement, Passage, Pulse, Quantity, Section, Site, Weather,
 };
 use crate::limits::{self, Range};
 use crate::line::{axle_at_ends_s, Line};
@@ -29,7 +29,7 @@ use crate::wire::{
 };
 
 mod compact;
-pub(crate) use compact::compact_measurement;
+pub(crate) use compact::{compact_measurement, compact_passage};
 
 /// A `/measurement/friction` message's fields, borrowed: from its wire
 /// struct, or straight from its text ([`compact_measurement`]).
@@ -54,6 +54,69 @@ impl<'a> From<&'a MeasurementMsg> for MeasurementFields<'a> {
             value: msg.value,
         }
     }
+}
+
+/// A `/train/passage` message's fields, borrowed: from its wire struct, or
+/// straight from its text ([`compact_passage`]). The axles' per-rail
+/// values are kept in two lists for the whole train (one allocation each,
+/// not two maps and four names per axle), each axle holding its range of
+/// them, in the order written.
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) struct PassageFields<'a> {
+    pub train_id: &'a str,
+    pub direction: Direction,
+    pub speed_mps: f64,
+    pub axles: Vec<AxleFields<'a>>,
+    /// `wheel_load_kN` of every axle: (rail name, kN).
+    pub wheel_loads_kn: Vec<(&'a str, f64)>,
+    /// `creepage` of every axle: (rail name, creepages).
+    pub creepages: Vec<(&'a str, CreepageMsg)>,
+}
+
+/// An axle of [`PassageFields`].
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) struct AxleFields<'a> {
+    pub offset_m: f64,
+    pub bogie_position: BogiePosition,
+    pub wheel_diameter_m: f64,
+    /// Its entries of [`PassageFields::wheel_loads_kn`].
+    pub wheel_load_kn: std::ops::Range<usize>,
+    /// Its entries of [`PassageFields::creepages`].
+    pub creepage: std::ops::Range<usize>,
+    pub segments: Option<&'a RawJson>,
+}
+
+impl<'a> From<&'a PassageMsg> for PassageFields<'a> {
+    fn from(msg: &'a PassageMsg) -> Self {
+        let mut fields = PassageFields {
+            train_id: &msg.train_id,
+            direction: msg.direction,
+            speed_mps: msg.speed_mps,
+            axles: Vec::with_capacity(msg.axles.len()),
+            wheel_loads_kn: Vec::new(),
+            creepages: Vec::new(),
+        };
+        for a in &msg.axles {
+            let loads = fields.wheel_loads_kn.len();
+            fields.wheel_loads_kn.extend(borrowed(&a.wheel_load_kn));
+            let creepages = fields.creepages.len();
+            fields.creepages.extend(borrowed(&a.creepage));
+            fields.axles.push(AxleFields {
+                offset_m: a.offset_m,
+                bogie_position: a.bogie_position,
+                wheel_diameter_m: a.wheel_diameter_m,
+                wheel_load_kn: loads..fields.wheel_loads_kn.len(),
+                creepage: creepages..fields.creepages.len(),
+                segments: a.segments.as_ref(),
+            });
+        }
+        fields
+    }
+}
+
+/// A per-rail map's entries with the rail names borrowed.
+fn borrowed<T: Copy>(map: &PerRail<T>) -> impl Iterator<Item = (&str, T)> {
+    map.0.iter().map(|(rail, value)| (rail.as_str(), *value))
 }
 
 /// Why a message breaks the format: a sentence, and the field it is about
@@ -244,7 +307,7 @@ fn resolve_rail(rails: &[String], name: &str, field: &str) -> Result<usize, Deco
 
 /// An axle's wheel loads (`name`: the map's field path), kN -> N.
 fn wheel_loads_n(
-    map: &PerRail<f64>,
+    map: &[(&str, f64)],
     rails: &[String],
     name: &dyn Fn() -> String,
 ) -> Result<Vec<f64>, DecodeError> {
@@ -256,7 +319,7 @@ fn wheel_loads_n(
 
 /// An axle's creepages (`name`: the map's field path).
 fn creepages(
-    map: &PerRail<CreepageMsg>,
+    map: &[(&str, CreepageMsg)],
     rails: &[String],
     name: &dyn Fn() -> String,
 ) -> Result<Vec<Creepage>, DecodeError> {
@@ -323,12 +386,18 @@ fn axle_segments(
             wheel_load_n: entry
                 .wheel_load_kn
                 .as_ref()
-                .map(|m| wheel_loads_n(m, rails, &|| format!("{}.wheel_load_kN", field())))
+                .map(|m| {
+                    let m: Vec<_> = borrowed(m).collect();
+                    wheel_loads_n(&m, rails, &|| format!("{}.wheel_load_kN", field()))
+                })
                 .transpose()?,
             creepage: entry
                 .creepage
                 .as_ref()
-                .map(|m| creepages(m, rails, &|| format!("{}.creepage", field())))
+                .map(|m| {
+                    let m: Vec<_> = borrowed(m).collect();
+                    creepages(&m, rails, &|| format!("{}.creepage", field()))
+                })
                 .transpose()?,
         });
     }
@@ -341,7 +410,7 @@ fn axle_segments(
 /// name every rail once and no other (`name()` is the map's field, for the
 /// errors). Allocates only the result.
 fn per_rail<T: Copy, U>(
-    map: &PerRail<T>,
+    map: &[(&str, T)],
     rails: &[String],
     name: impl Fn() -> String,
     mut each: impl FnMut(T, &str) -> Result<U, DecodeError>,
@@ -349,8 +418,8 @@ fn per_rail<T: Copy, U>(
     // In the map's order: a rail the section lacks, or one named again. A
     // map of known rails repeats one by its (rails + 1)-th entry at the
     // latest, so this looks at no more than rails^2 pairs.
-    for (j, (rail, _)) in map.0.iter().enumerate() {
-        if !rails.contains(rail) {
+    for (j, &(rail, _)) in map.iter().enumerate() {
+        if !rails.iter().any(|r| r == rail) {
             let name = name();
             return Err(DecodeError::at(
                 format!("{name}.{rail}"),
@@ -360,7 +429,7 @@ fn per_rail<T: Copy, U>(
                 ),
             ));
         }
-        if map.0[..j].iter().any(|(earlier, _)| earlier == rail) {
+        if map[..j].iter().any(|&(earlier, _)| earlier == rail) {
             let name = name();
             return Err(DecodeError::at(
                 format!("{name}.{rail}"),
@@ -368,7 +437,7 @@ fn per_rail<T: Copy, U>(
             ));
         }
     }
-    let value = |rail: &String| map.0.iter().find(|(r, _)| r == rail).map(|(_, v)| *v);
+    let value = |rail: &String| map.iter().find(|&&(r, _)| r == rail).map(|&(_, v)| v);
     let lacks = |rail: &String| {
         let name = name();
         DecodeError::at(
@@ -619,7 +688,7 @@ impl Decoder {
     /// A `/train/passage` at `log_time_ns`; it becomes the next train.
     pub(crate) fn passage(
         &mut self,
-        msg: PassageMsg,
+        msg: PassageFields<'_>,
         log_time_ns: u64,
     ) -> Result<Passage, DecodeError> {
         let rails = &self.section.rails;
@@ -657,12 +726,15 @@ impl Decoder {
                     ));
                 }
             }
-            let wheel_load_n = wheel_loads_n(&a.wheel_load_kn, rails, &|| {
-                format!("axles[{i}].wheel_load_kN")
+            let wheel_load_n =
+                wheel_loads_n(&msg.wheel_loads_kn[a.wheel_load_kn.clone()], rails, &|| {
+                    format!("axles[{i}].wheel_load_kN")
+                })?;
+            let creepage = creepages(&msg.creepages[a.creepage.clone()], rails, &|| {
+                format!("axles[{i}].creepage")
             })?;
-            let creepage = creepages(&a.creepage, rails, &|| format!("axles[{i}].creepage"))?;
             // Without a line the field is unknown and ignored (line.md).
-            let segments = match (&self.line, &a.segments) {
+            let segments = match (&self.line, a.segments) {
                 (Some(line), Some(value)) => axle_segments(value, line, rails, i)?,
                 _ => Vec::new(),
             };
@@ -684,7 +756,7 @@ impl Decoder {
         }
 
         let train_seq = self.trains.len();
-        if let Some(seen) = self.trains.get(msg.train_id.as_str()) {
+        if let Some(seen) = self.trains.get(msg.train_id) {
             return Err(DecodeError::at(
                 "train_id",
                 format!(
@@ -767,16 +839,16 @@ impl Decoder {
             speed_mps,
         ));
         self.trains.insert(
-            msg.train_id.as_str().into(),
+            msg.train_id.into(),
             TrainSeen {
                 train_seq,
                 axle_count: axles.len(),
                 log_time_ns,
             },
         );
-        self.last_train_id = Some(msg.train_id.clone());
+        self.last_train_id = Some(msg.train_id.to_string());
         Ok(Passage {
-            train_id: msg.train_id,
+            train_id: msg.train_id.to_string(),
             train_seq,
             direction: msg.direction,
             speed_mps,

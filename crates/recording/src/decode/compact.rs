@@ -1,68 +1,61 @@
-//! A `/measurement/friction` message in its compact shape, read without
-//! serde.
+//! Messages in their compact shape, read without serde: the two topics
+//! that are nearly all of a recording, `/measurement/friction` (most of its
+//! messages: a year on the 1.5 km curve has 2.46 M of 2.59 M) and
+//! `/train/passage` (most of its bytes: the same year's 20 440 passages are
+//! 370 MB of JSON, its measurements 250 MB).
 //!
-//! Measurements are most of a recording's messages (a year on the 1.5 km
-//! curve: 2.46 M of 2.50 M), and serde spent most of the reader thread's
-//! time on them: a derived struct matches every key through a visitor, and
-//! `site_id` and `rail` were allocated only to be looked up and dropped.
-//! The shape every writer we know of produces (`tortwin synth`, the CSV
-//! import, the mcap and json libraries' compact output) is one object
-//! without whitespace whose values are strings without escapes, `null`,
-//! plain integers and numbers; [`compact_measurement`] reads exactly that
-//! shape and borrows the strings. Anything else (whitespace, an escape, an
-//! unknown or repeated key, a missing field, a value of another type, a
-//! number serde would refuse) is `None`, and the caller parses the message
-//! with serde, whose result or error is then the answer: this is a shortcut
-//! for well-formed messages, never a second grammar. Numbers are converted
-//! by serde_json itself (the same function as the full parse), so a value
-//! is the same double either way; the tests compare the two on the written
+//! serde spent most of the reader thread's time on them: a derived struct
+//! matches every key through a visitor, and the strings (a measurement's
+//! `site_id` and `rail`, a passage's four rail names per axle) were
+//! allocated only to be looked up and dropped. The shape every writer we
+//! know of produces (`tortwin synth`, the CSV import, the mcap and json
+//! libraries' compact output) is objects and arrays without whitespace
+//! whose values are strings without escapes, `null`, plain integers and
+//! numbers; [`compact_measurement`] and [`compact_passage`] read exactly
+//! that shape and borrow the strings. Anything else (whitespace, an escape,
+//! an unknown or repeated key, a missing field, an empty object or array, a
+//! value of another type, a number serde would refuse, a passage's
+//! `segments` of a line) is `None`, and the caller parses the message with
+//! serde, whose result or error is then the answer: this is a shortcut for
+//! well-formed messages, never a second grammar. Numbers are converted by
+//! serde_json itself (the same function as the full parse), so a value is
+//! the same double either way; the tests compare the two on the written
 //! shape and on thousands of variations of it.
 
-use super::MeasurementFields;
-use crate::event::Quantity;
+use super::{AxleFields, MeasurementFields, PassageFields};
+use crate::event::{BogiePosition, Direction, Quantity};
 use crate::wire::json::number;
+use crate::wire::CreepageMsg;
 
 /// The fields of a measurement message in the compact shape, or `None`
 /// (then [`super::parse`] decides).
 pub(crate) fn compact_measurement(data: &[u8]) -> Option<MeasurementFields<'_>> {
     let text = std::str::from_utf8(data).ok()?;
     let mut scan = Scan { text, at: 0 };
-    scan.byte(b'{')?;
     let mut site_id = None;
     let mut rail = None;
     let mut quantity = None;
     let mut train_id = None;
     let mut axle_index = None;
     let mut value = None;
-    loop {
-        let key = scan.string()?;
-        scan.byte(b':')?;
-        match key {
-            "site_id" => once(&mut site_id, scan.string()?)?,
-            "rail" => once(&mut rail, scan.string()?)?,
-            "quantity" => {
-                let q = match scan.string()? {
-                    "mu" => Quantity::Mu,
-                    "adhesion" => Quantity::Adhesion,
-                    "rail_mu" => Quantity::RailMu,
-                    _ => return None,
-                };
-                once(&mut quantity, q)?
-            }
-            "train_id" => once(&mut train_id, scan.or_null(Scan::string)?)?,
-            "axle_index" => once(&mut axle_index, scan.or_null(Scan::index)?)?,
-            "value" => once(&mut value, scan.number()?)?,
-            _ => return None,
+    scan.object(|scan, key| match key {
+        "site_id" => once(&mut site_id, scan.string()?),
+        "rail" => once(&mut rail, scan.string()?),
+        "quantity" => {
+            let q = match scan.string()? {
+                "mu" => Quantity::Mu,
+                "adhesion" => Quantity::Adhesion,
+                "rail_mu" => Quantity::RailMu,
+                _ => return None,
+            };
+            once(&mut quantity, q)
         }
-        match scan.next()? {
-            b',' => {}
-            b'}' => break,
-            _ => return None,
-        }
-    }
-    if scan.at != text.len() {
-        return None;
-    }
+        "train_id" => once(&mut train_id, scan.or_null(Scan::string)?),
+        "axle_index" => once(&mut axle_index, scan.or_null(Scan::index)?),
+        "value" => once(&mut value, scan.number()?),
+        _ => None,
+    })?;
+    scan.end()?;
     Some(MeasurementFields {
         site_id: site_id?,
         rail: rail?,
@@ -70,6 +63,117 @@ pub(crate) fn compact_measurement(data: &[u8]) -> Option<MeasurementFields<'_>> 
         train_id: train_id.flatten(),
         axle_index: axle_index.flatten(),
         value: value?,
+    })
+}
+
+/// The fields of a passage message in the compact shape, or `None` (then
+/// [`super::parse`] decides). `consist` is skipped as serde skips it (any
+/// string, as often as it comes).
+pub(crate) fn compact_passage(data: &[u8]) -> Option<PassageFields<'_>> {
+    let text = std::str::from_utf8(data).ok()?;
+    let mut scan = Scan { text, at: 0 };
+    // About 230 bytes an axle as written; the lists grow past a guess too low.
+    let axles_guess = data.len() / 256;
+    let mut fields = PassageFields {
+        train_id: "",
+        direction: Direction::Up,
+        speed_mps: 0.0,
+        axles: Vec::with_capacity(axles_guess),
+        wheel_loads_kn: Vec::with_capacity(2 * axles_guess),
+        creepages: Vec::with_capacity(2 * axles_guess),
+    };
+    let mut train_id = None;
+    let mut direction = None;
+    let mut speed_mps = None;
+    let mut axles = None;
+    scan.object(|scan, key| match key {
+        "train_id" => once(&mut train_id, scan.string()?),
+        "direction" => {
+            let d = match scan.string()? {
+                "up" => Direction::Up,
+                "down" => Direction::Down,
+                _ => return None,
+            };
+            once(&mut direction, d)
+        }
+        "speed_mps" => once(&mut speed_mps, scan.number()?),
+        "consist" => scan.string().map(drop),
+        "axles" => {
+            once(&mut axles, ())?;
+            scan.array(|scan| axle(scan, &mut fields))
+        }
+        _ => None,
+    })?;
+    scan.end()?;
+    axles?;
+    fields.train_id = train_id?;
+    fields.direction = direction?;
+    fields.speed_mps = speed_mps?;
+    Some(fields)
+}
+
+/// One axle object, added to `fields`.
+fn axle<'a>(scan: &mut Scan<'a>, fields: &mut PassageFields<'a>) -> Option<()> {
+    let mut offset_m = None;
+    let mut bogie_position = None;
+    let mut wheel_diameter_m = None;
+    let mut wheel_load_kn = None;
+    let mut creepage = None;
+    scan.object(|scan, key| match key {
+        "offset_m" => once(&mut offset_m, scan.number()?),
+        "bogie_position" => {
+            let b = match scan.string()? {
+                "leading" => BogiePosition::Leading,
+                "trailing" => BogiePosition::Trailing,
+                _ => return None,
+            };
+            once(&mut bogie_position, b)
+        }
+        "wheel_diameter_m" => once(&mut wheel_diameter_m, scan.number()?),
+        "wheel_load_kN" => {
+            let start = fields.wheel_loads_kn.len();
+            scan.object(|scan, rail| {
+                fields.wheel_loads_kn.push((rail, scan.number()?));
+                Some(())
+            })?;
+            once(&mut wheel_load_kn, start..fields.wheel_loads_kn.len())
+        }
+        "creepage" => {
+            let start = fields.creepages.len();
+            scan.object(|scan, rail| {
+                fields.creepages.push((rail, creepage_of(scan)?));
+                Some(())
+            })?;
+            once(&mut creepage, start..fields.creepages.len())
+        }
+        _ => None,
+    })?;
+    fields.axles.push(AxleFields {
+        offset_m: offset_m?,
+        bogie_position: bogie_position?,
+        wheel_diameter_m: wheel_diameter_m?,
+        wheel_load_kn: wheel_load_kn?,
+        creepage: creepage?,
+        segments: None,
+    });
+    Some(())
+}
+
+/// One rail's creepage object.
+fn creepage_of(scan: &mut Scan<'_>) -> Option<CreepageMsg> {
+    let mut cx = None;
+    let mut cy = None;
+    let mut spin_per_m = None;
+    scan.object(|scan, key| match key {
+        "cx" => once(&mut cx, scan.number()?),
+        "cy" => once(&mut cy, scan.number()?),
+        "spin_per_m" => once(&mut spin_per_m, scan.number()?),
+        _ => None,
+    })?;
+    Some(CreepageMsg {
+        cx: cx?,
+        cy: cy?,
+        spin_per_m: spin_per_m?,
     })
 }
 
@@ -90,6 +194,39 @@ struct Scan<'a> {
 }
 
 impl<'a> Scan<'a> {
+    /// A non-empty object: `field` reads each key's value.
+    fn object(&mut self, mut field: impl FnMut(&mut Self, &'a str) -> Option<()>) -> Option<()> {
+        self.byte(b'{')?;
+        loop {
+            let key = self.string()?;
+            self.byte(b':')?;
+            field(self, key)?;
+            match self.next()? {
+                b',' => {}
+                b'}' => return Some(()),
+                _ => return None,
+            }
+        }
+    }
+
+    /// A non-empty array: `item` reads each element.
+    fn array(&mut self, mut item: impl FnMut(&mut Self) -> Option<()>) -> Option<()> {
+        self.byte(b'[')?;
+        loop {
+            item(self)?;
+            match self.next()? {
+                b',' => {}
+                b']' => return Some(()),
+                _ => return None,
+            }
+        }
+    }
+
+    /// Nothing after the message's value.
+    fn end(&self) -> Option<()> {
+        (self.at == self.text.len()).then_some(())
+    }
+
     fn next(&mut self) -> Option<u8> {
         let b = *self.text.as_bytes().get(self.at)?;
         self.at += 1;
@@ -163,7 +300,7 @@ impl<'a> Scan<'a> {
 mod tests {
     use super::*;
     use crate::decode::parse;
-    use crate::wire::MeasurementMsg;
+    use crate::wire::{AxleMsg, MeasurementMsg, PassageMsg, PerRail};
 
     /// What serde makes of the same bytes, as fields.
     fn by_serde(data: &[u8]) -> Option<MeasurementMsg> {
@@ -352,5 +489,210 @@ mod tests {
             }
         }
         assert!(read > 10, "the shortcut read only {read} of the cases");
+    }
+
+    /// What serde makes of a passage's bytes, as fields, printed: `{:?}`
+    /// shows every number exactly (`-0.0` too).
+    fn passage_by_serde(data: &[u8]) -> Option<String> {
+        let msg = parse::<PassageMsg>(data).ok()?;
+        Some(format!("{:?}", PassageFields::from(&msg)))
+    }
+
+    fn same_passage(data: &[u8]) -> bool {
+        let text = String::from_utf8_lossy(data);
+        let Some(fields) = compact_passage(data) else {
+            return false;
+        };
+        let expected = passage_by_serde(data)
+            .unwrap_or_else(|| panic!("serde refuses what the compact reader took: {text}"));
+        assert_eq!(format!("{fields:?}"), expected, "{text}");
+        true
+    }
+
+    fn axle(offset_m: f64, rails: [&str; 2]) -> AxleMsg {
+        let creepage = |cx: f64| CreepageMsg {
+            cx,
+            cy: -0.0004,
+            spin_per_m: 0.18,
+        };
+        AxleMsg {
+            offset_m,
+            bogie_position: BogiePosition::Trailing,
+            wheel_diameter_m: 0.92,
+            wheel_load_kn: PerRail(vec![(rails[0].into(), 92.1), (rails[1].into(), 80.0)]),
+            creepage: PerRail(vec![
+                (rails[0].into(), creepage(0.005)),
+                (rails[1].into(), creepage(-0.0)),
+            ]),
+            segments: None,
+        }
+    }
+
+    /// The shape `tortwin synth` writes is read by the shortcut, and gives
+    /// what serde gives; so does each axle's own shape after another.
+    #[test]
+    fn the_written_passage_is_read_and_agrees_with_serde() {
+        let msg = PassageMsg {
+            train_id: "F-00012".into(),
+            direction: Direction::Down,
+            speed_mps: 21.9,
+            consist: Some("freight".into()),
+            axles: vec![
+                axle(2.45, ["high", "low"]),
+                axle(4.95, ["low", "high"]),
+                axle(1e-3, ["left ü", "right"]),
+            ],
+        };
+        let data = serde_json::to_vec(&msg).unwrap();
+        assert!(
+            same_passage(&data),
+            "not read: {}",
+            String::from_utf8_lossy(&data)
+        );
+        let fields = compact_passage(&data).unwrap();
+        assert_eq!(fields.axles.len(), 3);
+        assert_eq!(
+            fields.wheel_loads_kn[fields.axles[1].wheel_load_kn.clone()][0],
+            ("low", 92.1)
+        );
+        let without = PassageMsg {
+            consist: None,
+            ..msg
+        };
+        assert!(same_passage(&serde_json::to_vec(&without).unwrap()));
+    }
+
+    /// Variations of the shape: whatever the shortcut reads, serde reads
+    /// the same; whatever serde refuses, the shortcut leaves to it.
+    #[test]
+    fn passage_variations_agree_with_serde_or_are_left_to_it() {
+        let base = br#"{"train_id":"P-1","direction":"up","speed_mps":20.5,"consist":"passenger","axles":[{"offset_m":2.5,"bogie_position":"leading","wheel_diameter_m":0.9,"wheel_load_kN":{"high":92.1,"low":80.6},"creepage":{"high":{"cx":0.005,"cy":0.004,"spin_per_m":0.18},"low":{"cx":-0.005,"cy":0.004,"spin_per_m":-0.1}}}]}"#;
+        let text = std::str::from_utf8(base).unwrap();
+        let numbers = [
+            "1",
+            "-2",
+            "0",
+            "-0",
+            "1e3",
+            "1E-3",
+            "1.5e+2",
+            "2.5E308",
+            "1e309",
+            "-1e-320",
+            "9007199254740993",
+            "18446744073709551616",
+            "01",
+            "1.",
+            ".5",
+            "+1",
+            "1e",
+            "--1",
+            "0x10",
+            "true",
+            "null",
+            "\"1\"",
+            "NaN",
+            "[1]",
+            "{}",
+        ];
+        let strings = [
+            "\"\"",
+            "\"a\\\"b\"",
+            "\"a\\u0041\"",
+            "\"tab\there\"",
+            "null",
+            "1",
+            "\"ü\"",
+            "\"down\"",
+            "\"trailing\"",
+            "\"Up\"",
+        ];
+        let mut cases: Vec<String> = Vec::new();
+        for v in numbers {
+            for field in ["20.5", "2.5", "0.9", "92.1", "0.005", "-0.1"] {
+                cases.push(text.replacen(field, v, 1));
+            }
+        }
+        for v in strings {
+            for field in [
+                "\"P-1\"",
+                "\"up\"",
+                "\"leading\"",
+                "\"passenger\"",
+                "\"low\"",
+            ] {
+                cases.push(text.replacen(field, v, 1));
+            }
+        }
+        let axle = &text[text.find("[{").unwrap() + 1..text.rfind("}]").unwrap() + 1];
+        cases.extend([
+            // More axles, none, an axle that is not an object.
+            text.replace(axle, &format!("{axle},{axle},{axle}")),
+            text.replace(axle, ""),
+            text.replace(axle, "1"),
+            text.replace(axle, &format!("{axle},")),
+            text.replace(axle, &format!("[{axle}]")),
+            // Whitespace, order, repeats, unknown, missing and skipped keys.
+            text.replace(',', ", "),
+            text.replace(':', " : "),
+            format!(" {text}"),
+            format!("{text} "),
+            format!("{text}x"),
+            text.replace(",\"consist\":\"passenger\"", ""),
+            text.replace("\"consist\":\"passenger\"", "\"consist\":\"a\",\"consist\":\"b\""),
+            text.replace("\"consist\":\"passenger\"", "\"consist\":{\"cars\":3}"),
+            text.replace("\"consist\":\"passenger\"", "\"extra\":1"),
+            text.replace("\"direction\":\"up\"", "\"direction\":\"up\",\"direction\":\"down\""),
+            text.replace("\"speed_mps\":20.5,", ""),
+            text.replace("\"train_id\":\"P-1\",", ""),
+            text.replace("\"offset_m\":2.5,", ""),
+            text.replace("\"offset_m\":2.5,", "\"offset_m\":2.5,\"offset_m\":2.5,"),
+            text.replace("\"bogie_position\":\"leading\",", ""),
+            text.replace("\"wheel_diameter_m\":0.9,", "\"wheel_diameter_m\":0.9,\"segments\":{}"),
+            text.replace("\"wheel_diameter_m\":0.9,", "\"wheel_diameter_m\":0.9,\"segments\":null,"),
+            text.replace("\"wheel_diameter_m\":0.9,", "\"wheel_diameter_m\":0.9,\"segments\":{\"S1\":1},"),
+            text.replace(
+                "\"wheel_diameter_m\":0.9,",
+                "\"wheel_diameter_m\":0.9,\"segments\":{\"S1\":{\"wheel_load_kN\":{\"high\":1,\"low\":2}}},",
+            ),
+            text.replace("\"wheel_diameter_m\":0.9,", "\"wheel_diameter_m\":0.9,\"x\":0,"),
+            // Per-rail maps: empty, a rail twice, a rail missing, arrays.
+            text.replace("{\"high\":92.1,\"low\":80.6}", "{}"),
+            text.replace("{\"high\":92.1,\"low\":80.6}", "{\"high\":92.1,\"high\":80.6}"),
+            text.replace("{\"high\":92.1,\"low\":80.6}", "{\"high\":92.1}"),
+            text.replace("{\"high\":92.1,\"low\":80.6}", "[92.1,80.6]"),
+            text.replace("\"cx\":0.005,", ""),
+            text.replace("\"cx\":0.005,", "\"cx\":0.005,\"cx\":0.005,"),
+            text.replace("\"cx\":0.005,", "\"cz\":0.005,"),
+            text.replace("{\"cx\":0.005,\"cy\":0.004,\"spin_per_m\":0.18}", "[0.005,0.004,0.18]"),
+            text.replace("{\"cx\":0.005,\"cy\":0.004,\"spin_per_m\":0.18}", "{}"),
+            "{}".to_string(),
+            "[]".to_string(),
+            String::new(),
+        ]);
+        let mut read = 0;
+        for case in &cases {
+            read += usize::from(same_passage(case.as_bytes()));
+        }
+        // Every prefix of the shape, and every byte changed to one of a
+        // few that matter to the grammar.
+        for end in 0..base.len() {
+            assert!(!same_passage(&base[..end]));
+        }
+        for at in 0..base.len() {
+            for b in [
+                b'"', b'\\', b',', b':', b'}', b'{', b'[', b']', b' ', b'0', b'e', b'-', b'n',
+                0x01, 0xff,
+            ] {
+                let mut changed = base.to_vec();
+                changed[at] = b;
+                same_passage(&changed);
+            }
+        }
+        assert!(
+            read > 40,
+            "the shortcut read only {read} of the {} cases",
+            cases.len()
+        );
     }
 }

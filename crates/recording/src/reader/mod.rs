@@ -375,12 +375,20 @@ impl RecordingReader {
             Topic::Line => Err("a second /line message; a recording has at most one"
                 .to_string()
                 .into()),
-            Topic::Passage => decode::parse::<PassageMsg>(data).and_then(|msg| {
-                let wire = keep(&|| Wire::Passage(msg.clone()));
-                decoder
-                    .passage(msg, log_time_ns)
-                    .map(|p| (EventKind::Passage(p), wire))
-            }),
+            // Passages are most of a recording's bytes: those in the
+            // compact shape are read without serde too.
+            Topic::Passage => match (!keep_wire)
+                .then(|| decode::compact_passage(data))
+                .flatten()
+            {
+                Some(fields) => decoder
+                    .passage(fields, log_time_ns)
+                    .map(|p| (EventKind::Passage(p), None)),
+                None => decode::parse::<PassageMsg>(data).and_then(|msg| {
+                    let p = decoder.passage((&msg).into(), log_time_ns)?;
+                    Ok((EventKind::Passage(p), keep(&|| Wire::Passage(msg.clone()))))
+                }),
+            },
             Topic::Pulse => decode::parse::<PulseMsg>(data).and_then(|msg| {
                 let p = decoder.pulse(&msg)?;
                 Ok((EventKind::Pulse(p), keep_wire.then_some(Wire::Pulse(msg))))

@@ -92,7 +92,7 @@ pub fn import_dir(dir: &Path, out: &Path) -> Result<ImportSummary, ConvertError>
     let mut decoder = Decoder::new(typed, None, origin_ns, f64::NEG_INFINITY);
     for item in &items {
         let result = match &item.msg {
-            Msg::Passage(m) => decoder.passage(m.clone(), item.log_time_ns).map(drop),
+            Msg::Passage(m) => decoder.passage(m.into(), item.log_time_ns).map(drop),
             Msg::Pulse(m) => decoder.pulse(m).map(drop),
             Msg::Weather(m) => decoder.weather(m).map(drop),
             Msg::Measurement(m) => decoder.measurement(m.into()).map(drop),
