@@ -108,11 +108,15 @@ pub(super) struct ChunkInfo {
 }
 
 /// A chunk's messages in file order: each one's header and the range of
-/// `bytes` its data is.
+/// `bytes` its data is. `bytes` is the chunk's records as decompressed
+/// (the messages' data where they lie, not copied) when the chunk was read
+/// whole, else the messages' data copied one after another.
 #[derive(Debug, Clone, Default)]
 pub(super) struct ChunkMessages {
     pub bytes: Vec<u8>,
     pub messages: Vec<(mcap::records::MessageHeader, Range<usize>)>,
+    /// Bytes to reserve at the first copy.
+    reserve: usize,
 }
 
 impl ChunkMessages {
@@ -120,15 +124,60 @@ impl ChunkMessages {
     fn with_capacity(header: &mcap::records::ChunkHeader) -> Self {
         let size = header.uncompressed_size.min(MAX_CHUNK_BYTES);
         Self {
-            bytes: Vec::with_capacity(usize::try_from(size).unwrap_or(0)),
+            bytes: Vec::new(),
             messages: Vec::with_capacity(expected_messages(header)),
+            reserve: usize::try_from(size).unwrap_or(0),
         }
     }
 
-    fn push(&mut self, header: mcap::records::MessageHeader, data: &[u8]) {
-        let start = self.bytes.len();
-        self.bytes.extend_from_slice(data);
-        self.messages.push((header, start..self.bytes.len()));
+    /// A message whose `data` ends the record body `body`; `at` is where
+    /// that body lies in the chunk's decompressed records when they are
+    /// kept whole (then nothing is copied), `None` when they are not.
+    fn push(
+        &mut self,
+        header: mcap::records::MessageHeader,
+        body: &[u8],
+        data: &[u8],
+        at: Option<usize>,
+    ) {
+        let range = match at {
+            Some(at) => {
+                let start = at + (body.len() - data.len());
+                start..start + data.len()
+            }
+            None => {
+                if self.bytes.capacity() == 0 {
+                    self.bytes.reserve(self.reserve);
+                }
+                let start = self.bytes.len();
+                self.bytes.extend_from_slice(data);
+                start..self.bytes.len()
+            }
+        };
+        self.messages.push((header, range));
+    }
+
+    /// Takes the chunk's decompressed records, into which the messages'
+    /// ranges point, if it was read whole. When the messages kept are less
+    /// than half of them (a chunk mostly of topics tortwin does not read),
+    /// their data are copied out instead, so that a chunk held for its
+    /// messages holds no more than twice their bytes.
+    fn adopt(&mut self, records: Option<Vec<u8>>) {
+        let Some(records) = records else {
+            return;
+        };
+        let kept: usize = self.messages.iter().map(|(_, r)| r.len()).sum();
+        if 2 * kept >= records.len() {
+            self.bytes = records;
+            return;
+        }
+        let mut bytes = Vec::with_capacity(kept);
+        for (_, range) in &mut self.messages {
+            let start = bytes.len();
+            bytes.extend_from_slice(&records[range.clone()]);
+            *range = start..bytes.len();
+        }
+        self.bytes = bytes;
     }
 }
 
@@ -491,12 +540,12 @@ fn read_chunk(record: &[u8], keep: bool) -> Result<ChunkContents, String> {
     }
     let mut records = Vec::with_capacity(expected_messages(&header));
     let mut kept = keep.then(|| ChunkMessages::with_capacity(&header));
-    for_each_chunk_record(record, &header, |opcode, body| {
+    let whole = chunk_records_whole(record, &header, |opcode, body, at| {
         match record::parse(opcode, body)? {
             Record::Channel(channel) => records.push(ChunkEntry::Channel(Box::new(channel))),
             Record::Message { header, data } => {
                 if let Some(kept) = &mut kept {
-                    kept.push(header, &data);
+                    kept.push(header, body, &data, at);
                 }
                 records.push(ChunkEntry::Message {
                     header,
@@ -507,6 +556,9 @@ fn read_chunk(record: &[u8], keep: bool) -> Result<ChunkContents, String> {
         }
         Ok(())
     })?;
+    if let Some(kept) = &mut kept {
+        kept.adopt(whole);
+    }
     Ok(ChunkContents {
         message_start_time: header.message_start_time,
         message_end_time: header.message_end_time,
@@ -518,22 +570,23 @@ fn read_chunk(record: &[u8], keep: bool) -> Result<ChunkContents, String> {
 /// The messages of a chunk record (given whole), decompressed; the bytes
 /// of a message whose channel `keep` refuses (an unknown topic) are not
 /// kept (its header is: it counts in the file's order). Memory: the
-/// format's messages of the chunk, whatever the unknown ones weigh.
+/// chunk's records as decompressed, or the format's messages of the chunk
+/// when they are less than half of them ([`ChunkMessages::adopt`]).
 pub(super) fn chunk_messages(
     record: &[u8],
     keep: impl Fn(u16) -> bool,
 ) -> Result<ChunkMessages, String> {
     let header = chunk_header(record)?;
-    // Reserved, not touched: pages the unknown topics' bytes would fill are
-    // never written.
     let mut kept = ChunkMessages::with_capacity(&header);
-    for_each_chunk_record(record, &header, |opcode, body| {
+    let whole = chunk_records_whole(record, &header, |opcode, body, at| {
         if let Record::Message { header, data } = record::parse(opcode, body)? {
             let data: &[u8] = if keep(header.channel_id) { &data } else { &[] };
-            kept.push(header, data);
+            // An empty range at the end of the record body.
+            kept.push(header, body, data, at);
         }
         Ok(())
     })?;
+    kept.adopt(whole);
     Ok(kept)
 }
 
@@ -698,15 +751,27 @@ pub(super) fn for_each_chunk_record(
     header: &mcap::records::ChunkHeader,
     mut f: impl FnMut(u8, &[u8]) -> Result<(), String>,
 ) -> Result<(), String> {
+    chunk_records_whole(record, header, |opcode, body, _| f(opcode, body)).map(drop)
+}
+
+/// [`for_each_chunk_record`], keeping the decompressed records of a chunk
+/// read whole: `f` also gets where each record body lies in them, and they
+/// are returned (`None` for a chunk that went through the streaming reader).
+fn chunk_records_whole(
+    record: &[u8],
+    header: &mcap::records::ChunkHeader,
+    mut f: impl FnMut(u8, &[u8], Option<usize>) -> Result<(), String>,
+) -> Result<Option<Vec<u8>>, String> {
     if let Some(records) = whole_chunk(record, header) {
-        for (opcode, body) in framed(&records) {
+        for (opcode, at, body) in framed(&records) {
             if opcode == op::CHANNEL || opcode == op::MESSAGE {
-                f(opcode, body)?;
+                f(opcode, body, Some(at))?;
             }
         }
-        return Ok(());
+        return Ok(Some(records));
     }
-    streamed_chunk_records(record, header, f)
+    streamed_chunk_records(record, header, |opcode, body| f(opcode, body, None))?;
+    Ok(None)
 }
 
 /// [`for_each_chunk_record`] with the mcap crate's streaming reader.
@@ -776,14 +841,15 @@ fn whole_chunk(record: &[u8], header: &mcap::records::ChunkHeader) -> Option<Vec
         return None;
     }
     let framed_bytes: usize = framed(&bytes)
-        .map(|(_, body)| RECORD_HEADER_BYTES as usize + body.len())
+        .map(|(_, _, body)| RECORD_HEADER_BYTES as usize + body.len())
         .sum();
     (framed_bytes == size).then_some(bytes)
 }
 
-/// The records (opcode, body) of decompressed chunk bytes, in order, as
-/// long as they frame: each an opcode, a u64 length and that many bytes.
-fn framed(bytes: &[u8]) -> impl Iterator<Item = (u8, &[u8])> {
+/// The records (opcode, offset of the body in `bytes`, body) of
+/// decompressed chunk bytes, in order, as long as they frame: each an
+/// opcode, a u64 length and that many bytes.
+fn framed(bytes: &[u8]) -> impl Iterator<Item = (u8, usize, &[u8])> {
     let mut rest = bytes;
     std::iter::from_fn(move || {
         let (&opcode, after) = rest.split_first()?;
@@ -793,8 +859,9 @@ fn framed(bytes: &[u8]) -> impl Iterator<Item = (u8, &[u8])> {
             return None;
         }
         let (body, after) = after.split_at(len);
+        let at = bytes.len() - rest.len() + RECORD_HEADER_BYTES as usize;
         rest = after;
-        Some((opcode, body))
+        Some((opcode, at, body))
     })
 }
 
@@ -942,6 +1009,51 @@ mod tests {
         record.extend_from_slice(&(body.len() as u64).to_le_bytes());
         record.extend_from_slice(&body);
         record
+    }
+
+    /// A chunk's messages as (header, data).
+    fn messages_of(kept: &ChunkMessages) -> Vec<(mcap::records::MessageHeader, Vec<u8>)> {
+        kept.messages
+            .iter()
+            .map(|(h, range)| (*h, kept.bytes[range.clone()].to_vec()))
+            .collect()
+    }
+
+    /// The messages kept of a chunk read whole point into its decompressed
+    /// records (no copy), and are the streaming reader's messages; a chunk
+    /// whose kept messages are less than half of it keeps only their bytes.
+    #[test]
+    fn messages_kept_of_a_chunk_read_whole_are_the_streamed_ones() {
+        for compression in [Some(mcap::Compression::Zstd), None] {
+            for record in chunk_records(compression, 1500) {
+                let header = chunk_header(&record).expect("a chunk header");
+                assert!(whole_chunk(&record, &header).is_some());
+                for keep_all in [true, false] {
+                    let mut streamed = Vec::new();
+                    streamed_chunk_records(&record, &header, |opcode, body| {
+                        if let Record::Message { header, data } = record::parse(opcode, body)? {
+                            let data = if keep_all { data.to_vec() } else { Vec::new() };
+                            streamed.push((header, data));
+                        }
+                        Ok(())
+                    })
+                    .expect("read");
+                    let kept = chunk_messages(&record, |_| keep_all).expect("read");
+                    assert_eq!(messages_of(&kept), streamed);
+                    let size = header.uncompressed_size as usize;
+                    if keep_all {
+                        // The decompressed records themselves.
+                        assert_eq!(kept.bytes.len(), size);
+                        let scanned = read_chunk(&record, true).expect("read");
+                        let scanned = scanned.kept.expect("kept");
+                        assert_eq!(scanned.bytes.len(), size);
+                        assert_eq!(messages_of(&scanned), streamed);
+                    } else {
+                        assert!(kept.bytes.is_empty(), "{} bytes held", kept.bytes.len());
+                    }
+                }
+            }
+        }
     }
 
     #[test]
