@@ -28,6 +28,7 @@
 
 use std::collections::HashMap;
 use std::fs::File;
+use std::hash::{BuildHasherDefault, Hasher};
 use std::io::{BufReader, Read, Seek, SeekFrom};
 use std::ops::Range;
 use std::path::Path;
@@ -90,6 +91,39 @@ pub(super) struct ReplayKey {
 pub(super) struct ChannelInfo {
     pub topic: String,
     pub message_encoding: String,
+    /// The topic's place in the replay order, found once for the channel
+    /// rather than by name for each of its messages.
+    pub rank: TopicRank,
+}
+
+/// The channels of a file by id. Looked up for every message (its replay
+/// key, its encoding), so hashed by a multiplication rather than SipHash:
+/// the ids are the file's own, and a file that chose colliding ones would
+/// slow only its own reading of a handful of channels.
+pub(super) type Channels = HashMap<u16, ChannelInfo, BuildHasherDefault<ChannelIdHasher>>;
+
+/// [`Channels`]' hasher: Fibonacci hashing of the 16-bit id.
+#[derive(Debug, Default)]
+pub(super) struct ChannelIdHasher(u64);
+
+impl Hasher for ChannelIdHasher {
+    fn finish(&self) -> u64 {
+        self.0
+    }
+
+    fn write(&mut self, bytes: &[u8]) {
+        for &b in bytes {
+            self.write_u64(u64::from(b));
+        }
+    }
+
+    fn write_u16(&mut self, id: u16) {
+        self.write_u64(u64::from(id));
+    }
+
+    fn write_u64(&mut self, value: u64) {
+        self.0 = (self.0.rotate_left(5) ^ value).wrapping_mul(0x9e37_79b9_7f4a_7c15);
+    }
 }
 
 /// A Chunk record as the layout pass found it.
@@ -204,7 +238,7 @@ pub(super) struct LooseRun {
 
 #[derive(Debug, Default)]
 pub(super) struct Layout {
-    pub channels: HashMap<u16, ChannelInfo>,
+    pub channels: Channels,
     pub chunks: Vec<ChunkInfo>,
     /// Runs of messages outside chunks, in file order.
     pub loose: Vec<LooseRun>,
@@ -631,10 +665,11 @@ fn add_chunk(
 }
 
 pub(super) fn add_channel(
-    channels: &mut HashMap<u16, ChannelInfo>,
+    channels: &mut Channels,
     channel: mcap::records::Channel,
 ) -> Result<(), String> {
     let info = ChannelInfo {
+        rank: TopicRank::of(&channel.topic),
         topic: channel.topic,
         message_encoding: channel.message_encoding,
     };
@@ -675,7 +710,7 @@ fn message_key(
 /// The replay key of the message with this header and index, whose
 /// channel must have been defined.
 pub(super) fn key_of(
-    channels: &HashMap<u16, ChannelInfo>,
+    channels: &Channels,
     header: &mcap::records::MessageHeader,
     index_in_file: u64,
 ) -> Result<ReplayKey, String> {
@@ -688,7 +723,7 @@ pub(super) fn key_of(
     })?;
     Ok(ReplayKey {
         log_time_ns: header.log_time,
-        topic: TopicRank::of(&channel.topic),
+        topic: channel.rank,
         index_in_file,
     })
 }

@@ -22,7 +22,7 @@
 //! before it without waiting for the next event).
 
 use std::cmp::Reverse;
-use std::collections::{BinaryHeap, HashMap};
+use std::collections::BinaryHeap;
 use std::fs::File;
 use std::io::{Read, Seek, SeekFrom};
 use std::path::{Path, PathBuf};
@@ -34,7 +34,7 @@ use mcap::records::{op, Record};
 
 use super::layout::{
     add_channel, check_message_size, chunk_header, for_each_chunk_record, key_of, message_header,
-    record_frame, ChannelInfo, ReplayKey, TopicRank, MAX_SMALL_RECORD_BYTES, MESSAGE_HEADER_BYTES,
+    record_frame, Channels, ReplayKey, TopicRank, MAX_SMALL_RECORD_BYTES, MESSAGE_HEADER_BYTES,
     RECORD_HEADER_BYTES,
 };
 use super::record;
@@ -118,7 +118,7 @@ pub(super) struct LiveQueue {
     offset: u64,
     /// The DataEnd (or Footer) was read.
     finished: bool,
-    channels: HashMap<u16, ChannelInfo>,
+    channels: Channels,
     /// Messages read so far (chunks expanded): the next one's index.
     next_index: u64,
     held: BinaryHeap<Reverse<Held>>,
@@ -150,7 +150,7 @@ impl LiveQueue {
             follow,
             offset: 0,
             finished: false,
-            channels: HashMap::new(),
+            channels: Channels::default(),
             next_index: 0,
             held: BinaryHeap::new(),
             latest_ns: None,
@@ -430,7 +430,7 @@ impl LiveQueue {
         super::replay::location(&self.channels, message)
     }
 
-    pub(super) fn channels(&self) -> &HashMap<u16, ChannelInfo> {
+    pub(super) fn channels(&self) -> &Channels {
         &self.channels
     }
 

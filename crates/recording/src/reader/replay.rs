@@ -19,7 +19,7 @@
 //! runs (a file in reverse time order is the worst case: a run a message).
 
 use std::cmp::{Ordering, Reverse};
-use std::collections::{BinaryHeap, HashMap};
+use std::collections::BinaryHeap;
 use std::fs::File;
 use std::io::BufReader;
 use std::ops::Range;
@@ -29,7 +29,7 @@ use std::sync::Arc;
 use mcap::records::op;
 
 use super::layout::{
-    chunk_messages, message_header, read_at, read_exact_vec, record_frame, ChannelInfo, ChunkInfo,
+    chunk_messages, message_header, read_at, read_exact_vec, record_frame, Channels, ChunkInfo,
     LooseRun, ReplayKey, TopicRank, MAX_MESSAGE_BYTES, MESSAGE_HEADER_BYTES, RECORD_HEADER_BYTES,
 };
 use crate::error::{InputError, MessageLocation};
@@ -104,7 +104,7 @@ impl<T> Ord for Next<T> {
 pub(super) struct ReplayQueue {
     path: PathBuf,
     file: BufReader<File>,
-    channels: HashMap<u16, ChannelInfo>,
+    channels: Channels,
     /// Chunks not yet decompressed, the next one last.
     waiting_chunks: Vec<ChunkInfo>,
     /// Runs of messages outside chunks not yet started, the next one last.
@@ -174,7 +174,7 @@ impl ReplayQueue {
     pub(super) fn new(
         path: &Path,
         file: BufReader<File>,
-        channels: HashMap<u16, ChannelInfo>,
+        channels: Channels,
         chunks: Vec<ChunkInfo>,
         loose: Vec<LooseRun>,
         keep_unknown: bool,
@@ -308,7 +308,7 @@ impl ReplayQueue {
                     keep_unknown
                         || channels
                             .get(&channel)
-                            .is_some_and(|c| TopicRank::of(&c.topic) != TopicRank::Unknown)
+                            .is_some_and(|c| c.rank != TopicRank::Unknown)
                 };
                 chunk_messages(&record, keep).map_err(|e| {
                     self.corrupt(format!(
@@ -334,7 +334,7 @@ impl ReplayQueue {
                     log_time_ns: header.log_time,
                     topic: channels
                         .get(&header.channel_id)
-                        .map_or(TopicRank::Unknown, |c| TopicRank::of(&c.topic)),
+                        .map_or(TopicRank::Unknown, |c| c.rank),
                     index_in_file,
                 },
                 channel_id: header.channel_id,
@@ -392,7 +392,7 @@ impl ReplayQueue {
             let topic = self
                 .channels
                 .get(&header.channel_id)
-                .map_or(TopicRank::Unknown, |c| TopicRank::of(&c.topic));
+                .map_or(TopicRank::Unknown, |c| c.rank);
             let data_len = body_len
                 .checked_sub(MESSAGE_HEADER_BYTES)
                 .ok_or_else(changed)?;
@@ -445,7 +445,7 @@ impl ReplayQueue {
         }
     }
 
-    pub(super) fn channels(&self) -> &HashMap<u16, ChannelInfo> {
+    pub(super) fn channels(&self) -> &Channels {
         &self.channels
     }
 
@@ -456,10 +456,7 @@ impl ReplayQueue {
 
 /// Where a message is, for an error about it: its channel's topic (none if
 /// the channel is unknown), log_time and index in the file.
-pub(super) fn location(
-    channels: &HashMap<u16, ChannelInfo>,
-    message: &PendingMessage,
-) -> MessageLocation {
+pub(super) fn location(channels: &Channels, message: &PendingMessage) -> MessageLocation {
     MessageLocation {
         topic: channels
             .get(&message.channel_id)
