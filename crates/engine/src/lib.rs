@@ -183,6 +183,16 @@ pub struct EngineOptions {
     /// (the train's last two axles when it has no axle `K + 1`). Ignored
     /// on a section.
     pub line_axle: Option<usize>,
+    /// Roll a train's tracks (a line's rails) one after the other on the
+    /// engine's thread even where rayon has threads to spare: for a replay
+    /// whose outputs are written on threads of their own, which take the
+    /// second core anyway. There the tracks in parallel cost CPU (the
+    /// worker's wake-ups and spinning between trains: 3-day curve with
+    /// MCAP out, 138 ms of CPU against 127 one after the other) and gained
+    /// no time (80 ms either way; the year with MCAP and .rrd out 15.2 s
+    /// against 14.6), while without outputs they take 62 ms against 75.
+    /// The results are the same either way.
+    pub serial_tracks: bool,
 }
 
 /// The calculation grid: `d_i = i * C`, `C = pi * nominal wheel diameter`,

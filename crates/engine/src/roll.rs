@@ -1055,9 +1055,11 @@ impl Engine {
                     work.wheel_seen.resize(work.axles.len() * points, 0.0);
                 }
             }
+            let serial = self.opts.serial_tracks;
             let (ctx, states, works) = self.split();
             let record_ref: &TrainRecord = record;
             let parallel = states.len() > 1
+                && !serial
                 && rayon::current_num_threads() > 1
                 && works
                     .iter()

@@ -64,12 +64,14 @@ impl Engine {
             }
         }
         if !self.opts.snapshot_every_wheel {
+            let serial = self.opts.serial_tracks;
             let (mut ctx, states, works) = self.split();
             ctx.keep_seen = keep_seen;
             ctx.watch = watch;
             ctx.observers = observers;
             let record_ref: &TrainRecord = record;
             let parallel = rails > 1
+                && !serial
                 && rayon::current_num_threads() > 1
                 && axles * points >= PARALLEL_MIN_CONTACTS;
             if parallel {
