@@ -41,15 +41,14 @@ pub(crate) fn compact_measurement(data: &[u8]) -> Option<MeasurementFields<'_>> 
     scan.object(|scan, key| match key {
         "site_id" => once(&mut site_id, scan.string()?),
         "rail" => once(&mut rail, scan.string()?),
-        "quantity" => {
-            let q = match scan.string()? {
-                "mu" => Quantity::Mu,
-                "adhesion" => Quantity::Adhesion,
-                "rail_mu" => Quantity::RailMu,
-                _ => return None,
-            };
-            once(&mut quantity, q)
-        }
+        "quantity" => once(
+            &mut quantity,
+            scan.name(&[
+                ("mu", Quantity::Mu),
+                ("adhesion", Quantity::Adhesion),
+                ("rail_mu", Quantity::RailMu),
+            ])?,
+        ),
         "train_id" => once(&mut train_id, scan.or_null(Scan::string)?),
         "axle_index" => once(&mut axle_index, scan.or_null(Scan::index)?),
         "value" => once(&mut value, scan.number()?),
@@ -88,14 +87,10 @@ pub(crate) fn compact_passage(data: &[u8]) -> Option<PassageFields<'_>> {
     let mut axles = None;
     scan.object(|scan, key| match key {
         "train_id" => once(&mut train_id, scan.string()?),
-        "direction" => {
-            let d = match scan.string()? {
-                "up" => Direction::Up,
-                "down" => Direction::Down,
-                _ => return None,
-            };
-            once(&mut direction, d)
-        }
+        "direction" => once(
+            &mut direction,
+            scan.name(&[("up", Direction::Up), ("down", Direction::Down)])?,
+        ),
         "speed_mps" => once(&mut speed_mps, scan.number()?),
         "consist" => scan.string().map(drop),
         "axles" => {
@@ -121,14 +116,13 @@ fn axle<'a>(scan: &mut Scan<'a>, fields: &mut PassageFields<'a>) -> Option<()> {
     let mut creepage = None;
     scan.object(|scan, key| match key {
         "offset_m" => once(&mut offset_m, scan.number()?),
-        "bogie_position" => {
-            let b = match scan.string()? {
-                "leading" => BogiePosition::Leading,
-                "trailing" => BogiePosition::Trailing,
-                _ => return None,
-            };
-            once(&mut bogie_position, b)
-        }
+        "bogie_position" => once(
+            &mut bogie_position,
+            scan.name(&[
+                ("leading", BogiePosition::Leading),
+                ("trailing", BogiePosition::Trailing),
+            ])?,
+        ),
         "wheel_diameter_m" => once(&mut wheel_diameter_m, scan.number()?),
         "wheel_load_kN" => {
             let start = fields.wheel_loads_kn.len();
@@ -254,6 +248,15 @@ impl<'a> Scan<'a> {
         self.text.get(start..start + len)
     }
 
+    /// A string that is one of `names` (an enum's wire names), as its value.
+    fn name<T: Copy>(&mut self, names: &[(&str, T)]) -> Option<T> {
+        let name = self.string()?;
+        names
+            .iter()
+            .find(|(n, _)| *n == name)
+            .map(|&(_, value)| value)
+    }
+
     /// `null` (absent, as serde reads an optional field) or what `read` reads.
     fn or_null<T>(&mut self, read: impl FnOnce(&mut Self) -> Option<T>) -> Option<Option<T>> {
         if self.text.as_bytes()[self.at..].starts_with(b"null") {
@@ -301,6 +304,57 @@ mod tests {
     use super::*;
     use crate::decode::parse;
     use crate::wire::{AxleMsg, MeasurementMsg, PassageMsg, PerRail};
+
+    /// Numbers as JSON has them and as it does not, for a number field.
+    const NUMBERS: &[&str] = &[
+        "0.41",
+        "1",
+        "-2",
+        "0",
+        "-0",
+        "1e3",
+        "1E-3",
+        "1.5e+2",
+        "2.5E308",
+        "1e309",
+        "-1e-320",
+        "0.1000000000000000055511151231257827",
+        "9007199254740993",
+        "18446744073709551616",
+        "01",
+        "1.",
+        ".5",
+        "+1",
+        "1e",
+        "--1",
+        "1.2.3",
+        "0x10",
+        "true",
+        "null",
+        "\"1\"",
+        "NaN",
+        "1 ",
+        "[1]",
+        "{}",
+    ];
+
+    /// Every prefix of `base` (`true`), and `base` with each byte changed to
+    /// each of a few that matter to the grammar (`false`).
+    fn for_each_mutation(base: &[u8], mut check: impl FnMut(&[u8], bool)) {
+        for end in 0..base.len() {
+            check(&base[..end], true);
+        }
+        for at in 0..base.len() {
+            for b in [
+                b'"', b'\\', b',', b':', b'}', b'{', b'[', b']', b' ', b'0', b'e', b'-', b'n',
+                0x01, 0xff,
+            ] {
+                let mut changed = base.to_vec();
+                changed[at] = b;
+                check(&changed, false);
+            }
+        }
+    }
 
     /// What serde makes of the same bytes, as fields.
     fn by_serde(data: &[u8]) -> Option<MeasurementMsg> {
@@ -363,36 +417,6 @@ mod tests {
     #[test]
     fn variations_agree_with_serde_or_are_left_to_it() {
         let base = br#"{"site_id":"M1","rail":"high","quantity":"adhesion","train_id":"P-1","axle_index":3,"value":0.41}"#;
-        let values = [
-            "0.41",
-            "1",
-            "-2",
-            "0",
-            "-0",
-            "1e3",
-            "1E-3",
-            "1.5e+2",
-            "2.5E308",
-            "1e309",
-            "-1e-320",
-            "0.1000000000000000055511151231257827",
-            "9007199254740993",
-            "18446744073709551616",
-            "01",
-            "1.",
-            ".5",
-            "+1",
-            "1e",
-            "--1",
-            "1.2.3",
-            "0x10",
-            "true",
-            "null",
-            "\"1\"",
-            "NaN",
-            "1 ",
-            "[1]",
-        ];
         let indices = [
             "3",
             "0",
@@ -431,7 +455,7 @@ mod tests {
         ];
         let text = std::str::from_utf8(base).unwrap();
         let mut cases: Vec<String> = Vec::new();
-        for v in values {
+        for v in NUMBERS {
             cases.push(text.replace("0.41", v));
         }
         for i in indices {
@@ -473,21 +497,10 @@ mod tests {
             same(case.as_bytes());
             read += usize::from(compact_measurement(case.as_bytes()).is_some());
         }
-        // Every prefix of the written shape, and every single byte changed
-        // to one of a few that matter to the grammar.
-        for end in 0..base.len() {
-            same(&base[..end]);
-            assert!(compact_measurement(&base[..end]).is_none());
-        }
-        for at in 0..base.len() {
-            for b in [
-                b'"', b'\\', b',', b':', b'}', b'{', b' ', b'0', b'e', b'-', b'n', 0x01, 0xff,
-            ] {
-                let mut changed = base.to_vec();
-                changed[at] = b;
-                same(&changed);
-            }
-        }
+        for_each_mutation(base, |case, prefix| {
+            same(case);
+            assert!(!prefix || compact_measurement(case).is_none());
+        });
         assert!(read > 10, "the shortcut read only {read} of the cases");
     }
 
@@ -568,33 +581,6 @@ mod tests {
     fn passage_variations_agree_with_serde_or_are_left_to_it() {
         let base = br#"{"train_id":"P-1","direction":"up","speed_mps":20.5,"consist":"passenger","axles":[{"offset_m":2.5,"bogie_position":"leading","wheel_diameter_m":0.9,"wheel_load_kN":{"high":92.1,"low":80.6},"creepage":{"high":{"cx":0.005,"cy":0.004,"spin_per_m":0.18},"low":{"cx":-0.005,"cy":0.004,"spin_per_m":-0.1}}}]}"#;
         let text = std::str::from_utf8(base).unwrap();
-        let numbers = [
-            "1",
-            "-2",
-            "0",
-            "-0",
-            "1e3",
-            "1E-3",
-            "1.5e+2",
-            "2.5E308",
-            "1e309",
-            "-1e-320",
-            "9007199254740993",
-            "18446744073709551616",
-            "01",
-            "1.",
-            ".5",
-            "+1",
-            "1e",
-            "--1",
-            "0x10",
-            "true",
-            "null",
-            "\"1\"",
-            "NaN",
-            "[1]",
-            "{}",
-        ];
         let strings = [
             "\"\"",
             "\"a\\\"b\"",
@@ -608,7 +594,7 @@ mod tests {
             "\"Up\"",
         ];
         let mut cases: Vec<String> = Vec::new();
-        for v in numbers {
+        for v in NUMBERS {
             for field in ["20.5", "2.5", "0.9", "92.1", "0.005", "-0.1"] {
                 cases.push(text.replacen(field, v, 1));
             }
@@ -674,21 +660,9 @@ mod tests {
         for case in &cases {
             read += usize::from(same_passage(case.as_bytes()));
         }
-        // Every prefix of the shape, and every byte changed to one of a
-        // few that matter to the grammar.
-        for end in 0..base.len() {
-            assert!(!same_passage(&base[..end]));
-        }
-        for at in 0..base.len() {
-            for b in [
-                b'"', b'\\', b',', b':', b'}', b'{', b'[', b']', b' ', b'0', b'e', b'-', b'n',
-                0x01, 0xff,
-            ] {
-                let mut changed = base.to_vec();
-                changed[at] = b;
-                same_passage(&changed);
-            }
-        }
+        for_each_mutation(base, |case, prefix| {
+            assert!(!same_passage(case) || !prefix);
+        });
         assert!(
             read > 40,
             "the shortcut read only {read} of the {} cases",
