@@ -183,16 +183,21 @@ pub struct EngineOptions {
     /// (the train's last two axles when it has no axle `K + 1`). Ignored
     /// on a section.
     pub line_axle: Option<usize>,
-    /// Roll a train's tracks (a line's rails) one after the other on the
-    /// engine's thread even where rayon has threads to spare: for a replay
-    /// whose outputs are written on threads of their own, which take the
-    /// second core anyway. There the tracks in parallel cost CPU (the
-    /// worker's wake-ups and spinning between trains: 3-day curve with
-    /// MCAP out, 138 ms of CPU against 127 one after the other) and gained
-    /// no time (80 ms either way; the year with MCAP and .rrd out 15.2 s
-    /// against 14.6), while without outputs they take 62 ms against 75.
+    /// The replay writes output files on threads of its own, which take
+    /// the second core: a train's tracks (a line's rails) then roll in
+    /// parallel only when each has at least 2^17 (131 072) contacts, else
+    /// one after the other on the engine's thread. A
+    /// parallel roll costs the rayon worker's wake-up and its spinning
+    /// after each train, which the output threads would have used: 3 days
+    /// of the 600 m curve with MCAP out (15.6 k contacts a track and train)
+    /// took 80 ms and 138 ms of CPU with the rails in parallel, 77 ms and
+    /// 127 ms one after the other; the year on the 1.5 km curve with MCAP
+    /// and .rrd out (41 k) 15.2 against 14.6 s. A day of the 10 km example
+    /// line with MCAP out (276 k a rail) took 314 ms in parallel, 411 ms one
+    /// after the other. Without output files the tracks roll in parallel
+    /// from a few thousand contacts (the 3-day curve: 62 ms against 75).
     /// The results are the same either way.
-    pub serial_tracks: bool,
+    pub beside_output_threads: bool,
 }
 
 /// The calculation grid: `d_i = i * C`, `C = pi * nominal wheel diameter`,

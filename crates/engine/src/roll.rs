@@ -762,6 +762,19 @@ const LANES: usize = 4;
 /// many contacts on each (a thread's start is a few microseconds).
 const PARALLEL_MIN_CONTACTS: usize = 4096;
 
+/// [`PARALLEL_MIN_CONTACTS`] for a replay whose output threads take the
+/// second core ([`crate::EngineOptions::beside_output_threads`]).
+const PARALLEL_MIN_CONTACTS_BESIDE_OUTPUTS: usize = 1 << 17;
+
+/// The contacts a track must have in a train for the tracks to roll in
+/// parallel.
+fn parallel_min_contacts(opts: &crate::EngineOptions) -> usize {
+    match opts.beside_output_threads {
+        true => PARALLEL_MIN_CONTACTS_BESIDE_OUTPUTS,
+        false => PARALLEL_MIN_CONTACTS,
+    }
+}
+
 /// What one track's roll changes besides its [`TrackState`]: the track's
 /// point events, and what the roll reports back to the
 /// engine (settled in the serial order by [`Engine::settle`]). Each track
@@ -1055,15 +1068,14 @@ impl Engine {
                     work.wheel_seen.resize(work.axles.len() * points, 0.0);
                 }
             }
-            let serial = self.opts.serial_tracks;
+            let min_contacts = parallel_min_contacts(&self.opts);
             let (ctx, states, works) = self.split();
             let record_ref: &TrainRecord = record;
             let parallel = states.len() > 1
-                && !serial
                 && rayon::current_num_threads() > 1
                 && works
                     .iter()
-                    .filter(|w| w.axles.len() * points >= PARALLEL_MIN_CONTACTS)
+                    .filter(|w| w.axles.len() * points >= min_contacts)
                     .count()
                     > 1;
             if parallel {

@@ -351,8 +351,8 @@ proptest! {
             let wavefront = run(contacts, threads)?;
             prop_assert!(reference == wavefront, "the wavefront on {} thread(s) differs", threads);
         }
-        let serial_tracks = EngineOptions { serial_tracks: true, ..contacts };
-        prop_assert!(reference == run(serial_tracks, 2)?, "the tracks one after the other differ");
+        let beside = EngineOptions { beside_output_threads: true, ..contacts };
+        prop_assert!(reference == run(beside, 2)?, "the tracks beside output threads differ");
         // Without the per-wheel calls: the same state and balance.
         let plain_reference = run(EngineOptions { every_wheel_contacts: false, ..serial }, 1)?;
         for threads in [1, 2] {

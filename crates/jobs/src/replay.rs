@@ -213,7 +213,7 @@ fn run(
         every_wheel_contacts: args.per_train,
         line_axle: args.out_rrd.is_some().then_some(args.line_axle),
         // The output files' threads (below) take the second core.
-        serial_tracks: args.out_mcap.is_some() || args.out_rrd.is_some(),
+        beside_output_threads: args.out_mcap.is_some() || args.out_rrd.is_some(),
         ..EngineOptions::default()
     };
     let source = config_name(args.config.as_ref());

@@ -9,9 +9,9 @@
 //! point's segment: a line of one tangent is the section bit for bit.
 
 use super::{
-    clock_free, wheel_time_s, Clocks, Div4, Engine, EngineError, Exp4, Lane, Roll4, RollContext,
-    SiteValue, TrackState, TrackWork, TrainRecord, Vector, LANES, NO_APPLICATOR, NO_AXLE,
-    PARALLEL_MIN_CONTACTS,
+    clock_free, parallel_min_contacts, wheel_time_s, Clocks, Div4, Engine, EngineError, Exp4, Lane,
+    Roll4, RollContext, SiteValue, TrackState, TrackWork, TrainRecord, Vector, LANES,
+    NO_APPLICATOR, NO_AXLE,
 };
 #[cfg(target_arch = "x86_64")]
 use super::{div4_avx, exp4_inline, exp4_is_vectorised};
@@ -64,16 +64,14 @@ impl Engine {
             }
         }
         if !self.opts.snapshot_every_wheel {
-            let serial = self.opts.serial_tracks;
+            let min_contacts = parallel_min_contacts(&self.opts);
             let (mut ctx, states, works) = self.split();
             ctx.keep_seen = keep_seen;
             ctx.watch = watch;
             ctx.observers = observers;
             let record_ref: &TrainRecord = record;
-            let parallel = rails > 1
-                && !serial
-                && rayon::current_num_threads() > 1
-                && axles * points >= PARALLEL_MIN_CONTACTS;
+            let parallel =
+                rails > 1 && rayon::current_num_threads() > 1 && axles * points >= min_contacts;
             if parallel {
                 use rayon::prelude::*;
                 states
