@@ -102,6 +102,12 @@ pub(super) struct ChannelInfo {
 /// slow only its own reading of a handful of channels.
 pub(super) type Channels = HashMap<u16, ChannelInfo, BuildHasherDefault<ChannelIdHasher>>;
 
+/// The replay rank of a message on channel `id`: its channel's, or
+/// [`TopicRank::Unknown`] for a channel the file never defined.
+pub(super) fn rank_of(channels: &Channels, id: u16) -> TopicRank {
+    channels.get(&id).map_or(TopicRank::Unknown, |c| c.rank)
+}
+
 /// [`Channels`]' hasher: Fibonacci hashing of the 16-bit id.
 #[derive(Debug, Default)]
 pub(super) struct ChannelIdHasher(u64);

@@ -29,8 +29,9 @@ use std::sync::Arc;
 use mcap::records::op;
 
 use super::layout::{
-    chunk_messages, message_header, read_at, read_exact_vec, record_frame, Channels, ChunkInfo,
-    LooseRun, ReplayKey, TopicRank, MAX_MESSAGE_BYTES, MESSAGE_HEADER_BYTES, RECORD_HEADER_BYTES,
+    chunk_messages, message_header, rank_of, read_at, read_exact_vec, record_frame, Channels,
+    ChunkInfo, LooseRun, ReplayKey, TopicRank, MAX_MESSAGE_BYTES, MESSAGE_HEADER_BYTES,
+    RECORD_HEADER_BYTES,
 };
 use crate::error::{InputError, MessageLocation};
 
@@ -304,12 +305,8 @@ impl ReplayQueue {
                     ))
                 })?;
                 let (channels, keep_unknown) = (&self.channels, self.keep_unknown);
-                let keep = |channel: u16| {
-                    keep_unknown
-                        || channels
-                            .get(&channel)
-                            .is_some_and(|c| c.rank != TopicRank::Unknown)
-                };
+                let keep =
+                    |channel: u16| keep_unknown || rank_of(channels, channel) != TopicRank::Unknown;
                 chunk_messages(&record, keep).map_err(|e| {
                     self.corrupt(format!(
                         "unreadable chunk at byte {}: {e}",
@@ -332,9 +329,7 @@ impl ReplayQueue {
             .map(|(index_in_file, (header, range))| ChunkMessage {
                 key: ReplayKey {
                     log_time_ns: header.log_time,
-                    topic: channels
-                        .get(&header.channel_id)
-                        .map_or(TopicRank::Unknown, |c| c.rank),
+                    topic: rank_of(channels, header.channel_id),
                     index_in_file,
                 },
                 channel_id: header.channel_id,
@@ -389,10 +384,7 @@ impl ReplayQueue {
             let head =
                 read_exact_vec(&mut self.file, MESSAGE_HEADER_BYTES).map_err(|_| changed())?;
             let header = message_header(&head);
-            let topic = self
-                .channels
-                .get(&header.channel_id)
-                .map_or(TopicRank::Unknown, |c| c.rank);
+            let topic = rank_of(&self.channels, header.channel_id);
             let data_len = body_len
                 .checked_sub(MESSAGE_HEADER_BYTES)
                 .ok_or_else(changed)?;
