@@ -52,7 +52,9 @@ use std::time::{Duration, SystemTime};
 use tempfile::{NamedTempFile, TempDir, TempPath};
 use usage::UsageError;
 pub mod usage;
+mod writeback;
 pub use usage::{caused_by_environment, is_environment};
+pub use writeback::Writeback;
 
 /// Why an output file could not be written; every variant names the path.
 #[derive(Debug, thiserror::Error)]

@@ -54,7 +54,7 @@ use std::sync::Arc;
 use serde::Serialize;
 
 use self::numbers::Precision;
-use crate::files::{FileError, PartialFile};
+use crate::files::{FileError, PartialFile, Writeback};
 use crate::foxglove::{below_band_warning, Label, Log, LogLevel, TrackScene};
 use crate::geometry::Plan;
 use crate::provenance::Provenance;
@@ -384,7 +384,7 @@ impl McapFile {
             .compression_threads(0)
             .library(format!("tortwin {version} (mcap-rs)"));
         let mut writer = options
-            .create(BufWriter::new(file))
+            .create(BufWriter::new(Writeback::new(file)))
             .map_err(mcap_error("starting"))?;
 
         writer
@@ -477,7 +477,8 @@ impl McapFile {
             .into_inner()
             .into_inner()
             .map_err(|e| e.into_error())
-            .map_err(io_error("flushing"))?;
+            .map_err(io_error("flushing"))?
+            .into_inner();
         file.sync_all().map_err(io_error("syncing"))?;
         drop(file);
         Ok(self.temp.commit()?)

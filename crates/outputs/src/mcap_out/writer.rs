@@ -8,16 +8,17 @@
 //! The writer sees the same messages in the same order either way: the file
 //! is the same.
 
-use std::fs::File;
 use std::io::BufWriter;
 use std::path::{Path, PathBuf};
 use std::thread::JoinHandle;
 
 use tortwin_handover::{Filler, Gone};
 
+use crate::files::Writeback;
+
 use super::McapError;
 
-pub(super) type Writer = mcap::Writer<BufWriter<File>>;
+pub(super) type Writer = mcap::Writer<BufWriter<Writeback>>;
 
 /// Batches in flight between the threads.
 const QUEUE: usize = 16;
