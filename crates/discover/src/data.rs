@@ -468,7 +468,7 @@ impl Sink for Collect<'_> {
         if let Some(&k) = self.row_of_index.get(&m.index_in_file) {
             self.simulated[k] = m.simulated;
             if let Some(slot) = self.readouts.get_mut(k) {
-                *slot = m.readout;
+                *slot = m.readout.as_deref().copied();
             }
             if let Some(slot) = self.given_during.get_mut(k) {
                 *slot = self.pushed;

@@ -1358,7 +1358,7 @@ impl Engine {
             axle_index: m.axle().map(|a| a.axle_index),
             measured: m.value,
             simulated,
-            readout,
+            readout: readout.map(Box::new),
         })?;
         Ok(())
     }

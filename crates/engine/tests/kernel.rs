@@ -41,7 +41,7 @@ struct Collect(Vec<String>);
 
 impl Sink for Collect {
     fn measurement(&mut self, m: &MeasurementOutput) -> SinkResult {
-        let readout = m.readout.map(|r| (r.mass_kg, r.mass_tangent));
+        let readout = m.readout.as_deref().map(|r| (r.mass_kg, r.mass_tangent));
         self.0.push(format!(
             "{} {:?} {:?}",
             m.index_in_file, m.simulated, readout
