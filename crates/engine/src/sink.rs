@@ -78,8 +78,9 @@ pub struct PulseEvent<'a> {
 #[derive(Debug, Clone)]
 ///
 /// Its names are shared (`Arc`), not borrowed: measurements are most of a
-/// recording's events, and a sink thread's copy of each would otherwise
-/// allocate three strings that the thread frees again.
+/// recording's events, and a copy of each that outlives the call would
+/// otherwise allocate three strings. (A [`SinkThread`] does not copy them:
+/// its thread keeps names of its own, given once.)
 pub struct MeasurementOutput {
     pub log_time_ns: u64,
     pub index_in_file: u64,

@@ -6,7 +6,12 @@
 //!
 //! Calls cross in batches, through the workspace's one batched hand-over
 //! (`tortwin_handover`; a wake-up per measurement would cost the engine more
-//! than the encoding saves). An error of the sink stops its thread; the
+//! than the encoding saves). Pulses and measurements, most of the calls,
+//! cross without their names (applicator, site, rail, train): the thread
+//! keeps its own copy of each, given once and again only when it changes
+//! ([`Names`]). A pulse's two names were two strings allocated on the
+//! engine's thread and freed on this one, a measurement's three `Arc`s'
+//! counts written by both threads, their cache lines going back and forth. An error of the sink stops its thread; the
 //! engine gets that error at its next call (or at `finish`), as it would
 //! have at the failing call itself, only a little later: nothing is renamed
 //! into place before `finish` succeeds. Dropping a [`SinkThread`] waits for
@@ -19,10 +24,13 @@ use std::thread::JoinHandle;
 
 use tortwin_handover::{Filler, Taker};
 
+use tortwin_recording::Quantity;
+
 use crate::sink::{
     Alert, Event, FieldSnapshot, LineWheels, MeasurementOutput, PulseEvent, RunSummary,
     SectionInfo, Sink, SinkError, SinkResult, TrainEvent, WheelContacts,
 };
+use crate::Readout;
 
 /// Calls in one hand-over.
 const BATCH: usize = 512;
@@ -36,9 +44,194 @@ const BATCH_BYTES: usize = 8 << 20;
 /// 132 MB at the grid limit, whatever the recording's length.
 const QUEUE: usize = 8;
 
+/// What crosses to the thread: a call, or a pulse or measurement without
+/// its names.
+enum Call {
+    Event(Event<'static>),
+    Pulse(PulseCall),
+    Measurement(MeasurementCall),
+}
+
+/// A name as it crosses: `None` when the thread already holds it (the last
+/// one given for its index).
+type NewName = Option<Box<str>>;
+
+/// A [`PulseEvent`] without its names.
+struct PulseCall {
+    log_time_ns: u64,
+    applicator: usize,
+    applicator_id: NewName,
+    rail: usize,
+    rail_name: NewName,
+    mass_kg: f64,
+}
+
+/// A [`MeasurementOutput`] without its names.
+struct MeasurementCall {
+    log_time_ns: u64,
+    index_in_file: u64,
+    site: usize,
+    site_id: NewName,
+    rail: usize,
+    rail_name: NewName,
+    quantity: Quantity,
+    /// `None` for no train (`rail_mu`), `Some(None)` for the train of the
+    /// last measurement that had one.
+    train_id: Option<NewName>,
+    axle_index: Option<usize>,
+    measured: f64,
+    simulated: f64,
+    readout: Option<Box<Readout>>,
+}
+
+/// The names one side of the thread holds: the last given for each
+/// applicator, site and rail index, and the last train's id. The engine's
+/// side keeps them to compare (`Box<str>`), the thread's to hand out
+/// (`Arc<str>`, counted on that thread only).
+struct Names<T> {
+    applicators: Vec<Option<T>>,
+    sites: Vec<Option<T>>,
+    rails: Vec<Option<T>>,
+    train: Option<T>,
+}
+
+impl<T> Default for Names<T> {
+    fn default() -> Self {
+        Self {
+            applicators: Vec::new(),
+            sites: Vec::new(),
+            rails: Vec::new(),
+            train: None,
+        }
+    }
+}
+
+/// `name` as it crosses for index `k`: `None` when `sent[k]` is it already,
+/// else the text, which `sent[k]` keeps from now on.
+fn new_name(sent: &mut Vec<Option<Box<str>>>, k: usize, name: &str) -> NewName {
+    if sent.get(k).and_then(Option::as_deref) == Some(name) {
+        return None;
+    }
+    if sent.len() <= k {
+        sent.resize(k + 1, None);
+    }
+    sent[k] = Some(name.into());
+    Some(name.into())
+}
+
+/// The thread's copy of the name of index `k`, replaced first by `new`
+/// when one crossed.
+fn known_name<'a>(
+    known: &'a mut Vec<Option<Arc<str>>>,
+    k: usize,
+    new: NewName,
+    what: &str,
+) -> Result<&'a Arc<str>, SinkError> {
+    if let Some(name) = new {
+        if known.len() <= k {
+            known.resize(k + 1, None);
+        }
+        known[k] = Some(Arc::from(name));
+    }
+    known
+        .get(k)
+        .and_then(Option::as_ref)
+        .ok_or_else(|| format!("the output thread was never given the name of {what} {k}").into())
+}
+
+impl Names<Box<str>> {
+    fn pulse(&mut self, p: &PulseEvent<'_>) -> PulseCall {
+        PulseCall {
+            log_time_ns: p.log_time_ns,
+            applicator: p.applicator,
+            applicator_id: new_name(&mut self.applicators, p.applicator, &p.applicator_id),
+            rail: p.rail,
+            rail_name: new_name(&mut self.rails, p.rail, &p.rail_name),
+            mass_kg: p.mass_kg,
+        }
+    }
+
+    fn measurement(&mut self, m: &MeasurementOutput) -> MeasurementCall {
+        let train_id = m.train_id.as_deref().map(|id| {
+            if self.train.as_deref() == Some(id) {
+                return None;
+            }
+            self.train = Some(id.into());
+            Some(id.into())
+        });
+        MeasurementCall {
+            log_time_ns: m.log_time_ns,
+            index_in_file: m.index_in_file,
+            site: m.site,
+            site_id: new_name(&mut self.sites, m.site, &m.site_id),
+            rail: m.rail,
+            rail_name: new_name(&mut self.rails, m.rail, &m.rail_name),
+            quantity: m.quantity,
+            train_id,
+            axle_index: m.axle_index,
+            measured: m.measured,
+            simulated: m.simulated,
+            readout: m.readout.clone(),
+        }
+    }
+}
+
+impl Names<Arc<str>> {
+    fn send_pulse<S: Sink>(&mut self, p: PulseCall, sink: &mut S) -> SinkResult {
+        let applicator_id = known_name(
+            &mut self.applicators,
+            p.applicator,
+            p.applicator_id,
+            "applicator",
+        )?;
+        let rail_name = known_name(&mut self.rails, p.rail, p.rail_name, "rail")?;
+        sink.pulse(&PulseEvent {
+            log_time_ns: p.log_time_ns,
+            applicator: p.applicator,
+            applicator_id: (&**applicator_id).into(),
+            rail: p.rail,
+            rail_name: (&**rail_name).into(),
+            mass_kg: p.mass_kg,
+        })
+    }
+
+    fn send_measurement<S: Sink>(&mut self, m: MeasurementCall, sink: &mut S) -> SinkResult {
+        let train_id = match m.train_id {
+            None => None,
+            Some(new) => {
+                if let Some(id) = new {
+                    self.train = Some(Arc::from(id));
+                }
+                let id = self.train.as_ref().ok_or_else(|| {
+                    SinkError::from("the output thread was never given a train's id")
+                })?;
+                Some(Arc::clone(id))
+            }
+        };
+        let site_id = Arc::clone(known_name(&mut self.sites, m.site, m.site_id, "site")?);
+        let rail_name = Arc::clone(known_name(&mut self.rails, m.rail, m.rail_name, "rail")?);
+        sink.measurement(&MeasurementOutput {
+            log_time_ns: m.log_time_ns,
+            index_in_file: m.index_in_file,
+            site_id,
+            site: m.site,
+            rail_name,
+            rail: m.rail,
+            quantity: m.quantity,
+            train_id,
+            axle_index: m.axle_index,
+            measured: m.measured,
+            simulated: m.simulated,
+            readout: m.readout,
+        })
+    }
+}
+
 /// A [`Sink`] that runs another on a thread of its own.
 pub struct SinkThread {
-    to_thread: Filler<Vec<Event<'static>>>,
+    to_thread: Filler<Vec<Call>>,
+    /// The names the thread holds, as the engine's side compares them.
+    names: Names<Box<str>>,
     failed: Arc<AtomicBool>,
     thread: Option<JoinHandle<SinkResult>>,
     /// The bytes the arrays of the batch's calls hold.
@@ -49,7 +242,7 @@ impl SinkThread {
     /// Starts `sink` on a thread named `name`, which runs behind the engine
     /// ([`tortwin_handover::behind_the_engine`]: a batch replay's outputs).
     pub fn spawn<S: Sink + Send + 'static>(name: &str, sink: S) -> std::io::Result<Self> {
-        let (to_thread, calls) = tortwin_handover::channel::<Vec<Event<'static>>>(QUEUE);
+        let (to_thread, calls) = tortwin_handover::channel::<Vec<Call>>(QUEUE);
         let failed = Arc::new(AtomicBool::new(false));
         let flag = Arc::clone(&failed);
         let thread = std::thread::Builder::new()
@@ -64,6 +257,7 @@ impl SinkThread {
             })?;
         Ok(Self {
             to_thread,
+            names: Names::default(),
             failed,
             thread: Some(thread),
             batch_bytes: 0,
@@ -72,11 +266,15 @@ impl SinkThread {
 
     /// Hands `event`, owned, to the thread (in a batch).
     fn push(&mut self, event: Event<'_>) -> SinkResult {
+        let call = event.into_owned();
+        self.batch_bytes += call.array_bytes();
+        self.push_call(Call::Event(call))
+    }
+
+    fn push_call(&mut self, call: Call) -> SinkResult {
         if self.failed.load(Ordering::Acquire) {
             return Err(self.join());
         }
-        let call = event.into_owned();
-        self.batch_bytes += call.array_bytes();
         let batch = self.to_thread.batch();
         batch.push(call);
         if batch.len() >= BATCH || self.batch_bytes >= BATCH_BYTES {
@@ -126,11 +324,13 @@ impl Sink for SinkThread {
     }
 
     fn pulse(&mut self, p: &PulseEvent<'_>) -> SinkResult {
-        self.push(Event::Pulse(p.clone()))
+        let call = self.names.pulse(p);
+        self.push_call(Call::Pulse(call))
     }
 
     fn measurement(&mut self, m: &MeasurementOutput) -> SinkResult {
-        self.push(Event::Measurement(m.clone()))
+        let call = self.names.measurement(m);
+        self.push_call(Call::Measurement(call))
     }
 
     fn field(&mut self, f: &FieldSnapshot<'_>) -> SinkResult {
@@ -166,10 +366,15 @@ impl Sink for SinkThread {
 }
 
 /// The thread: every call of every batch, in order, until the first error.
-fn run<S: Sink>(mut sink: S, calls: &Taker<Vec<Event<'static>>>) -> SinkResult {
+fn run<S: Sink>(mut sink: S, calls: &Taker<Vec<Call>>) -> SinkResult {
+    let mut names = Names::<Arc<str>>::default();
     while let Some(mut batch) = calls.take() {
         for call in batch.drain(..) {
-            call.send_to(&mut sink)?;
+            match call {
+                Call::Event(event) => event.send_to(&mut sink)?,
+                Call::Pulse(p) => names.send_pulse(p, &mut sink)?,
+                Call::Measurement(m) => names.send_measurement(m, &mut sink)?,
+            }
         }
         calls.give_back(batch);
     }
@@ -221,14 +426,21 @@ mod tests {
         }
         fn pulse(&mut self, p: &PulseEvent<'_>) -> SinkResult {
             self.line(format!(
-                "pulse {} {} {}",
-                p.applicator_id, p.rail_name, p.mass_kg
+                "pulse {} {} {} {} {}",
+                p.applicator, p.applicator_id, p.rail, p.rail_name, p.mass_kg
             ))
         }
         fn measurement(&mut self, m: &MeasurementOutput) -> SinkResult {
             self.line(format!(
-                "measurement {} {} {} {:?} {:?} {}",
-                m.index_in_file, m.site_id, m.rail_name, m.train_id, m.axle_index, m.simulated
+                "measurement {} {} {} {} {} {:?} {:?} {}",
+                m.index_in_file,
+                m.site,
+                m.site_id,
+                m.rail,
+                m.rail_name,
+                m.train_id,
+                m.axle_index,
+                m.simulated
             ))
         }
         fn field(&mut self, f: &FieldSnapshot<'_>) -> SinkResult {
@@ -245,7 +457,10 @@ mod tests {
         }
     }
 
-    /// Every kind of call, `trains` trains' worth (over several batches).
+    /// Every kind of call, `trains` trains' worth (over several batches);
+    /// the pulses and measurements with names that change (another train's,
+    /// another index's, and from train 350 on another text for an index
+    /// already seen), and measurements without a train between those of one.
     fn drive(sink: &mut dyn Sink, trains: usize) -> SinkResult {
         let section = Section {
             section_id: "s".into(),
@@ -298,10 +513,11 @@ mod tests {
                 speed_mps: 20.0,
                 axles: 4,
             })?;
+            let renamed = if k >= 350 { "x" } else { "" };
             sink.pulse(&PulseEvent {
                 log_time_ns: k as u64,
-                applicator: 0,
-                applicator_id: "A1".into(),
+                applicator: k % 2,
+                applicator_id: format!("A{}{renamed}", k % 2 + 1).into(),
                 rail: k % 2,
                 rail_name: (&section.rails[k % 2]).into(),
                 mass_kg: x,
@@ -310,8 +526,8 @@ mod tests {
                 sink.measurement(&MeasurementOutput {
                     log_time_ns: k as u64,
                     index_in_file: (3 * k + j) as u64,
-                    site_id: "S1".into(),
-                    site: 0,
+                    site_id: format!("S{}{renamed}", j % 2 + 1).as_str().into(),
+                    site: j % 2,
                     rail_name: section.rails[j % 2].as_str().into(),
                     rail: j % 2,
                     quantity: Quantity::Mu,
