@@ -7,9 +7,11 @@
 //! that every log_time lies inside the header's range), and its records are
 //! dropped again. A Message record outside any chunk keeps only its replay
 //! key and file offset. Channel records are kept (a handful). Chunks are
-//! decompressed a few at a time on rayon's threads and added in file order.
-//! Memory: up to four compressed chunk records (32 MiB), one decompressed
-//! chunk per thread, plus a few words per chunk. The first chunks' messages,
+//! decompressed on rayon's threads as they are read, up to four ahead, and
+//! added in file order.
+//! Memory: up to five compressed chunk records (about 32 MiB at most) with
+//! their messages' headers, one decompressed chunk per thread, plus a few
+//! words per chunk. The first chunks' messages,
 //! up to [`KEPT_CHUNK_BYTES`], are kept for the replay, which would
 //! otherwise decompress them again straight away (all of a short recording).
 //!
@@ -26,12 +28,14 @@
 //! the crate's sans-io [`LinearReader`] decompresses, checks the CRC and
 //! frames the records.
 
-use std::collections::HashMap;
+use std::collections::{HashMap, VecDeque};
 use std::fs::File;
 use std::hash::{BuildHasherDefault, Hasher};
 use std::io::{BufReader, Read, Seek, SeekFrom};
 use std::ops::Range;
 use std::path::Path;
+use std::sync::mpsc::{Receiver, Sender};
+use std::time::{Duration, Instant};
 
 use mcap::records::{op, Record};
 use mcap::sans_io::{LinearReadEvent, LinearReader, LinearReaderOptions};
@@ -288,18 +292,43 @@ pub(super) fn scan_layout(path: &Path, file: &mut BufReader<File>) -> Result<Lay
     Ok(layout)
 }
 
-/// Chunk records read but not yet scanned: they are decompressed and
-/// checked on rayon's threads a few at a time, and what they hold is added
-/// to the layout in file order ([`PendingChunks::settle`]) before any record
-/// after them, so the layout, the message numbers and the first error are
-/// those of a scan one record at a time.
+/// Chunk records read but not yet scanned: each is decompressed and checked
+/// on rayon's threads as soon as it is read, while the next records are
+/// read, and what they hold is added to the layout in file order
+/// ([`PendingChunks::settle`]) before any record after them, so the layout,
+/// the message numbers and the first error are those of a scan one record
+/// at a time. (Read a few at a time and then decompressed together, the
+/// chunks waited for the reading and a batch for its slowest chunk: on a
+/// 3-day recording's eight 1 MiB chunks a third of the two cores idled.)
 struct PendingChunks {
-    /// (file offset, body length, the record whole).
-    records: Vec<(u64, u64, Vec<u8>)>,
+    /// The chunks read and not yet added, in file order.
+    pending: VecDeque<Pending>,
+    /// The scans, as they finish.
+    done: (Sender<Scan>, Receiver<Scan>),
+    /// Chunks read so far (the next one's number).
+    read: u64,
     message_count: u64,
     /// Uncompressed bytes still to keep for the replay; 0 from the first
     /// chunk that does not fit on.
     keep_left: u64,
+}
+
+/// How long the layout pass polls for a chunk's scan before it sleeps
+/// ([`PendingChunks::settle_oldest`]): about what a 1 MiB chunk takes.
+const POLL: Duration = Duration::from_millis(2);
+
+/// A chunk's scan: its number and contents.
+type Scan = (u64, Result<ChunkContents, String>);
+
+/// A chunk read and being scanned.
+struct Pending {
+    number: u64,
+    /// File offset and body length of the record.
+    offset: u64,
+    body_len: u64,
+    /// Bytes of the record, held by its scan.
+    bytes: usize,
+    contents: Option<Result<ChunkContents, String>>,
 }
 
 impl PendingChunks {
@@ -310,72 +339,119 @@ impl PendingChunks {
 
     fn new() -> Self {
         Self {
-            records: Vec::new(),
+            pending: VecDeque::new(),
+            done: std::sync::mpsc::channel(),
+            read: 0,
             message_count: 0,
             keep_left: KEPT_CHUNK_BYTES,
         }
     }
 
+    /// Starts the scan of a chunk record (file offset, body length, the
+    /// record whole); adds the oldest chunks to the layout while more than
+    /// [`Self::MAX`] (or [`Self::MAX_BYTES`]) are pending.
     fn push(
         &mut self,
         path: &Path,
         layout: &mut Layout,
-        record: (u64, u64, Vec<u8>),
+        (offset, body_len, record): (u64, u64, Vec<u8>),
     ) -> Result<(), InputError> {
-        self.records.push(record);
-        let bytes: usize = self.records.iter().map(|(_, _, r)| r.len()).sum();
-        if self.records.len() >= Self::MAX || bytes >= Self::MAX_BYTES {
-            self.settle(path, layout)?;
+        // Whether to keep the chunk, in file order (a chunk whose header
+        // does not parse fails in read_chunk).
+        let size = chunk_header(&record).map_or(u64::MAX, |h| h.uncompressed_size);
+        let keep = size <= self.keep_left;
+        self.keep_left = if keep { self.keep_left - size } else { 0 };
+        let number = self.read;
+        self.read += 1;
+        self.pending.push_back(Pending {
+            number,
+            offset,
+            body_len,
+            bytes: record.len(),
+            contents: None,
+        });
+        let done = self.done.0.clone();
+        rayon::spawn(move || {
+            // The layout pass may have failed and gone: nobody to tell.
+            let _ = done.send((number, read_chunk(&record, keep)));
+        });
+        while self.pending.len() > Self::MAX
+            || self.pending.iter().map(|p| p.bytes).sum::<usize>() > Self::MAX_BYTES
+        {
+            self.settle_oldest(path, layout)?;
         }
         Ok(())
     }
 
-    /// Scans the pending chunks (in parallel) and adds them to the layout
-    /// in file order; the first chunk that fails is the error.
+    /// Adds every pending chunk to the layout, in file order; the first
+    /// chunk that fails is the error.
     fn settle(&mut self, path: &Path, layout: &mut Layout) -> Result<(), InputError> {
-        use rayon::prelude::*;
-        let records = std::mem::take(&mut self.records);
-        // Which chunks to keep, in file order (a chunk whose header does not
-        // parse fails in read_chunk).
-        let keep: Vec<bool> = records
-            .iter()
-            .map(|(_, _, r)| {
-                let size = chunk_header(r).map_or(u64::MAX, |h| h.uncompressed_size);
-                let fits = size <= self.keep_left;
-                self.keep_left = if fits { self.keep_left - size } else { 0 };
-                fits
-            })
-            .collect();
-        let contents: Vec<Result<ChunkContents, String>> = if records.len() > 1 {
-            records
-                .par_iter()
-                .zip(&keep)
-                .map(|((_, _, r), &keep)| read_chunk(r, keep))
-                .collect()
-        } else {
-            records
-                .iter()
-                .zip(&keep)
-                .map(|((_, _, r), &keep)| read_chunk(r, keep))
-                .collect()
-        };
-        for ((offset, body_len, _), contents) in records.into_iter().zip(contents) {
-            let first_index = self.message_count;
-            let (message_start_time, kept) = contents
-                .and_then(|c| add_chunk(c, layout, &mut self.message_count))
-                .map_err(|e| {
-                    InputError::file(path, format!("unreadable chunk at byte {offset}: {e}"))
-                })?;
-            layout.chunks.push(ChunkInfo {
-                record_offset: offset,
-                body_len,
-                message_start_time,
-                first_index,
-                message_count: self.message_count - first_index,
-                kept,
-            });
+        while !self.pending.is_empty() {
+            self.settle_oldest(path, layout)?;
         }
         Ok(())
+    }
+
+    /// Waits for the oldest pending chunk's scan (running scans of the pool
+    /// meanwhile when this is one of its threads) and adds the chunk. A
+    /// scan that runs on another thread is polled for, up to [`POLL`],
+    /// before this thread sleeps until a scan ends: woken, it was queued
+    /// for the core of the thread that woke it (the scheduler expects a
+    /// thread that wakes another to sleep), which went on with the next
+    /// chunk, while the other core idled for as long as a chunk takes.
+    fn settle_oldest(&mut self, path: &Path, layout: &mut Layout) -> Result<(), InputError> {
+        let mut polling_since = None;
+        loop {
+            while let Ok(scan) = self.done.1.try_recv() {
+                self.file(scan);
+            }
+            if self.pending.front().is_some_and(|p| p.contents.is_some()) {
+                break;
+            }
+            if rayon::yield_now() == Some(rayon::Yield::Executed) {
+                continue;
+            }
+            if polling_since.get_or_insert_with(Instant::now).elapsed() < POLL {
+                std::thread::yield_now();
+                continue;
+            }
+            match self.done.1.recv() {
+                Ok(scan) => self.file(scan),
+                Err(_) => unreachable!("the layout pass holds a sender"),
+            }
+        }
+        let Some(Pending {
+            offset,
+            body_len,
+            contents: Some(contents),
+            ..
+        }) = self.pending.pop_front()
+        else {
+            return Ok(());
+        };
+        let first_index = self.message_count;
+        let added = contents.and_then(|c| add_chunk(c, layout, &mut self.message_count));
+        let (message_start_time, kept) = added.map_err(|e| {
+            // This chunk is the error, not one after it.
+            self.pending.clear();
+            InputError::file(path, format!("unreadable chunk at byte {offset}: {e}"))
+        })?;
+        layout.chunks.push(ChunkInfo {
+            record_offset: offset,
+            body_len,
+            message_start_time,
+            first_index,
+            message_count: self.message_count - first_index,
+            kept,
+        });
+        Ok(())
+    }
+
+    /// Files a finished scan with its chunk.
+    fn file(&mut self, (number, contents): Scan) {
+        if let Some(p) = self.pending.iter_mut().find(|p| p.number == number) {
+            p.contents = Some(contents);
+        }
     }
 }
 
