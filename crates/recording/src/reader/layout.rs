@@ -317,8 +317,9 @@ struct PendingChunks {
 /// ([`PendingChunks::settle_oldest`]): about what a 1 MiB chunk takes.
 const POLL: Duration = Duration::from_millis(2);
 
-/// A chunk's scan: its number and contents.
-type Scan = (u64, Result<ChunkContents, String>);
+/// A chunk's scan: its number and contents, or the panic that ended it
+/// (resumed on the layout pass's thread, as a parallel iterator would).
+type Scan = (u64, std::thread::Result<Result<ChunkContents, String>>);
 
 /// A chunk read and being scanned.
 struct Pending {
@@ -328,7 +329,7 @@ struct Pending {
     body_len: u64,
     /// Bytes of the record, held by its scan.
     bytes: usize,
-    contents: Option<Result<ChunkContents, String>>,
+    contents: Option<std::thread::Result<Result<ChunkContents, String>>>,
 }
 
 impl PendingChunks {
@@ -372,8 +373,9 @@ impl PendingChunks {
         });
         let done = self.done.0.clone();
         rayon::spawn(move || {
+            let scan = std::panic::catch_unwind(|| read_chunk(&record, keep));
             // The layout pass may have failed and gone: nobody to tell.
-            let _ = done.send((number, read_chunk(&record, keep)));
+            let _ = done.send((number, scan));
         });
         while self.pending.len() > Self::MAX
             || self.pending.iter().map(|p| p.bytes).sum::<usize>() > Self::MAX_BYTES
@@ -429,6 +431,7 @@ impl PendingChunks {
         else {
             return Ok(());
         };
+        let contents = contents.unwrap_or_else(|panic| std::panic::resume_unwind(panic));
         let first_index = self.message_count;
         let added = contents.and_then(|c| add_chunk(c, layout, &mut self.message_count));
         let (message_start_time, kept) = added.map_err(|e| {
