@@ -74,12 +74,24 @@ fn logger(input: &Path, output: &Path, hourly: bool) -> Child {
 fn rerun_server(save: &Path) -> (Child, String) {
     let python = std::env::var("TORTWIN_PYTHON").unwrap_or_else(|_| "python3".to_owned());
     let port = free_port();
-    let mut child = Command::new(python)
+    let mut server = Command::new(python);
+    server
         .args(["-m", "rerun", "--port", &port.to_string(), "--save"])
         .arg(save)
         .env("CI", "1")
         .stdout(std::process::Stdio::null())
-        .stderr(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null());
+    // The test ends the server with SIGINT, which a shell's background job
+    // inherits ignored (a CI started with `&` from a script): the server
+    // then never ended and the test hung. SIGINT back to its default.
+    // SAFETY: between fork and exec only `signal`, async-signal-safe.
+    unsafe {
+        std::os::unix::process::CommandExt::pre_exec(&mut server, || {
+            libc::signal(libc::SIGINT, libc::SIG_DFL);
+            Ok(())
+        });
+    }
+    let mut child = server
         .spawn()
         .expect("python3 -m rerun (pip install rerun-sdk)");
     let t0 = Instant::now();
