@@ -11,8 +11,9 @@
 //! keeps its own copy of each, given once and again only when it changes
 //! ([`Names`]). A pulse's two names were two strings allocated on the
 //! engine's thread and freed on this one, a measurement's three `Arc`s'
-//! counts written by both threads, their cache lines going back and forth. An error of the sink stops its thread; the
-//! engine gets that error at its next call (or at `finish`), as it would
+//! counts written by both threads, their cache lines going back and forth.
+//!
+//! An error of the sink stops its thread; the engine gets that error at its next call (or at `finish`), as it would
 //! have at the failing call itself, only a little later: nothing is renamed
 //! into place before `finish` succeeds. Dropping a [`SinkThread`] waits for
 //! the sink to be dropped, so a failed run's temporary files are gone when
@@ -75,8 +76,7 @@ struct MeasurementCall {
     rail: usize,
     rail_name: NewName,
     quantity: Quantity,
-    /// `None` for no train (`rail_mu`), `Some(None)` for the train of the
-    /// last measurement that had one.
+    /// `None` for no train (`rail_mu`).
     train_id: Option<NewName>,
     axle_index: Option<usize>,
     measured: f64,
@@ -85,14 +85,14 @@ struct MeasurementCall {
 }
 
 /// The names one side of the thread holds: the last given for each
-/// applicator, site and rail index, and the last train's id. The engine's
-/// side keeps them to compare (`Box<str>`), the thread's to hand out
-/// (`Arc<str>`, counted on that thread only).
+/// applicator, site and rail index, and the last train's id (at index 0 of
+/// `train`). The engine's side keeps them to compare (`Box<str>`), the
+/// thread's to hand out (`Arc<str>`, counted on that thread only).
 struct Names<T> {
     applicators: Vec<Option<T>>,
     sites: Vec<Option<T>>,
     rails: Vec<Option<T>>,
-    train: Option<T>,
+    train: Vec<Option<T>>,
 }
 
 impl<T> Default for Names<T> {
@@ -101,7 +101,7 @@ impl<T> Default for Names<T> {
             applicators: Vec::new(),
             sites: Vec::new(),
             rails: Vec::new(),
-            train: None,
+            train: Vec::new(),
         }
     }
 }
@@ -152,13 +152,10 @@ impl Names<Box<str>> {
     }
 
     fn measurement(&mut self, m: &MeasurementOutput) -> MeasurementCall {
-        let train_id = m.train_id.as_deref().map(|id| {
-            if self.train.as_deref() == Some(id) {
-                return None;
-            }
-            self.train = Some(id.into());
-            Some(id.into())
-        });
+        let train_id = m
+            .train_id
+            .as_deref()
+            .map(|id| new_name(&mut self.train, 0, id));
         MeasurementCall {
             log_time_ns: m.log_time_ns,
             index_in_file: m.index_in_file,
@@ -197,16 +194,8 @@ impl Names<Arc<str>> {
 
     fn send_measurement<S: Sink>(&mut self, m: MeasurementCall, sink: &mut S) -> SinkResult {
         let train_id = match m.train_id {
+            Some(new) => Some(Arc::clone(known_name(&mut self.train, 0, new, "train")?)),
             None => None,
-            Some(new) => {
-                if let Some(id) = new {
-                    self.train = Some(Arc::from(id));
-                }
-                let id = self.train.as_ref().ok_or_else(|| {
-                    SinkError::from("the output thread was never given a train's id")
-                })?;
-                Some(Arc::clone(id))
-            }
         };
         let site_id = Arc::clone(known_name(&mut self.sites, m.site, m.site_id, "site")?);
         let rail_name = Arc::clone(known_name(&mut self.rails, m.rail, m.rail_name, "rail")?);
