@@ -657,13 +657,43 @@ impl<F> Roll4 for F where
 {
 }
 
+/// A run of ordinary steps in registers ([`RollContext::run4_fma`]): given
+/// the lanes, the track, the first step and the step to stop before, the
+/// direction and each lane's constant factors, returns the first step it
+/// did not take.
+trait Run4:
+    Fn(&RollContext<'_>, &mut [Lane; LANES], Run<'_>) -> usize + Copy
+{
+}
+impl<F> Run4 for F where
+    F: Fn(&RollContext<'_>, &mut [Lane; LANES], Run<'_>) -> usize + Copy
+{
+}
+
+/// Where a run of steps starts and what it may take ([`Run4`]).
+struct Run<'s> {
+    state: &'s mut TrackState,
+    observed: &'s mut Observed,
+    special: &'s [bool],
+    first: usize,
+    end: usize,
+    up: bool,
+    factors: [(f64, f64); LANES],
+}
+
 /// What the wavefront computes four lanes at once.
 #[derive(Clone, Copy)]
-struct Vector<E, D, R> {
+struct Vector<E, D, R, U> {
     exp: E,
     div: D,
     roll: R,
+    /// Runs of ordinary steps; `None` where the kernel has no such path
+    /// (the portable kernel, the line's).
+    run: Option<U>,
 }
+
+/// The type of [`Vector::run`] where there is none.
+type NoRun = fn(&RollContext<'_>, &mut [Lane; LANES], Run<'_>) -> usize;
 
 /// Four quotients in one AVX register.
 ///
@@ -1282,6 +1312,7 @@ impl RollContext<'_> {
             exp: |x: [f64; LANES]| x.map(f64::exp),
             div: |a: [f64; LANES], b: [f64; LANES]| std::array::from_fn(|j| a[j] / b[j]),
             roll: product::roll4,
+            run: None::<NoRun>,
         };
         self.roll_group_with(group, state, work, v);
     }
@@ -1301,8 +1332,150 @@ impl RollContext<'_> {
             roll: |p: &ProductParams, m, c: &[ContactConditions; LANES]| unsafe {
                 product::roll4_fma(p, m, c)
             },
+            // SAFETY: as above.
+            run: Some(
+                |ctx: &RollContext<'_>, lanes: &mut [Lane; LANES], run: Run<'_>| unsafe {
+                    ctx.run4_fma(lanes, run)
+                },
+            ),
         };
         self.roll_group_with(group, state, work, v);
+    }
+
+    /// Ordinary steps of four lanes from `run.first` on, in registers: each
+    /// step is [`RollContext::contacts4`]'s with clock-free lanes (the
+    /// conditions from the lanes' constant factors, steps 3 to 5 by
+    /// [`product::roll4_register`], then [`Roller::rolled`]'s stores), the
+    /// same operations on the same values, so the same bits. What the
+    /// lanes carry from one step to the next stays in registers: the
+    /// wheels' masses and loss totals, and the rail mass each lane leaves
+    /// for the next lane, which reads that point at the next step (only
+    /// the last lane's is stored at once; the others' when the run ends).
+    /// Stops before `run.end` or before a step where a lane is at a
+    /// special point; returns the step it stopped at.
+    ///
+    /// Only for lanes without tangents, the wheel_edge_reservoir effect or
+    /// every wheel's contacts kept ([`RollContext::runs`]).
+    ///
+    /// # Safety
+    /// The CPU must have AVX2 and FMA.
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    unsafe fn run4_fma(&self, lanes: &mut [Lane; LANES], run: Run<'_>) -> usize {
+        use std::arch::x86_64::*;
+        let Run {
+            state,
+            observed,
+            special,
+            first,
+            end,
+            up,
+            factors,
+        } = run;
+        let points = self.d_m.len();
+        let at = |s: usize| -> [usize; LANES] {
+            std::array::from_fn(|j| if up { s - j } else { points - 1 - (s - j) })
+        };
+        let mut s = first;
+        if s >= end || at(s).iter().any(|&i| special[i]) {
+            return s;
+        }
+        macro_rules! lanes {
+            (|$j:ident| $e:expr) => {
+                _mm256_setr_pd(
+                    {
+                        let $j = 0;
+                        $e
+                    },
+                    {
+                        let $j = 1;
+                        $e
+                    },
+                    {
+                        let $j = 2;
+                        $e
+                    },
+                    {
+                        let $j = 3;
+                        $e
+                    },
+                )
+            };
+        }
+        macro_rules! store {
+            ($v:expr) => {{
+                let mut a = [0.0; LANES];
+                _mm256_storeu_pd(a.as_mut_ptr(), $v);
+                a
+            }};
+        }
+        const _: () = assert!(LANES == 4);
+        // The conditions' parts that do not change between special points:
+        // whether the wheel passed an applicator (and which), its factors.
+        let applicator = lanes.each_ref().map(|l| l.st.applicator_point);
+        let transfers = lanes!(|j| match applicator[j] {
+            Some(_) => f64::from_bits(u64::MAX),
+            None => 0.0,
+        });
+        let factor = lanes!(|j| factors[j].1);
+        let fp_fc = lanes!(|j| lanes[j].roller.fp_fc);
+        let observe = lanes.each_ref().map(|l| l.roller.observe);
+        let mut wheel = lanes!(|j| lanes[j].st.wheel_kg);
+        let mut consumed = lanes!(|j| lanes[j].st.consumed_kg);
+        let mut capped = lanes!(|j| lanes[j].st.capped_kg);
+        let rail_kg = &mut state.rail_mass_kg;
+        let mut is = at(s);
+        let mut rail = lanes!(|j| rail_kg[is[j]]);
+        loop {
+            // conditions_given, lane by lane.
+            let revolution = lanes!(|j| match applicator[j] {
+                Some(ia) => self.revolution[is[j].abs_diff(ia)] * factors[j].0,
+                None => 0.0,
+            });
+            let conditions = product::Conditions4 {
+                transfers,
+                revolution,
+                factor,
+                fp_fc,
+            };
+            let rolled = product::roll4_register(self.product, (wheel, rail), &conditions);
+            if observe.iter().any(|&o| o) {
+                let m = store!(_mm256_add_pd(wheel, rail));
+                let after = store!(rolled.wheel);
+                for j in (0..LANES).filter(|&j| observe[j]) {
+                    observed.mass_kg[is[j]] = m[j];
+                    observed.wheel_mass_kg[is[j]] = after[j];
+                }
+            }
+            wheel = rolled.wheel;
+            consumed = _mm256_add_pd(consumed, rolled.consumed);
+            capped = _mm256_add_pd(capped, rolled.capped);
+            // The last lane's point is not read again by this group.
+            rail_kg[is[LANES - 1]] = _mm256_cvtsd_f64(_mm256_permute4x64_pd::<0b11>(rolled.rail));
+            s += 1;
+            let next = at(s);
+            if s >= end || next.iter().any(|&i| special[i]) {
+                // The other lanes' points, for the next lane's next step.
+                let left = store!(rolled.rail);
+                for j in 0..LANES - 1 {
+                    rail_kg[is[j]] = left[j];
+                }
+                break;
+            }
+            // Lane j + 1 now reads what lane j left; lane 0 a new point.
+            rail = _mm256_blend_pd::<0b0001>(
+                _mm256_permute4x64_pd::<0b10_01_00_11>(rolled.rail),
+                _mm256_set1_pd(rail_kg[next[0]]),
+            );
+            is = next;
+        }
+        let (wheel, consumed, capped) = (store!(wheel), store!(consumed), store!(capped));
+        for (j, lane) in lanes.iter_mut().enumerate() {
+            lane.st.wheel_kg = wheel[j];
+            lane.st.consumed_kg = consumed[j];
+            lane.st.capped_kg = capped[j];
+        }
+        s
     }
 
     #[inline(always)]
@@ -1311,7 +1484,7 @@ impl RollContext<'_> {
         group: &Group<'_>,
         state: &mut TrackState,
         work: &mut TrackWork,
-        v: Vector<impl Exp4, impl Div4, impl Roll4>,
+        v: Vector<impl Exp4, impl Div4, impl Roll4, impl Run4>,
     ) {
         let Group {
             record,
@@ -1339,9 +1512,35 @@ impl RollContext<'_> {
             true => None,
             false => clock_free(&lanes),
         };
-        for s in 0..points + n - 1 {
+        // Runs of ordinary steps in registers where the kernel has them
+        // and the lanes allow.
+        let runs = match (v.run, clock_free) {
+            (Some(run), Some(factors)) if self.runs(&lanes) => Some((run, factors)),
+            _ => None,
+        };
+        let mut s = 0;
+        while s < points + n - 1 {
             let lo = s.saturating_sub(points - 1);
             let hi = n.min(s + 1);
+            if let (true, Some((run, factors))) = (lo == 0 && hi == LANES, runs) {
+                let next = run(
+                    self,
+                    &mut lanes,
+                    Run {
+                        state: &mut *state,
+                        observed: &mut work.observed,
+                        special,
+                        first: s,
+                        end: points - 1,
+                        up,
+                        factors,
+                    },
+                );
+                if next > s {
+                    s = next;
+                    continue;
+                }
+            }
             if lo == 0 && hi == LANES {
                 let is: [usize; LANES] =
                     std::array::from_fn(|j| if up { s - j } else { points - 1 - (s - j) });
@@ -1380,6 +1579,7 @@ impl RollContext<'_> {
                 if s + 1 >= points {
                     self.finish_lane(&lanes[s + 1 - points], state, work, points);
                 }
+                s += 1;
                 continue;
             }
             for (j, lane) in lanes.iter_mut().enumerate().take(hi).skip(lo) {
@@ -1398,6 +1598,7 @@ impl RollContext<'_> {
             if s + 1 >= points {
                 self.finish_lane(&lanes[s + 1 - points], state, work, points);
             }
+            s += 1;
         }
         // The same stores again where no step left them out (a group of
         // fewer than four wheels steps lane by lane): the same values.
@@ -1442,6 +1643,15 @@ impl RollContext<'_> {
             self.timeline,
             i,
         )
+    }
+
+    /// Whether [`RollContext::run4_fma`] may take these lanes' ordinary
+    /// steps: no tangents, no wheel_edge_reservoir and no row of every
+    /// wheel's contacts to keep (the steps it leaves out).
+    fn runs(&self, lanes: &[Lane; LANES]) -> bool {
+        self.tangent_width == 0
+            && !self.keep_seen
+            && lanes.iter().all(|l| l.roller.reservoir.is_none())
     }
 
     /// A wheel that has left the track: its totals for the ledger.
@@ -1531,7 +1741,7 @@ impl RollContext<'_> {
         tracks: [usize; LANES],
         is: [usize; LANES],
         clock_free: Option<[(f64, f64); LANES]>,
-        v: Vector<impl Exp4, impl Div4, impl Roll4>,
+        v: Vector<impl Exp4, impl Div4, impl Roll4, impl Run4>,
     ) -> [f64; LANES] {
         use std::array::from_fn;
         let (rail, conditions, effects) = match clock_free {
@@ -1601,7 +1811,7 @@ impl RollContext<'_> {
         works: &mut [TrackWork],
         tracks: [usize; LANES],
         is: [usize; LANES],
-        v: Vector<impl Exp4, impl Div4, impl Roll4>,
+        v: Vector<impl Exp4, impl Div4, impl Roll4, impl Run4>,
     ) -> [Touch<'_>; LANES] {
         let exp4 = v.exp;
         let mut touches = self.touches4(lanes, clocks, states, tracks, is, v.div);

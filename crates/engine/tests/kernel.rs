@@ -3,10 +3,10 @@
 //! default where the CPU has them) and the portable one
 //! (`EngineOptions::portable_kernel`: `f64::exp` and `/` lane by lane).
 //! Every measurement's simulated value, every read-out mass and its
-//! tangent, and the state before every train and at the end are compared
-//! bit for bit on the bundled recordings: the paper's model, every named
-//! effect, bands and rain, generic terms, a line, with and without
-//! tangents.
+//! tangent, the state before every train and at the end, and the run's
+//! mass balance are compared bit for bit on the bundled recordings: the
+//! paper's model, every named effect, bands and rain, generic terms, a
+//! line, with and without tangents.
 
 // A test asserts by panicking (clippy.toml allows it inside #[test] functions;
 // this file's helpers are test code too).
@@ -55,7 +55,8 @@ impl Sink for Collect {
 }
 
 /// The measurements and the states (as JSON) of one replay: before every
-/// train (after the trains before it have passed) and at the end.
+/// train (after the trains before it have passed) and at the end, then the
+/// run's mass balance.
 fn replay(
     rec: &Recording,
     cfg: &ModelConfig,
@@ -81,10 +82,13 @@ fn replay(
         }
         engine.push(event.clone(), &mut sink).unwrap();
     }
-    engine
+    let summary = engine
         .finish(&mut sink, rec.unknown_topic_messages)
         .unwrap();
     states.push(serde_json::to_string(&engine.state()).unwrap());
+    // The mass balance's totals (consumed, capped, lost, carried out), in
+    // `{:?}`'s round-trip form.
+    states.push(format!("{:?}", summary.mass_balance));
     (sink.0, states)
 }
 

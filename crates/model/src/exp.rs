@@ -73,7 +73,20 @@ const TOP_SPAN: u64 = 0x3f;
 #[inline(always)]
 pub unsafe fn exp4_inline(x: [f64; 4]) -> [f64; 4] {
     use std::arch::x86_64::*;
-    let xv = _mm256_loadu_pd(x.as_ptr());
+    let mut out = [0.0; 4];
+    _mm256_storeu_pd(out.as_mut_ptr(), exp4_register(_mm256_loadu_pd(x.as_ptr())));
+    out
+}
+
+#[cfg(target_arch = "x86_64")]
+/// [`exp4_inline`] on a register: the same operations, for a caller that
+/// keeps its four lanes in registers from one contact to the next.
+///
+/// # Safety
+/// The CPU must have AVX2 and FMA.
+#[inline(always)]
+pub unsafe fn exp4_register(xv: std::arch::x86_64::__m256d) -> std::arch::x86_64::__m256d {
+    use std::arch::x86_64::*;
     // kd = round(x 128 / ln2) by the shift trick; ki its integer bits.
     let kd = _mm256_fmadd_pd(xv, _mm256_set1_pd(INV_LN2_N), _mm256_set1_pd(SHIFT));
     let ki = _mm256_castpd_si256(kd);
@@ -122,17 +135,19 @@ pub unsafe fn exp4_inline(x: [f64; 4]) -> [f64; 4] {
         _mm256_add_pd(_mm256_set1_pd(1.0), xv),
         _mm256_castsi256_pd(tiny),
     );
-    let mut out = [0.0; 4];
-    _mm256_storeu_pd(out.as_mut_ptr(), result);
     let large = _mm256_movemask_pd(_mm256_castsi256_pd(large));
-    if large != 0 {
-        for (j, (o, &xi)) in out.iter_mut().zip(&x).enumerate() {
-            if large & (1 << j) != 0 {
-                *o = xi.exp();
-            }
+    if large == 0 {
+        return result;
+    }
+    let (mut out, mut x) = ([0.0; 4], [0.0; 4]);
+    _mm256_storeu_pd(out.as_mut_ptr(), result);
+    _mm256_storeu_pd(x.as_mut_ptr(), xv);
+    for (j, (o, &xi)) in out.iter_mut().zip(&x).enumerate() {
+        if large & (1 << j) != 0 {
+            *o = xi.exp();
         }
     }
-    out
+    _mm256_loadu_pd(out.as_ptr())
 }
 
 /// `__exp_data.tab` of optimized-routines: for k = 0..127, the tail (the

@@ -451,7 +451,7 @@ fn roll_given4(
 ///
 /// # Safety
 /// The CPU must have AVX.
-#[cfg(target_arch = "x86_64")]
+#[cfg(all(target_arch = "x86_64", test))]
 #[inline(always)]
 unsafe fn roll_given4_avx(
     params: &ProductParams,
@@ -459,21 +459,141 @@ unsafe fn roll_given4_avx(
     conditions: &[ContactConditions; 4],
     exps: ([f64; 4], [f64; 4]),
 ) -> ([f64; 4], [f64; 4], [ContactLosses; 4]) {
+    use std::arch::x86_64::_mm256_loadu_pd;
+    let conditions = Conditions4::of(conditions);
+    let rolled = roll_given4_register(
+        params,
+        (
+            _mm256_loadu_pd(masses.0.as_ptr()),
+            _mm256_loadu_pd(masses.1.as_ptr()),
+        ),
+        &conditions,
+        (
+            _mm256_loadu_pd(exps.0.as_ptr()),
+            _mm256_loadu_pd(exps.1.as_ptr()),
+        ),
+    );
+    rolled.arrays()
+}
+
+/// Four lanes' [`ContactConditions`] in AVX registers.
+#[cfg(target_arch = "x86_64")]
+#[derive(Clone, Copy)]
+pub struct Conditions4 {
+    /// All bits set in a lane whose `transfer_revolution` is `Some`, else 0.
+    pub transfers: std::arch::x86_64::__m256d,
+    /// `transfer_revolution`, 0 where `None`.
+    pub revolution: std::arch::x86_64::__m256d,
+    /// `consumption_factor`.
+    pub factor: std::arch::x86_64::__m256d,
+    /// `fp_fc`.
+    pub fp_fc: std::arch::x86_64::__m256d,
+}
+
+#[cfg(target_arch = "x86_64")]
+impl Conditions4 {
+    /// The four lanes' conditions gathered into registers.
+    ///
+    /// # Safety
+    /// The CPU must have AVX.
+    #[inline(always)]
+    pub unsafe fn of(conditions: &[ContactConditions; 4]) -> Self {
+        use std::arch::x86_64::*;
+        macro_rules! lanes {
+            (|$c:ident| $e:expr) => {{
+                let [c0, c1, c2, c3] = conditions;
+                _mm256_setr_pd(
+                    {
+                        let $c = c0;
+                        $e
+                    },
+                    {
+                        let $c = c1;
+                        $e
+                    },
+                    {
+                        let $c = c2;
+                        $e
+                    },
+                    {
+                        let $c = c3;
+                        $e
+                    },
+                )
+            }};
+        }
+        Self {
+            transfers: lanes!(|c| if c.transfer_revolution.is_some() {
+                f64::from_bits(u64::MAX)
+            } else {
+                0.0
+            }),
+            revolution: lanes!(|c| c.transfer_revolution.unwrap_or(0.0)),
+            factor: lanes!(|c| c.consumption_factor),
+            fp_fc: lanes!(|c| c.fp_fc),
+        }
+    }
+}
+
+/// What [`roll_given4_register`] leaves: the four lanes' new wheel and rail
+/// masses and their losses, in AVX registers.
+#[cfg(target_arch = "x86_64")]
+#[derive(Clone, Copy)]
+pub struct Rolled4 {
+    pub wheel: std::arch::x86_64::__m256d,
+    pub rail: std::arch::x86_64::__m256d,
+    pub consumed: std::arch::x86_64::__m256d,
+    pub capped: std::arch::x86_64::__m256d,
+}
+
+#[cfg(target_arch = "x86_64")]
+impl Rolled4 {
+    /// The registers as arrays, the losses per lane.
+    ///
+    /// # Safety
+    /// The CPU must have AVX.
+    #[inline(always)]
+    unsafe fn arrays(self) -> ([f64; 4], [f64; 4], [ContactLosses; 4]) {
+        use std::arch::x86_64::*;
+        // Macros, not closures: a closure is not compiled for AVX and may be
+        // left out of line (see the engine's `touches4`).
+        macro_rules! store {
+            ($v:expr) => {{
+                let mut a = [0.0; 4];
+                _mm256_storeu_pd(a.as_mut_ptr(), $v);
+                a
+            }};
+        }
+        let (consumed, capped) = (store!(self.consumed), store!(self.capped));
+        macro_rules! losses {
+            ($j:literal) => {
+                ContactLosses {
+                    consumed_kg: consumed[$j],
+                    capped_kg: capped[$j],
+                }
+            };
+        }
+        let losses = [losses!(0), losses!(1), losses!(2), losses!(3)];
+        (store!(self.wheel), store!(self.rail), losses)
+    }
+}
+
+/// [`roll_given4_avx`] on registers: the masses `(w0, r0)`, the conditions
+/// and the exponentials given in registers, the results left in them.
+///
+/// # Safety
+/// The CPU must have AVX.
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+unsafe fn roll_given4_register(
+    params: &ProductParams,
+    (w0, r0): (std::arch::x86_64::__m256d, std::arch::x86_64::__m256d),
+    conditions: &Conditions4,
+    exps: (std::arch::x86_64::__m256d, std::arch::x86_64::__m256d),
+) -> Rolled4 {
     use std::arch::x86_64::*;
     // Macros, not closures: a closure is not compiled for AVX and may be
     // left out of line (see the engine's `touches4`).
-    macro_rules! load {
-        ($a:expr) => {
-            _mm256_loadu_pd($a.as_ptr())
-        };
-    }
-    macro_rules! store {
-        ($v:expr) => {{
-            let mut a = [0.0; 4];
-            _mm256_storeu_pd(a.as_mut_ptr(), $v);
-            a
-        }};
-    }
     macro_rules! splat {
         ($x:expr) => {
             _mm256_set1_pd($x)
@@ -485,46 +605,18 @@ unsafe fn roll_given4_avx(
             _mm256_blendv_pd($b, $a, $mask)
         };
     }
-    macro_rules! lanes {
-        (|$c:ident| $e:expr) => {{
-            let [c0, c1, c2, c3] = conditions;
-            _mm256_setr_pd(
-                {
-                    let $c = c0;
-                    $e
-                },
-                {
-                    let $c = c1;
-                    $e
-                },
-                {
-                    let $c = c2;
-                    $e
-                },
-                {
-                    let $c = c3;
-                    $e
-                },
-            )
-        }};
-    }
-    let w0 = load!(&masses.0);
-    let r0 = load!(&masses.1);
     let m = _mm256_add_pd(w0, r0);
     let positive = _mm256_cmp_pd::<_CMP_GT_OQ>(m, _mm256_setzero_pd());
     let per_m = _mm256_div_pd(splat!(1.0), m);
     // Transfer (eq. 5, 6) where the wheel has passed an applicator.
-    let transfers = lanes!(|c| if c.transfer_revolution.is_some() {
-        f64::from_bits(u64::MAX)
-    } else {
-        0.0
-    });
-    let revolution = lanes!(|c| c.transfer_revolution.unwrap_or(0.0));
+    let Conditions4 {
+        transfers,
+        revolution,
+        factor,
+        fp_fc,
+    } = *conditions;
     let t = _mm256_mul_pd(
-        _mm256_mul_pd(
-            splat!(params.kt),
-            _mm256_sub_pd(splat!(1.0), load!(&exps.0)),
-        ),
+        _mm256_mul_pd(splat!(params.kt), _mm256_sub_pd(splat!(1.0), exps.0)),
         revolution,
     );
     // (t * 1.0).min(0.5): min_pd gives its second operand where t is NaN,
@@ -549,12 +641,10 @@ unsafe fn roll_given4_avx(
     let r1 = pick!(transferred, r_t, r0);
     // Consumption (eq. 1) of the total before the transfer.
     let saturation = if params.m0_kg > 0.0 {
-        _mm256_sub_pd(splat!(1.0), load!(&exps.1))
+        _mm256_sub_pd(splat!(1.0), exps.1)
     } else {
         splat!(1.0)
     };
-    let factor = lanes!(|c| c.consumption_factor);
-    let fp_fc = lanes!(|c| c.fp_fc);
     let c = _mm256_min_pd(
         _mm256_add_pd(
             _mm256_mul_pd(splat!(params.k0_kg), factor),
@@ -591,19 +681,12 @@ unsafe fn roll_given4_avx(
     let excess_w = _mm256_and_pd(over_w, _mm256_sub_pd(w2, m_max));
     let excess_r = _mm256_and_pd(over_r, _mm256_sub_pd(r2, m_max));
     let capped = _mm256_add_pd(excess_w, excess_r);
-    let wheel = store!(pick!(over_w, m_max, w2));
-    let rail = store!(pick!(over_r, m_max, r2));
-    let (consumed, capped) = (store!(consumed), store!(capped));
-    macro_rules! losses {
-        ($j:literal) => {
-            ContactLosses {
-                consumed_kg: consumed[$j],
-                capped_kg: capped[$j],
-            }
-        };
+    Rolled4 {
+        wheel: pick!(over_w, m_max, w2),
+        rail: pick!(over_r, m_max, r2),
+        consumed,
+        capped,
     }
-    let losses = [losses!(0), losses!(1), losses!(2), losses!(3)];
-    (wheel, rail, losses)
 }
 
 /// [`roll`] for four contacts at once: each lane's [`roll_exp_args`], their
@@ -642,6 +725,23 @@ pub unsafe fn roll4_fma(
     use std::arch::x86_64::*;
     let wheel = _mm256_loadu_pd(masses.0.as_ptr());
     let rail = _mm256_loadu_pd(masses.1.as_ptr());
+    roll4_register(params, (wheel, rail), &Conditions4::of(conditions)).arrays()
+}
+
+/// [`roll4_fma`] on registers: the masses and conditions given in AVX
+/// registers, the results left in them (for a caller that keeps its lanes
+/// there from one contact to the next).
+///
+/// # Safety
+/// The CPU must have AVX2 and FMA.
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+pub unsafe fn roll4_register(
+    params: &ProductParams,
+    (wheel, rail): (std::arch::x86_64::__m256d, std::arch::x86_64::__m256d),
+    conditions: &Conditions4,
+) -> Rolled4 {
+    use std::arch::x86_64::*;
     let sign = _mm256_set1_pd(-0.0);
     // -m1 (1 / cm), m1 the larger mass; -m (1 / (m0 km2)).
     let transfer = _mm256_mul_pd(
@@ -652,14 +752,11 @@ pub unsafe fn roll4_fma(
         _mm256_xor_pd(_mm256_add_pd(wheel, rail), sign),
         _mm256_set1_pd(1.0 / (params.m0_kg * params.km2)),
     );
-    let mut args = ([0.0; 4], [0.0; 4]);
-    _mm256_storeu_pd(args.0.as_mut_ptr(), transfer);
-    _mm256_storeu_pd(args.1.as_mut_ptr(), saturation);
     let exps = (
-        crate::exp::exp4_inline(args.0),
-        crate::exp::exp4_inline(args.1),
+        crate::exp::exp4_register(transfer),
+        crate::exp::exp4_register(saturation),
     );
-    roll_given4_avx(params, masses, conditions, exps)
+    roll_given4_register(params, (wheel, rail), conditions, exps)
 }
 
 /// Caps one surface at `m_max`; returns the mass squeezed out.

@@ -10,7 +10,7 @@
 
 use super::{
     clock_free, parallel_min_contacts, wheel_time_s, Clocks, Div4, Engine, EngineError, Exp4, Lane,
-    Roll4, RollContext, SiteValue, TrackState, TrackWork, TrainRecord, Vector, LANES,
+    NoRun, Roll4, RollContext, SiteValue, TrackState, TrackWork, TrainRecord, Vector, LANES,
     NO_APPLICATOR, NO_AXLE,
 };
 #[cfg(target_arch = "x86_64")]
@@ -327,6 +327,7 @@ impl RollContext<'_> {
                 exp: |x: [f64; LANES]| x.map(f64::exp),
                 div: |a: [f64; LANES], b: [f64; LANES]| std::array::from_fn(|j| a[j] / b[j]),
                 roll: tortwin_model::product::roll4,
+                run: None::<NoRun>,
             };
             touches_left_out |= self.roll_group_line_with(record, rail, group, states, works, v);
         }
@@ -403,6 +404,8 @@ impl RollContext<'_> {
                    c: &[tortwin_model::product::ContactConditions; LANES]| unsafe {
                 tortwin_model::product::roll4_fma(p, m, c)
             },
+            // The line's lanes change rail bands from point to point.
+            run: None::<NoRun>,
         };
         self.roll_group_line_with(record, rail, axles, states, works, v)
     }
@@ -425,7 +428,7 @@ impl RollContext<'_> {
         axles: std::ops::Range<usize>,
         states: &mut [TrackState],
         works: &mut [TrackWork],
-        v: Vector<impl Exp4, impl Div4, impl Roll4>,
+        v: Vector<impl Exp4, impl Div4, impl Roll4, impl super::Run4>,
     ) -> bool {
         let Some(layout) = self.line else {
             return false;
