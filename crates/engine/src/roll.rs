@@ -2,6 +2,42 @@
 //! order of model.md "One contact". This is the hot path: no allocation,
 //! everything that depends only on the wheel computed once before the loop.
 
+/// The vector kernel's operations in AVX2 and FMA registers ([`Vector`]):
+/// four lanes' exponentials and quotients at once, steps 3 to 5 of four
+/// contacts, and runs of ordinary steps ([`RollContext::runs_fma`]). A
+/// macro, to be expanded in a function compiled for AVX2 and FMA and run
+/// only where the CPU has them: closures written there are compiled for
+/// them and inlined into it (made in a function of their own, they were
+/// left out of line: a day of the line 5 % slower, measured 2026-12-04).
+/// (No multiply-add is fused that the source does not ask for: Rust never
+/// contracts.)
+#[cfg(target_arch = "x86_64")]
+macro_rules! vector_fma {
+    () => {
+        $crate::roll::Vector {
+            // SAFETY: expanded only in functions compiled for AVX2 and FMA
+            // and called only where the CPU has them.
+            exp: |x| unsafe { tortwin_model::exp::exp4_inline(x) },
+            // SAFETY: as above.
+            div: |a, b| unsafe { $crate::roll::div4_avx(a, b) },
+            // SAFETY: as above.
+            roll:
+                |p: &tortwin_model::product::ProductParams,
+                 m,
+                 c: &[tortwin_model::product::ContactConditions; $crate::roll::LANES]| unsafe {
+                    tortwin_model::product::roll4_fma(p, m, c)
+                },
+            // SAFETY: as above.
+            run: Some(
+                |ctx: &$crate::roll::RollContext<'_>,
+                 parts: &mut [$crate::roll::RunPart<'_>],
+                 first: usize,
+                 end: usize| unsafe { ctx.runs_fma(parts, first, end) },
+            ),
+        }
+    };
+}
+
 mod on_line;
 
 use std::sync::Arc;
@@ -16,8 +52,6 @@ use super::{
 };
 use crate::sink::{FieldSnapshot, Sink, TrackInfo, WheelContacts};
 use tortwin_model::effects::{self, Named, TimeEffects};
-#[cfg(target_arch = "x86_64")]
-use tortwin_model::exp::exp4_inline;
 use tortwin_model::exp::exp4_is_vectorised;
 use tortwin_model::generic::ActsOn;
 use tortwin_model::product::{self, ContactConditions, ContactLosses, ProductParams};
@@ -657,28 +691,40 @@ impl<F> Roll4 for F where
 {
 }
 
-/// A run of ordinary steps in registers ([`RollContext::run4_fma`]): given
-/// the lanes, the track, the first step and the step to stop before, the
-/// direction and each lane's constant factors, returns the first step it
-/// did not take.
-trait Run4:
-    Fn(&RollContext<'_>, &mut [Lane; LANES], Run<'_>) -> usize + Copy
-{
-}
-impl<F> Run4 for F where
-    F: Fn(&RollContext<'_>, &mut [Lane; LANES], Run<'_>) -> usize + Copy
-{
-}
+/// Runs of ordinary steps in registers ([`RollContext::runs_fma`]): given
+/// one or two groups' lanes (of different tracks), the first step and the
+/// step to stop before, returns the first step it did not take.
+trait Run4: Fn(&RollContext<'_>, &mut [RunPart<'_>], usize, usize) -> usize + Copy {}
+impl<F> Run4 for F where F: Fn(&RollContext<'_>, &mut [RunPart<'_>], usize, usize) -> usize + Copy {}
 
-/// Where a run of steps starts and what it may take ([`Run4`]).
-struct Run<'s> {
+/// One group's part in a run of ordinary steps ([`Run4`]).
+struct RunPart<'s> {
+    lanes: &'s mut [Lane; LANES],
     state: &'s mut TrackState,
     observed: &'s mut Observed,
     special: &'s [bool],
-    first: usize,
-    end: usize,
     up: bool,
+    /// Each lane's constant transfer and consumption factors
+    /// ([`Roller::clock_free`]).
     factors: [(f64, f64); LANES],
+}
+
+impl RunPart<'_> {
+    /// The four lanes' points at step `s` (all four in the track).
+    #[inline(always)]
+    fn at(&self, s: usize) -> [usize; LANES] {
+        let points = self.special.len();
+        std::array::from_fn(|j| match self.up {
+            true => s - j,
+            false => points - 1 - (s - j),
+        })
+    }
+
+    /// Whether a lane is at a special point at step `s`.
+    #[inline(always)]
+    fn special_at(&self, s: usize) -> bool {
+        self.at(s).iter().any(|&i| self.special[i])
+    }
 }
 
 /// What the wavefront computes four lanes at once.
@@ -693,7 +739,7 @@ struct Vector<E, D, R, U> {
 }
 
 /// The type of [`Vector::run`] where there is none.
-type NoRun = fn(&RollContext<'_>, &mut [Lane; LANES], Run<'_>) -> usize;
+type NoRun = fn(&RollContext<'_>, &mut [RunPart<'_>], usize, usize) -> usize;
 
 /// Four quotients in one AVX register.
 ///
@@ -1008,6 +1054,23 @@ struct Group<'a> {
     first_row: usize,
 }
 
+/// One group's wavefront in progress ([`RollContext::roll_group_with`]).
+struct Wave<'r> {
+    record: &'r TrainRecord,
+    track: usize,
+    /// Wheels in the group, 1 to [`LANES`].
+    n: usize,
+    up: bool,
+    /// The group holds the train's last wheel on the track.
+    last: bool,
+    lanes: [Lane; LANES],
+    clocks: Clocks,
+    clock_free: Option<[(f64, f64); LANES]>,
+    /// The lanes' constant factors where runs of ordinary steps may take
+    /// their steps ([`RollContext::runs`]).
+    runs: Option<[(f64, f64); LANES]>,
+}
+
 /// A wheel in the wavefront.
 #[derive(Clone)]
 struct Lane {
@@ -1021,6 +1084,173 @@ struct Lane {
     pulses: u64,
     st: WheelRoll,
     roller: Roller,
+}
+
+/// One group's lanes in a run of ordinary steps
+/// ([`RollContext::runs_fma`]), in AVX registers: what the lanes carry from
+/// one step to the next (the wheels' masses and loss totals, the rail mass
+/// each lane leaves for the next lane, which reads that point at the next
+/// step) and the conditions' parts that do not change between special
+/// points (whether and where the wheel passed an applicator, its factors).
+/// Of the rail masses left, only the last lane's is stored at each step
+/// (no lane of the group reads its point again); the others' when the run
+/// ends.
+#[cfg(target_arch = "x86_64")]
+struct RunLanes {
+    applicator: [Option<usize>; LANES],
+    transfer_factor: [f64; LANES],
+    observe: [bool; LANES],
+    transfers: std::arch::x86_64::__m256d,
+    factor: std::arch::x86_64::__m256d,
+    fp_fc: std::arch::x86_64::__m256d,
+    wheel: std::arch::x86_64::__m256d,
+    consumed: std::arch::x86_64::__m256d,
+    capped: std::arch::x86_64::__m256d,
+    /// The rail masses the lanes read at this step, at the points `is`.
+    rail: std::arch::x86_64::__m256d,
+    is: [usize; LANES],
+    /// The rail masses the lanes left at the last step.
+    left: std::arch::x86_64::__m256d,
+}
+
+/// Four lanes' values as an AVX register, lane 0 first.
+macro_rules! lanes_pd {
+    (|$j:ident| $e:expr) => {
+        std::arch::x86_64::_mm256_setr_pd(
+            {
+                let $j = 0;
+                $e
+            },
+            {
+                let $j = 1;
+                $e
+            },
+            {
+                let $j = 2;
+                $e
+            },
+            {
+                let $j = 3;
+                $e
+            },
+        )
+    };
+}
+
+/// An AVX register's four lanes as an array.
+macro_rules! store_pd {
+    ($v:expr) => {{
+        let mut a = [0.0; LANES];
+        std::arch::x86_64::_mm256_storeu_pd(a.as_mut_ptr(), $v);
+        a
+    }};
+}
+
+#[cfg(target_arch = "x86_64")]
+impl RunLanes {
+    /// The lanes of `part` about to take step `s`.
+    ///
+    /// # Safety
+    /// The CPU must have AVX.
+    #[inline(always)]
+    unsafe fn start(part: &RunPart<'_>, s: usize) -> Self {
+        use std::arch::x86_64::_mm256_setzero_pd;
+        const _: () = assert!(LANES == 4);
+        let lanes = &*part.lanes;
+        let is = part.at(s);
+        let rail_kg = &part.state.rail_mass_kg;
+        Self {
+            applicator: lanes.each_ref().map(|l| l.st.applicator_point),
+            transfer_factor: part.factors.map(|f| f.0),
+            observe: lanes.each_ref().map(|l| l.roller.observe),
+            transfers: lanes_pd!(|j| match lanes[j].st.applicator_point {
+                Some(_) => f64::from_bits(u64::MAX),
+                None => 0.0,
+            }),
+            factor: lanes_pd!(|j| part.factors[j].1),
+            fp_fc: lanes_pd!(|j| lanes[j].roller.fp_fc),
+            wheel: lanes_pd!(|j| lanes[j].st.wheel_kg),
+            consumed: lanes_pd!(|j| lanes[j].st.consumed_kg),
+            capped: lanes_pd!(|j| lanes[j].st.capped_kg),
+            rail: lanes_pd!(|j| rail_kg[is[j]]),
+            is,
+            left: _mm256_setzero_pd(),
+        }
+    }
+
+    /// One step: [`Roller::conditions_given`] lane by lane, steps 3 to 5
+    /// ([`product::roll4_register`]), then [`Roller::rolled`]'s totals and
+    /// stores.
+    ///
+    /// # Safety
+    /// The CPU must have AVX2 and FMA.
+    #[inline(always)]
+    unsafe fn step(&mut self, ctx: &RollContext<'_>, part: &mut RunPart<'_>) {
+        use std::arch::x86_64::*;
+        let is = self.is;
+        let revolution = lanes_pd!(|j| match self.applicator[j] {
+            Some(ia) => ctx.revolution[is[j].abs_diff(ia)] * self.transfer_factor[j],
+            None => 0.0,
+        });
+        let conditions = product::Conditions4 {
+            transfers: self.transfers,
+            revolution,
+            factor: self.factor,
+            fp_fc: self.fp_fc,
+        };
+        let rolled = product::roll4_register(ctx.product, (self.wheel, self.rail), &conditions);
+        if self.observe.iter().any(|&o| o) {
+            let m = store_pd!(_mm256_add_pd(self.wheel, self.rail));
+            let after = store_pd!(rolled.wheel);
+            for j in (0..LANES).filter(|&j| self.observe[j]) {
+                part.observed.mass_kg[is[j]] = m[j];
+                part.observed.wheel_mass_kg[is[j]] = after[j];
+            }
+        }
+        self.wheel = rolled.wheel;
+        self.consumed = _mm256_add_pd(self.consumed, rolled.consumed);
+        self.capped = _mm256_add_pd(self.capped, rolled.capped);
+        self.left = rolled.rail;
+        part.state.rail_mass_kg[is[LANES - 1]] =
+            _mm256_cvtsd_f64(_mm256_permute4x64_pd::<0b11>(rolled.rail));
+    }
+
+    /// To step `s`, the step after the last: lane j + 1 reads what lane j
+    /// left, lane 0 a new point.
+    ///
+    /// # Safety
+    /// The CPU must have AVX2.
+    #[inline(always)]
+    unsafe fn advance(&mut self, part: &RunPart<'_>, s: usize) {
+        use std::arch::x86_64::*;
+        let next = part.at(s);
+        self.rail = _mm256_blend_pd::<0b0001>(
+            _mm256_permute4x64_pd::<0b10_01_00_11>(self.left),
+            _mm256_set1_pd(part.state.rail_mass_kg[next[0]]),
+        );
+        self.is = next;
+    }
+
+    /// The end of the run after a step: the rail masses the other lanes
+    /// left, and the lanes' masses and totals back in their states.
+    ///
+    /// # Safety
+    /// The CPU must have AVX.
+    #[inline(always)]
+    unsafe fn finish(&self, part: &mut RunPart<'_>) {
+        let left = store_pd!(self.left);
+        for (&i, &m) in self.is.iter().zip(&left).take(LANES - 1) {
+            part.state.rail_mass_kg[i] = m;
+        }
+        let wheel = store_pd!(self.wheel);
+        let consumed = store_pd!(self.consumed);
+        let capped = store_pd!(self.capped);
+        for (j, lane) in part.lanes.iter_mut().enumerate() {
+            lane.st.wheel_kg = wheel[j];
+            lane.st.consumed_kg = consumed[j];
+            lane.st.capped_kg = capped[j];
+        }
+    }
 }
 
 impl Engine {
@@ -1118,8 +1348,21 @@ impl Engine {
                         ctx.roll_track(record_ref, track, state, work);
                     });
             } else {
-                for (track, (state, work)) in states.iter_mut().zip(works.iter_mut()).enumerate() {
-                    ctx.roll_track(record_ref, track, state, work);
+                // Two tracks at a time, their groups side by side.
+                let pairs = states.chunks_mut(2).zip(works.chunks_mut(2));
+                for (p, (states, works)) in pairs.enumerate() {
+                    match (states, works) {
+                        ([state_a, state_b], [work_a, work_b]) => ctx.roll_tracks(
+                            record_ref,
+                            [2 * p, 2 * p + 1],
+                            [(state_a, work_a), (state_b, work_b)],
+                        ),
+                        (states, works) => {
+                            for (k, (state, work)) in states.iter_mut().zip(works).enumerate() {
+                                ctx.roll_track(record_ref, 2 * p + k, state, work);
+                            }
+                        }
+                    }
                 }
             }
             self.settle(record);
@@ -1294,6 +1537,67 @@ impl RollContext<'_> {
         work.axles = axles;
     }
 
+    /// [`RollContext::roll_track`] of two tracks: their groups of
+    /// [`LANES`] wheels side by side ([`RollContext::roll_pair_with`]),
+    /// the others one by one.
+    fn roll_tracks(
+        &self,
+        record: &TrainRecord,
+        tracks: [usize; 2],
+        [(state_a, work_a), (state_b, work_b)]: [(&mut TrackState, &mut TrackWork); 2],
+    ) {
+        let axles = [
+            std::mem::take(&mut work_a.axles),
+            std::mem::take(&mut work_b.axles),
+        ];
+        let groups = axles.each_ref().map(|a| a.len().div_ceil(LANES));
+        for g in 0..groups[0].max(groups[1]) {
+            let group = |k: usize| {
+                let axles = axles[k].chunks(LANES).nth(g)?;
+                Some(Group {
+                    record,
+                    track: tracks[k],
+                    axles,
+                    first_row: g * LANES,
+                })
+            };
+            match (group(0), group(1)) {
+                (Some(a), Some(b)) if a.axles.len() == LANES && b.axles.len() == LANES => {
+                    self.roll_pair(&a, &b, [(state_a, work_a), (state_b, work_b)]);
+                }
+                (a, b) => {
+                    if let Some(a) = a {
+                        self.roll_group(&a, state_a, work_a);
+                    }
+                    if let Some(b) = b {
+                        self.roll_group(&b, state_b, work_b);
+                    }
+                }
+            }
+        }
+        let [a, b] = axles;
+        (work_a.axles, work_b.axles) = (a, b);
+    }
+
+    /// [`RollContext::roll_group`] of two full groups on different tracks,
+    /// side by side where the kernel takes runs of ordinary steps in
+    /// registers; one after the other where it does not.
+    fn roll_pair(
+        &self,
+        a: &Group<'_>,
+        b: &Group<'_>,
+        [(state_a, work_a), (state_b, work_b)]: [(&mut TrackState, &mut TrackWork); 2],
+    ) {
+        #[cfg(target_arch = "x86_64")]
+        if !self.portable && exp4_is_vectorised() {
+            // SAFETY: the CPU has AVX2 and FMA.
+            unsafe { self.roll_pair_fma([a, b], [(state_a, work_a), (state_b, work_b)]) };
+            return;
+        }
+        self.roll_group(a, state_a, work_a);
+        self.roll_group(b, state_b, work_b);
+    }
+
     /// The wheels of `group` (consecutive wheels of one track, at most
     /// [`LANES`]) as a wavefront: at step s, wheel j of the group is at step
     /// s - j of its path. Wheel j reaches every point one step after wheel
@@ -1323,36 +1627,30 @@ impl RollContext<'_> {
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,fma")]
     fn roll_group_fma(&self, group: &Group<'_>, state: &mut TrackState, work: &mut TrackWork) {
-        let v = Vector {
-            // SAFETY: this function runs only on a CPU with AVX2 and FMA.
-            exp: |x| unsafe { exp4_inline(x) },
-            // SAFETY: as above.
-            div: |a, b| unsafe { div4_avx(a, b) },
-            // SAFETY: as above.
-            roll: |p: &ProductParams, m, c: &[ContactConditions; LANES]| unsafe {
-                product::roll4_fma(p, m, c)
-            },
-            // SAFETY: as above.
-            run: Some(
-                |ctx: &RollContext<'_>, lanes: &mut [Lane; LANES], run: Run<'_>| unsafe {
-                    ctx.run4_fma(lanes, run)
-                },
-            ),
-        };
+        let v = vector_fma!();
         self.roll_group_with(group, state, work, v);
     }
 
-    /// Ordinary steps of four lanes from `run.first` on, in registers: each
-    /// step is [`RollContext::contacts4`]'s with clock-free lanes (the
-    /// conditions from the lanes' constant factors, steps 3 to 5 by
-    /// [`product::roll4_register`], then [`Roller::rolled`]'s stores), the
-    /// same operations on the same values, so the same bits. What the
-    /// lanes carry from one step to the next stays in registers: the
-    /// wheels' masses and loss totals, and the rail mass each lane leaves
-    /// for the next lane, which reads that point at the next step (only
-    /// the last lane's is stored at once; the others' when the run ends).
-    /// Stops before `run.end` or before a step where a lane is at a
-    /// special point; returns the step it stopped at.
+    /// [`RollContext::roll_pair_with`] compiled for AVX2 and FMA, as
+    /// [`RollContext::roll_group_fma`].
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    fn roll_pair_fma(
+        &self,
+        groups: [&Group<'_>; 2],
+        tracks: [(&mut TrackState, &mut TrackWork); 2],
+    ) {
+        let v = vector_fma!();
+        self.roll_pair_with(groups, tracks, v);
+    }
+
+    /// Ordinary steps of one or two groups' lanes (on different tracks)
+    /// from `first` on, in registers ([`RunLanes`]): each step is
+    /// [`RollContext::contacts4`]'s with clock-free lanes, the same
+    /// operations on the same values, so the same bits. Two groups' steps
+    /// are independent chains the core overlaps. Stops before `end` or
+    /// before a step where a lane of either group is at a special point;
+    /// returns the step it stopped at.
     ///
     /// Only for lanes without tangents, the wheel_edge_reservoir effect or
     /// every wheel's contacts kept ([`RollContext::runs`]).
@@ -1361,119 +1659,47 @@ impl RollContext<'_> {
     /// The CPU must have AVX2 and FMA.
     #[cfg(target_arch = "x86_64")]
     #[inline(always)]
-    unsafe fn run4_fma(&self, lanes: &mut [Lane; LANES], run: Run<'_>) -> usize {
-        use std::arch::x86_64::*;
-        let Run {
-            state,
-            observed,
-            special,
-            first,
-            end,
-            up,
-            factors,
-        } = run;
-        let points = self.d_m.len();
-        let at = |s: usize| -> [usize; LANES] {
-            std::array::from_fn(|j| if up { s - j } else { points - 1 - (s - j) })
-        };
+    unsafe fn runs_fma(&self, parts: &mut [RunPart<'_>], first: usize, end: usize) -> usize {
+        if let Ok(one) = <&mut [RunPart<'_>; 1]>::try_from(&mut *parts) {
+            return self.run_fma(one, first, end);
+        }
+        if let Ok(two) = <&mut [RunPart<'_>; 2]>::try_from(&mut *parts) {
+            return self.run_fma(two, first, end);
+        }
+        first
+    }
+
+    /// [`RollContext::runs_fma`] for `K` groups.
+    ///
+    /// # Safety
+    /// The CPU must have AVX2 and FMA.
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    unsafe fn run_fma<const K: usize>(
+        &self,
+        parts: &mut [RunPart<'_>; K],
+        first: usize,
+        end: usize,
+    ) -> usize {
         let mut s = first;
-        if s >= end || at(s).iter().any(|&i| special[i]) {
+        if s >= end || parts.iter().any(|p| p.special_at(s)) {
             return s;
         }
-        macro_rules! lanes {
-            (|$j:ident| $e:expr) => {
-                _mm256_setr_pd(
-                    {
-                        let $j = 0;
-                        $e
-                    },
-                    {
-                        let $j = 1;
-                        $e
-                    },
-                    {
-                        let $j = 2;
-                        $e
-                    },
-                    {
-                        let $j = 3;
-                        $e
-                    },
-                )
-            };
-        }
-        macro_rules! store {
-            ($v:expr) => {{
-                let mut a = [0.0; LANES];
-                _mm256_storeu_pd(a.as_mut_ptr(), $v);
-                a
-            }};
-        }
-        const _: () = assert!(LANES == 4);
-        // The conditions' parts that do not change between special points:
-        // whether the wheel passed an applicator (and which), its factors.
-        let applicator = lanes.each_ref().map(|l| l.st.applicator_point);
-        let transfers = lanes!(|j| match applicator[j] {
-            Some(_) => f64::from_bits(u64::MAX),
-            None => 0.0,
-        });
-        let factor = lanes!(|j| factors[j].1);
-        let fp_fc = lanes!(|j| lanes[j].roller.fp_fc);
-        let observe = lanes.each_ref().map(|l| l.roller.observe);
-        let mut wheel = lanes!(|j| lanes[j].st.wheel_kg);
-        let mut consumed = lanes!(|j| lanes[j].st.consumed_kg);
-        let mut capped = lanes!(|j| lanes[j].st.capped_kg);
-        let rail_kg = &mut state.rail_mass_kg;
-        let mut is = at(s);
-        let mut rail = lanes!(|j| rail_kg[is[j]]);
+        let mut runs: [RunLanes; K] = std::array::from_fn(|k| RunLanes::start(&parts[k], s));
         loop {
-            // conditions_given, lane by lane.
-            let revolution = lanes!(|j| match applicator[j] {
-                Some(ia) => self.revolution[is[j].abs_diff(ia)] * factors[j].0,
-                None => 0.0,
-            });
-            let conditions = product::Conditions4 {
-                transfers,
-                revolution,
-                factor,
-                fp_fc,
-            };
-            let rolled = product::roll4_register(self.product, (wheel, rail), &conditions);
-            if observe.iter().any(|&o| o) {
-                let m = store!(_mm256_add_pd(wheel, rail));
-                let after = store!(rolled.wheel);
-                for j in (0..LANES).filter(|&j| observe[j]) {
-                    observed.mass_kg[is[j]] = m[j];
-                    observed.wheel_mass_kg[is[j]] = after[j];
-                }
+            for (run, part) in runs.iter_mut().zip(parts.iter_mut()) {
+                run.step(self, part);
             }
-            wheel = rolled.wheel;
-            consumed = _mm256_add_pd(consumed, rolled.consumed);
-            capped = _mm256_add_pd(capped, rolled.capped);
-            // The last lane's point is not read again by this group.
-            rail_kg[is[LANES - 1]] = _mm256_cvtsd_f64(_mm256_permute4x64_pd::<0b11>(rolled.rail));
             s += 1;
-            let next = at(s);
-            if s >= end || next.iter().any(|&i| special[i]) {
-                // The other lanes' points, for the next lane's next step.
-                let left = store!(rolled.rail);
-                for j in 0..LANES - 1 {
-                    rail_kg[is[j]] = left[j];
-                }
+            if s >= end || parts.iter().any(|p| p.special_at(s)) {
                 break;
             }
-            // Lane j + 1 now reads what lane j left; lane 0 a new point.
-            rail = _mm256_blend_pd::<0b0001>(
-                _mm256_permute4x64_pd::<0b10_01_00_11>(rolled.rail),
-                _mm256_set1_pd(rail_kg[next[0]]),
-            );
-            is = next;
+            for (run, part) in runs.iter_mut().zip(parts.iter()) {
+                run.advance(part, s);
+            }
         }
-        let (wheel, consumed, capped) = (store!(wheel), store!(consumed), store!(capped));
-        for (j, lane) in lanes.iter_mut().enumerate() {
-            lane.st.wheel_kg = wheel[j];
-            lane.st.consumed_kg = consumed[j];
-            lane.st.capped_kg = capped[j];
+        for (run, part) in runs.iter().zip(parts.iter_mut()) {
+            run.finish(part);
         }
         s
     }
@@ -1486,6 +1712,70 @@ impl RollContext<'_> {
         work: &mut TrackWork,
         v: Vector<impl Exp4, impl Div4, impl Roll4, impl Run4>,
     ) {
+        let mut wave = self.wave(group, v.run.is_some());
+        let end = self.d_m.len() - 1;
+        let mut s = 0;
+        while s < self.wave_steps(&wave) {
+            if let (Some(run), true) = (v.run, self.runs_at(&wave, s)) {
+                let part = self.run_part(&mut wave, state, work);
+                let next = run(self, &mut [part], s, end);
+                if next > s {
+                    s = next;
+                    continue;
+                }
+            }
+            self.wave_step(&mut wave, state, work, s, v);
+            s += 1;
+        }
+        self.wave_end(&wave, state);
+    }
+
+    /// Two groups of as many wheels as there are lanes, on different
+    /// tracks, rolled step by step side by side: [`RollContext::roll_group`]
+    /// of each, with their runs of ordinary steps taken together (two
+    /// independent chains for the core to overlap). The tracks share
+    /// nothing while a train rolls (they may roll on different threads), so
+    /// the order of one's steps against the other's changes nothing.
+    #[inline(always)]
+    fn roll_pair_with(
+        &self,
+        groups: [&Group<'_>; 2],
+        [(state_a, work_a), (state_b, work_b)]: [(&mut TrackState, &mut TrackWork); 2],
+        v: Vector<impl Exp4, impl Div4, impl Roll4, impl Run4>,
+    ) {
+        let mut a = self.wave(groups[0], v.run.is_some());
+        let mut b = self.wave(groups[1], v.run.is_some());
+        let end = self.d_m.len() - 1;
+        let steps = self.wave_steps(&a).max(self.wave_steps(&b));
+        let mut s = 0;
+        while s < steps {
+            if let (Some(run), true) = (v.run, self.runs_at(&a, s) && self.runs_at(&b, s)) {
+                let parts = [
+                    self.run_part(&mut a, state_a, work_a),
+                    self.run_part(&mut b, state_b, work_b),
+                ];
+                let next = run(self, &mut { parts }, s, end);
+                if next > s {
+                    s = next;
+                    continue;
+                }
+            }
+            if s < self.wave_steps(&a) {
+                self.wave_step(&mut a, state_a, work_a, s, v);
+            }
+            if s < self.wave_steps(&b) {
+                self.wave_step(&mut b, state_b, work_b, s, v);
+            }
+            s += 1;
+        }
+        self.wave_end(&a, state_a);
+        self.wave_end(&b, state_b);
+    }
+
+    /// The wavefront of `group` before its first step. `runs`: the kernel
+    /// has runs of ordinary steps ([`Vector::run`]).
+    #[inline(always)]
+    fn wave<'r>(&self, group: &Group<'r>, runs: bool) -> Wave<'r> {
         let Group {
             record,
             track,
@@ -1494,16 +1784,13 @@ impl RollContext<'_> {
         } = *group;
         let n = group.len();
         debug_assert!((1..=LANES).contains(&n));
-        let points = self.d_m.len();
-        let up = enters_at_zero(record.passage.direction);
         // Unused lanes repeat the first wheel and are never stepped.
         let first = self.lane(record, track, group[0], first_row);
-        let mut lanes: [Lane; LANES] = std::array::from_fn(|j| match group.get(j) {
+        let lanes: [Lane; LANES] = std::array::from_fn(|j| match group.get(j) {
             Some(&a) if j > 0 => self.lane(record, track, a, first_row + j),
             _ => first.clone(),
         });
         let clocks = Clocks::of(&lanes);
-        let special = &self.special[track];
         // The portable kernel stores every contact's touch (the reference
         // order, which the kernel test holds the vector kernel's stores to);
         // contacts with effect tangents take the clock (their factors'
@@ -1512,98 +1799,142 @@ impl RollContext<'_> {
             true => None,
             false => clock_free(&lanes),
         };
-        // Runs of ordinary steps in registers where the kernel has them
-        // and the lanes allow.
-        let runs = match (v.run, clock_free) {
-            (Some(run), Some(factors)) if self.runs(&lanes) => Some((run, factors)),
-            _ => None,
+        // Runs of ordinary steps where the kernel has them and the lanes
+        // allow.
+        let runs = match runs && self.runs(&lanes) {
+            true => clock_free,
+            false => None,
         };
-        let mut s = 0;
-        while s < points + n - 1 {
-            let lo = s.saturating_sub(points - 1);
-            let hi = n.min(s + 1);
-            if let (true, Some((run, factors))) = (lo == 0 && hi == LANES, runs) {
-                let next = run(
-                    self,
-                    &mut lanes,
-                    Run {
-                        state: &mut *state,
-                        observed: &mut work.observed,
-                        special,
-                        first: s,
-                        end: points - 1,
-                        up,
-                        factors,
-                    },
-                );
-                if next > s {
-                    s = next;
-                    continue;
+        Wave {
+            record,
+            track,
+            n,
+            up: enters_at_zero(record.passage.direction),
+            last: group[n - 1] == self.last_axle[track],
+            lanes,
+            clocks,
+            clock_free,
+            runs,
+        }
+    }
+
+    /// How many steps the wavefront takes: the first wheel's points, then
+    /// one more for each wheel after it.
+    #[inline(always)]
+    fn wave_steps(&self, wave: &Wave<'_>) -> usize {
+        self.d_m.len() + wave.n - 1
+    }
+
+    /// Whether a run of ordinary steps may start at step `s`: every lane is
+    /// on the track, none takes its last step, and the lanes allow runs.
+    #[inline(always)]
+    fn runs_at(&self, wave: &Wave<'_>, s: usize) -> bool {
+        wave.runs.is_some() && wave.n == LANES && s + 1 >= LANES && s + 1 < self.d_m.len()
+    }
+
+    /// A wavefront's part in a run of ordinary steps.
+    #[inline(always)]
+    fn run_part<'s>(
+        &'s self,
+        wave: &'s mut Wave<'_>,
+        state: &'s mut TrackState,
+        work: &'s mut TrackWork,
+    ) -> RunPart<'s> {
+        RunPart {
+            lanes: &mut wave.lanes,
+            state,
+            observed: &mut work.observed,
+            special: &self.special[wave.track],
+            up: wave.up,
+            factors: wave.runs.unwrap_or_default(),
+        }
+    }
+
+    /// Step `s` of a wavefront: the four contacts at once where every lane
+    /// is on the track ([`RollContext::contacts4`]), else lane by lane.
+    #[inline(always)]
+    fn wave_step(
+        &self,
+        wave: &mut Wave<'_>,
+        state: &mut TrackState,
+        work: &mut TrackWork,
+        s: usize,
+        v: Vector<impl Exp4, impl Div4, impl Roll4, impl Run4>,
+    ) {
+        let Wave {
+            record,
+            track,
+            n,
+            up,
+            ref mut lanes,
+            ref clocks,
+            clock_free,
+            ..
+        } = *wave;
+        let points = self.d_m.len();
+        let special = &self.special[track];
+        let lo = s.saturating_sub(points - 1);
+        let hi = n.min(s + 1);
+        if lo == 0 && hi == LANES {
+            let is: [usize; LANES] =
+                std::array::from_fn(|j| if up { s - j } else { points - 1 - (s - j) });
+            // A special point's events before its wheel, then the four
+            // contacts at once, then its sites: the four points are
+            // distinct and each event acts on its own point only, so
+            // this is the order of the contacts one by one.
+            let specials = is.map(|i| special[i]);
+            let mut at_s = [f64::NAN; LANES];
+            for j in (0..LANES).filter(|&j| specials[j]) {
+                at_s[j] = self.special_before(track, state, work, &mut lanes[j], is[j]);
+            }
+            // Compiled three times: without tangents nothing of them is
+            // left; without effect slots only the constants'.
+            let (states, works) = (std::slice::from_mut(state), std::slice::from_mut(work));
+            let tracks = [0; LANES];
+            let seen = match self.tangent_width {
+                0 => self.contacts4::<0>(lanes, clocks, states, works, tracks, is, clock_free, v),
+                tangent::STATE_SLOTS => self.contacts4::<{ tangent::STATE_SLOTS }>(
+                    lanes, clocks, states, works, tracks, is, clock_free, v,
+                ),
+                _ => self.contacts4::<SLOTS>(lanes, clocks, states, works, tracks, is, None, v),
+            };
+            for j in (0..LANES).filter(|&j| specials[j]) {
+                self.special_after(record, track, work, &lanes[j], is[j], at_s[j], seen[j]);
+            }
+            if self.keep_seen {
+                for (lane, (&i, &m)) in lanes.iter().zip(is.iter().zip(&seen)) {
+                    work.wheel_seen[lane.row * points + i] = m;
                 }
             }
-            if lo == 0 && hi == LANES {
-                let is: [usize; LANES] =
-                    std::array::from_fn(|j| if up { s - j } else { points - 1 - (s - j) });
-                // A special point's events before its wheel, then the four
-                // contacts at once, then its sites: the four points are
-                // distinct and each event acts on its own point only, so
-                // this is the order of the contacts one by one.
-                let specials = is.map(|i| special[i]);
-                let mut at_s = [f64::NAN; LANES];
-                for j in (0..LANES).filter(|&j| specials[j]) {
-                    at_s[j] = self.special_before(track, state, work, &mut lanes[j], is[j]);
-                }
-                // Compiled three times: without tangents nothing of them is
-                // left; without effect slots only the constants'.
-                let (states, works) = (std::slice::from_mut(state), std::slice::from_mut(work));
-                let tracks = [0; LANES];
-                let seen = match self.tangent_width {
-                    0 => self.contacts4::<0>(
-                        &mut lanes, &clocks, states, works, tracks, is, clock_free, v,
-                    ),
-                    tangent::STATE_SLOTS => self.contacts4::<{ tangent::STATE_SLOTS }>(
-                        &mut lanes, &clocks, states, works, tracks, is, clock_free, v,
-                    ),
-                    _ => self.contacts4::<SLOTS>(
-                        &mut lanes, &clocks, states, works, tracks, is, None, v,
-                    ),
-                };
-                for j in (0..LANES).filter(|&j| specials[j]) {
-                    self.special_after(record, track, work, &lanes[j], is[j], at_s[j], seen[j]);
-                }
-                if self.keep_seen {
-                    for (lane, (&i, &m)) in lanes.iter().zip(is.iter().zip(&seen)) {
-                        work.wheel_seen[lane.row * points + i] = m;
-                    }
-                }
-                if s + 1 >= points {
-                    self.finish_lane(&lanes[s + 1 - points], state, work, points);
-                }
-                s += 1;
-                continue;
-            }
-            for (j, lane) in lanes.iter_mut().enumerate().take(hi).skip(lo) {
-                let step = s - j;
-                let i = if up { step } else { points - 1 - step };
-                let m_kg = if special[i] {
-                    self.special_contact(record, track, state, work, lane, i)
-                } else {
-                    self.contact(lane, state, work, i)
-                };
-                if self.keep_seen {
-                    work.wheel_seen[lane.row * points + i] = m_kg;
-                }
-            }
-            // The lane that took its last step now.
             if s + 1 >= points {
                 self.finish_lane(&lanes[s + 1 - points], state, work, points);
             }
-            s += 1;
+            return;
         }
-        // The same stores again where no step left them out (a group of
-        // fewer than four wheels steps lane by lane): the same values.
-        if clock_free.is_some() && group[n - 1] == self.last_axle[track] {
-            self.store_touches(&lanes[n - 1], state);
+        for (j, lane) in lanes.iter_mut().enumerate().take(hi).skip(lo) {
+            let step = s - j;
+            let i = if up { step } else { points - 1 - step };
+            let m_kg = if special[i] {
+                self.special_contact(record, track, state, work, lane, i)
+            } else {
+                self.contact(lane, state, work, i)
+            };
+            if self.keep_seen {
+                work.wheel_seen[lane.row * points + i] = m_kg;
+            }
+        }
+        // The lane that took its last step now.
+        if s + 1 >= points {
+            self.finish_lane(&lanes[s + 1 - points], state, work, points);
+        }
+    }
+
+    /// After a wavefront's last step: step 1's stores again where no step
+    /// left them out (a group of fewer than four wheels steps lane by
+    /// lane): the same values.
+    fn wave_end(&self, wave: &Wave<'_>, state: &mut TrackState) {
+        if wave.clock_free.is_some() && wave.last {
+            self.store_touches(&wave.lanes[wave.n - 1], state);
         }
     }
 
@@ -1645,7 +1976,7 @@ impl RollContext<'_> {
         )
     }
 
-    /// Whether [`RollContext::run4_fma`] may take these lanes' ordinary
+    /// Whether [`RollContext::runs_fma`] may take these lanes' ordinary
     /// steps: no tangents, no wheel_edge_reservoir and no row of every
     /// wheel's contacts to keep (the steps it leaves out).
     fn runs(&self, lanes: &[Lane; LANES]) -> bool {

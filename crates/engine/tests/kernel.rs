@@ -57,11 +57,16 @@ impl Sink for Collect {
 /// The measurements and the states (as JSON) of one replay: before every
 /// train (after the trains before it have passed) and at the end, then the
 /// run's mass balance.
+///
+/// `serial`: as beside a replay's output threads, where a train's tracks
+/// roll on one thread (two at a time, their groups side by side), not in
+/// parallel.
 fn replay(
     rec: &Recording,
     cfg: &ModelConfig,
     tangents: bool,
     portable: bool,
+    serial: bool,
 ) -> (Vec<String>, Vec<String>) {
     let mut engine = Engine::on_line(
         rec.section.clone(),
@@ -70,6 +75,7 @@ fn replay(
         EngineOptions {
             tangents,
             portable_kernel: portable,
+            beside_output_threads: serial,
             ..EngineOptions::default()
         },
         rec.origin_ns,
@@ -135,34 +141,52 @@ fn the_vector_kernel_gives_the_portable_kernels_bits() {
             .collect();
     for (path, cfg) in &cases {
         let rec = Recording::read(path).unwrap();
-        for tangents in [false, true] {
-            let (vector, vector_state) = replay(&rec, cfg, tangents, false);
-            let (portable, portable_state) = replay(&rec, cfg, tangents, true);
-            // The field line has 32 measurements; every section recording
-            // more than 100.
+        assert_kernels_agree(&rec, cfg, &path.display().to_string());
+    }
+    // A second applicator on one rail only, without pulses (a wheel's
+    // transfer counts from it all the same): the two rails' tracks have
+    // different special points, where a run of ordinary steps of the two
+    // side by side must stop for one of them.
+    let mut rec = Recording::read(&root().join("recordings/demo_day.mcap")).unwrap();
+    let mut second = rec.section.applicators[0].clone();
+    second.id = "A2".to_string();
+    second.position_m = 0.55 * rec.section.length_m;
+    second.rails = vec![1];
+    rec.section.applicators.push(second);
+    assert_kernels_agree(
+        &rec,
+        &ModelConfig::default(),
+        "demo_day, a second applicator on one rail",
+    );
+}
+
+/// The vector kernel (tracks in parallel and side by side) against the
+/// portable one on `rec`, with and without tangents.
+fn assert_kernels_agree(rec: &Recording, cfg: &ModelConfig, name: &str) {
+    for tangents in [false, true] {
+        let (portable, portable_state) = replay(rec, cfg, tangents, true, false);
+        for serial in [false, true] {
+            let (vector, vector_state) = replay(rec, cfg, tangents, false, serial);
+            // The field line has 32 measurements; every section
+            // recording more than 100.
             let least = if rec.line.is_some() { 30 } else { 100 };
             assert!(
                 vector.len() > least,
-                "{}: {} measurements",
-                path.display(),
+                "{name}: {} measurements",
                 vector.len()
             );
-            assert_eq!(vector.len(), portable.len(), "{}", path.display());
+            let case = format!("{name} (tangents {tangents}, serial {serial})");
+            assert_eq!(vector.len(), portable.len(), "{case}");
             if let Some(k) = (0..vector.len()).find(|&k| vector[k] != portable[k]) {
                 panic!(
-                    "{} (tangents {tangents}): measurement {k} differs:\nvector   {}\nportable {}",
-                    path.display(),
-                    vector[k],
-                    portable[k]
+                    "{case}: measurement {k} differs:\nvector   {}\nportable {}",
+                    vector[k], portable[k]
                 );
             }
             assert_eq!(vector_state.len(), portable_state.len());
-            if let Some(k) = (0..vector_state.len()).find(|&k| vector_state[k] != portable_state[k])
-            {
-                panic!(
-                    "{} (tangents {tangents}): the states before train {k} differ",
-                    path.display()
-                );
+            let differs = (0..vector_state.len()).find(|&k| vector_state[k] != portable_state[k]);
+            if let Some(k) = differs {
+                panic!("{case}: the states before train {k} differ");
             }
         }
     }

@@ -8,13 +8,13 @@
 //! band in `WheelRoll::wheel_kg` for its duration and `fp fc` of the
 //! point's segment: a line of one tangent is the section bit for bit.
 
+#[cfg(target_arch = "x86_64")]
+use super::exp4_is_vectorised;
 use super::{
     clock_free, parallel_min_contacts, wheel_time_s, Clocks, Div4, Engine, EngineError, Exp4, Lane,
     NoRun, Roll4, RollContext, SiteValue, TrackState, TrackWork, TrainRecord, Vector, LANES,
     NO_APPLICATOR, NO_AXLE,
 };
-#[cfg(target_arch = "x86_64")]
-use super::{div4_avx, exp4_inline, exp4_is_vectorised};
 use crate::line::{LineLayout, RAIL_BANDS};
 use crate::sink::Sink;
 use crate::{enters_at_zero, SnapshotKind};
@@ -393,20 +393,9 @@ impl RollContext<'_> {
         states: &mut [TrackState],
         works: &mut [TrackWork],
     ) -> bool {
-        let v = Vector {
-            // SAFETY: this function runs only on a CPU with AVX2 and FMA.
-            exp: |x| unsafe { exp4_inline(x) },
-            // SAFETY: as above.
-            div: |a, b| unsafe { div4_avx(a, b) },
-            // SAFETY: as above.
-            roll: |p: &tortwin_model::product::ProductParams,
-                   m,
-                   c: &[tortwin_model::product::ContactConditions; LANES]| unsafe {
-                tortwin_model::product::roll4_fma(p, m, c)
-            },
-            // The line's lanes change rail bands from point to point.
-            run: None::<NoRun>,
-        };
+        // The line's lanes change rail bands from point to point: its
+        // groups take no runs of ordinary steps (`Vector::run`).
+        let v = vector_fma!();
         self.roll_group_line_with(record, rail, axles, states, works, v)
     }
 
