@@ -1097,9 +1097,14 @@ struct Lane {
 /// ends.
 #[cfg(target_arch = "x86_64")]
 struct RunLanes {
-    applicator: [Option<usize>; LANES],
-    transfer_factor: [f64; LANES],
     observe: [bool; LANES],
+    /// Each lane's distance from the applicator it passed last (0 where it
+    /// passed none), its index in the revolution factors, and how that
+    /// changes from one step to the next (+1 or -1: a run never crosses an
+    /// applicator's point, which is special).
+    revolution_at: std::arch::x86_64::__m256i,
+    revolution_step: std::arch::x86_64::__m256i,
+    transfer_factor: std::arch::x86_64::__m256d,
     transfers: std::arch::x86_64::__m256d,
     factor: std::arch::x86_64::__m256d,
     fp_fc: std::arch::x86_64::__m256d,
@@ -1153,16 +1158,32 @@ impl RunLanes {
     /// # Safety
     /// The CPU must have AVX.
     #[inline(always)]
-    unsafe fn start(part: &RunPart<'_>, s: usize) -> Self {
+    unsafe fn start(ctx: &RollContext<'_>, part: &RunPart<'_>, s: usize) -> Self {
         use std::arch::x86_64::_mm256_setzero_pd;
         const _: () = assert!(LANES == 4);
+        use std::arch::x86_64::_mm256_setr_epi64x;
         let lanes = &*part.lanes;
         let is = part.at(s);
         let rail_kg = &part.state.rail_mass_kg;
+        // The revolution factors are read with a gather, which does not
+        // check its indices: every distance on the track is in the table.
+        assert!(ctx.revolution.len() >= part.special.len());
+        let (at, step): ([i64; LANES], [i64; LANES]) = {
+            let of = |j: usize| match lanes[j].st.applicator_point {
+                Some(ia) => (
+                    is[j].abs_diff(ia) as i64,
+                    if (is[j] > ia) == part.up { 1 } else { -1 },
+                ),
+                None => (0, 0),
+            };
+            let lane = [of(0), of(1), of(2), of(3)];
+            (lane.map(|l| l.0), lane.map(|l| l.1))
+        };
         Self {
-            applicator: lanes.each_ref().map(|l| l.st.applicator_point),
-            transfer_factor: part.factors.map(|f| f.0),
             observe: lanes.each_ref().map(|l| l.roller.observe),
+            revolution_at: _mm256_setr_epi64x(at[0], at[1], at[2], at[3]),
+            revolution_step: _mm256_setr_epi64x(step[0], step[1], step[2], step[3]),
+            transfer_factor: lanes_pd!(|j| part.factors[j].0),
             transfers: lanes_pd!(|j| match lanes[j].st.applicator_point {
                 Some(_) => f64::from_bits(u64::MAX),
                 None => 0.0,
@@ -1188,10 +1209,16 @@ impl RunLanes {
     unsafe fn step(&mut self, ctx: &RollContext<'_>, part: &mut RunPart<'_>) {
         use std::arch::x86_64::*;
         let is = self.is;
-        let revolution = lanes_pd!(|j| match self.applicator[j] {
-            Some(ia) => ctx.revolution[is[j].abs_diff(ia)] * self.transfer_factor[j],
-            None => 0.0,
-        });
+        // revolution[|i - ia|] times the transfer factor where the wheel
+        // passed an applicator, 0 where it passed none (the product there
+        // masked off).
+        let revolution = _mm256_and_pd(
+            _mm256_mul_pd(
+                _mm256_i64gather_pd::<8>(ctx.revolution.as_ptr(), self.revolution_at),
+                self.transfer_factor,
+            ),
+            self.transfers,
+        );
         let conditions = product::Conditions4 {
             transfers: self.transfers,
             revolution,
@@ -1229,6 +1256,7 @@ impl RunLanes {
             _mm256_set1_pd(part.state.rail_mass_kg[next[0]]),
         );
         self.is = next;
+        self.revolution_at = _mm256_add_epi64(self.revolution_at, self.revolution_step);
     }
 
     /// The end of the run after a step: the rail masses the other lanes
@@ -1685,7 +1713,7 @@ impl RollContext<'_> {
         if s >= end || parts.iter().any(|p| p.special_at(s)) {
             return s;
         }
-        let mut runs: [RunLanes; K] = std::array::from_fn(|k| RunLanes::start(&parts[k], s));
+        let mut runs: [RunLanes; K] = std::array::from_fn(|k| RunLanes::start(self, &parts[k], s));
         loop {
             for (run, part) in runs.iter_mut().zip(parts.iter_mut()) {
                 run.step(self, part);
