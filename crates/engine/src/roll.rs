@@ -709,15 +709,29 @@ struct RunPart<'s> {
     factors: [(f64, f64); LANES],
 }
 
+/// The point of a track of `points` points a wheel is at after `step`
+/// steps of its path: it enters at 0 going up, at the last point going
+/// down.
+#[inline(always)]
+fn point_of(up: bool, points: usize, step: usize) -> usize {
+    match up {
+        true => step,
+        false => points - 1 - step,
+    }
+}
+
+/// The points of a wavefront's four lanes at step `s` (lane j at step
+/// s - j of its path), all four on the track.
+#[inline(always)]
+fn lane_points(up: bool, points: usize, s: usize) -> [usize; LANES] {
+    std::array::from_fn(|j| point_of(up, points, s - j))
+}
+
 impl RunPart<'_> {
-    /// The four lanes' points at step `s` (all four in the track).
+    /// The four lanes' points at step `s`.
     #[inline(always)]
     fn at(&self, s: usize) -> [usize; LANES] {
-        let points = self.special.len();
-        std::array::from_fn(|j| match self.up {
-            true => s - j,
-            false => points - 1 - (s - j),
-        })
+        lane_points(self.up, self.special.len(), s)
     }
 
     /// Whether a lane is at a special point at step `s`.
@@ -1904,8 +1918,7 @@ impl RollContext<'_> {
         let lo = s.saturating_sub(points - 1);
         let hi = n.min(s + 1);
         if lo == 0 && hi == LANES {
-            let is: [usize; LANES] =
-                std::array::from_fn(|j| if up { s - j } else { points - 1 - (s - j) });
+            let is = lane_points(up, points, s);
             // A special point's events before its wheel, then the four
             // contacts at once, then its sites: the four points are
             // distinct and each event acts on its own point only, so
@@ -1940,8 +1953,7 @@ impl RollContext<'_> {
             return;
         }
         for (j, lane) in lanes.iter_mut().enumerate().take(hi).skip(lo) {
-            let step = s - j;
-            let i = if up { step } else { points - 1 - step };
+            let i = point_of(up, points, s - j);
             let m_kg = if special[i] {
                 self.special_contact(record, track, state, work, lane, i)
             } else {

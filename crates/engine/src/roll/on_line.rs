@@ -11,9 +11,9 @@
 #[cfg(target_arch = "x86_64")]
 use super::exp4_is_vectorised;
 use super::{
-    clock_free, parallel_min_contacts, wheel_time_s, Clocks, Div4, Engine, EngineError, Exp4, Lane,
-    NoRun, Roll4, RollContext, SiteValue, TrackState, TrackWork, TrainRecord, Vector, LANES,
-    NO_APPLICATOR, NO_AXLE,
+    clock_free, lane_points, parallel_min_contacts, point_of, wheel_time_s, Clocks, Div4, Engine,
+    EngineError, Exp4, Lane, NoRun, Roll4, RollContext, SiteValue, TrackState, TrackWork,
+    TrainRecord, Vector, LANES, NO_APPLICATOR, NO_AXLE,
 };
 use crate::line::{LineLayout, RAIL_BANDS};
 use crate::sink::Sink;
@@ -449,8 +449,7 @@ impl RollContext<'_> {
             let lo = s.saturating_sub(points - 1);
             let hi = n.min(s + 1);
             if lo == 0 && hi == LANES {
-                let is: [usize; LANES] =
-                    std::array::from_fn(|j| if up { s - j } else { points - 1 - (s - j) });
+                let is = lane_points(up, points, s);
                 if !is.iter().any(|&i| special[i]) {
                     let mut wheel_bands = [0; LANES];
                     let mut rail_bands = [0; LANES];
@@ -471,8 +470,7 @@ impl RollContext<'_> {
                 }
             }
             for j in lo..hi {
-                let step = s - j;
-                let i = if up { step } else { points - 1 - step };
+                let i = point_of(up, points, s - j);
                 self.step_line(rail, &mut lanes[j], &mut paths[j], i, states, works);
             }
             // The lane that took its last step now.
@@ -582,7 +580,7 @@ impl RollContext<'_> {
         let up = enters_at_zero(record.passage.direction);
         let mut path = self.line_path(layout, record, rail, lane.axle);
         for step in steps {
-            let i = if up { step } else { points - 1 - step };
+            let i = point_of(up, points, step);
             self.step_line(rail, lane, &mut path, i, states, works);
         }
     }
