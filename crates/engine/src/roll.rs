@@ -1220,7 +1220,12 @@ impl RunLanes {
     /// # Safety
     /// The CPU must have AVX2 and FMA.
     #[inline(always)]
-    unsafe fn step(&mut self, ctx: &RollContext<'_>, part: &mut RunPart<'_>) {
+    unsafe fn step(
+        &mut self,
+        ctx: &RollContext<'_>,
+        params: &ProductParams,
+        part: &mut RunPart<'_>,
+    ) {
         use std::arch::x86_64::*;
         let is = self.is;
         // revolution[|i - ia|] times the transfer factor where the wheel
@@ -1239,7 +1244,7 @@ impl RunLanes {
             factor: self.factor,
             fp_fc: self.fp_fc,
         };
-        let rolled = product::roll4_register(ctx.product, (self.wheel, self.rail), &conditions);
+        let rolled = product::roll4_register(params, (self.wheel, self.rail), &conditions);
         if self.observe.iter().any(|&o| o) {
             let m = store_pd!(_mm256_add_pd(self.wheel, self.rail));
             let after = store_pd!(rolled.wheel);
@@ -1728,9 +1733,12 @@ impl RollContext<'_> {
             return s;
         }
         let mut runs: [RunLanes; K] = std::array::from_fn(|k| RunLanes::start(self, &parts[k], s));
+        // A copy the loop's stores cannot reach: its reciprocals are taken
+        // once, not at every step.
+        let params = *self.product;
         loop {
             for (run, part) in runs.iter_mut().zip(parts.iter_mut()) {
-                run.step(self, part);
+                run.step(self, &params, part);
             }
             s += 1;
             if s >= end || parts.iter().any(|p| p.special_at(s)) {
