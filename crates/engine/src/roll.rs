@@ -739,6 +739,21 @@ impl RunPart<'_> {
     fn special_at(&self, s: usize) -> bool {
         self.at(s).iter().any(|&i| self.special[i])
     }
+
+    /// The first step after `s` at which a lane is at a special point,
+    /// none being at `s` (`usize::MAX` if no lane reaches one). Lane 0
+    /// leads and the others follow it over the points it passed, none of
+    /// them special between lane 3's and lane 0's at `s`: it is the step at
+    /// which lane 0 reaches the next special point ahead of it.
+    #[inline(always)]
+    fn next_special(&self, s: usize) -> usize {
+        let lead = self.at(s)[0];
+        let ahead = match self.up {
+            true => self.special[lead + 1..].iter().position(|&b| b),
+            false => self.special[..lead].iter().rev().position(|&b| b),
+        };
+        ahead.map_or(usize::MAX, |k| s + 1 + k)
+    }
 }
 
 /// What the wavefront computes four lanes at once.
@@ -1732,6 +1747,12 @@ impl RollContext<'_> {
         if s >= end || parts.iter().any(|p| p.special_at(s)) {
             return s;
         }
+        // The step the run stops before, found once rather than by looking
+        // at the lanes' points at every step.
+        let stop = parts
+            .iter()
+            .map(|p| p.next_special(s))
+            .fold(end, usize::min);
         let mut runs: [RunLanes; K] = std::array::from_fn(|k| RunLanes::start(self, &parts[k], s));
         // A copy the loop's stores cannot reach: its reciprocals are taken
         // once, not at every step.
@@ -1741,7 +1762,7 @@ impl RollContext<'_> {
                 run.step(self, &params, part);
             }
             s += 1;
-            if s >= end || parts.iter().any(|p| p.special_at(s)) {
+            if s >= stop {
                 break;
             }
             for (run, part) in runs.iter_mut().zip(parts.iter()) {
