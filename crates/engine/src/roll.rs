@@ -1127,6 +1127,8 @@ struct Lane {
 #[cfg(target_arch = "x86_64")]
 struct RunLanes {
     observe: [bool; LANES],
+    /// Whether a lane observes (`observe` has one), found once.
+    observing: bool,
     /// Each lane's distance from the applicator it passed last (0 where it
     /// passed none), its index in the revolution factors, and how that
     /// changes from one step to the next (+1 or -1: a run never crosses an
@@ -1210,6 +1212,7 @@ impl RunLanes {
         };
         Self {
             observe: lanes.each_ref().map(|l| l.roller.observe),
+            observing: lanes.iter().any(|l| l.roller.observe),
             revolution_at: _mm256_setr_epi64x(at[0], at[1], at[2], at[3]),
             revolution_step: _mm256_setr_epi64x(step[0], step[1], step[2], step[3]),
             transfer_factor: lanes_pd!(|j| part.factors[j].0),
@@ -1260,7 +1263,7 @@ impl RunLanes {
             fp_fc: self.fp_fc,
         };
         let rolled = product::roll4_register(params, (self.wheel, self.rail), &conditions);
-        if self.observe.iter().any(|&o| o) {
+        if self.observing {
             let m = store_pd!(_mm256_add_pd(self.wheel, self.rail));
             let after = store_pd!(rolled.wheel);
             for j in (0..LANES).filter(|&j| self.observe[j]) {
