@@ -29,7 +29,26 @@ use crate::wire::{
 };
 
 mod compact;
-pub(crate) use compact::{compact_measurement, compact_passage};
+pub(crate) use compact::{compact_measurement, compact_passage, compact_pulse};
+
+/// An `/applicator/pulse` message's fields, borrowed: from its wire
+/// struct, or straight from its text ([`compact_pulse`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct PulseFields<'a> {
+    pub applicator_id: &'a str,
+    pub rail: &'a str,
+    pub mass_g: f64,
+}
+
+impl<'a> From<&'a PulseMsg> for PulseFields<'a> {
+    fn from(msg: &'a PulseMsg) -> Self {
+        Self {
+            applicator_id: &msg.applicator_id,
+            rail: &msg.rail,
+            mass_g: msg.mass_g,
+        }
+    }
+}
 
 /// A `/measurement/friction` message's fields, borrowed: from its wire
 /// struct, or straight from its text ([`compact_measurement`]).
@@ -857,9 +876,9 @@ impl Decoder {
     }
 
     /// An `/applicator/pulse`: on a rail its applicator lists.
-    pub(crate) fn pulse(&self, msg: &PulseMsg) -> Result<Pulse, DecodeError> {
+    pub(crate) fn pulse(&self, msg: PulseFields<'_>) -> Result<Pulse, DecodeError> {
         let section = &self.section;
-        let id = msg.applicator_id.as_str();
+        let id = msg.applicator_id;
         let Some((applicator, a)) = section
             .applicators
             .iter()
@@ -871,7 +890,7 @@ impl Decoder {
                 format!("field `applicator_id`: unknown applicator `{id}`"),
             ));
         };
-        let rail = resolve_rail(&section.rails, &msg.rail, "rail")?;
+        let rail = resolve_rail(&section.rails, msg.rail, "rail")?;
         if !a.rails.contains(&rail) {
             let listed: Vec<&str> = a
                 .rails

@@ -2,7 +2,8 @@
 //! that are nearly all of a recording, `/measurement/friction` (most of its
 //! messages: a year on the 1.5 km curve has 2.46 M of 2.59 M) and
 //! `/train/passage` (most of its bytes: the same year's 20 440 passages are
-//! 370 MB of JSON, its measurements 250 MB).
+//! 370 MB of JSON, its measurements 250 MB), and `/applicator/pulse` (a
+//! third of a 3-day recording's messages on the 600 m curve).
 //!
 //! serde spent most of the reader thread's time on them: a derived struct
 //! matches every key through a visitor, and the strings (a measurement's
@@ -11,8 +12,8 @@
 //! know of produces (`tortwin synth`, the CSV import, the mcap and json
 //! libraries' compact output) is objects and arrays without whitespace
 //! whose values are strings without escapes, `null`, plain integers and
-//! numbers; [`compact_measurement`] and [`compact_passage`] read exactly
-//! that shape and borrow the strings. Anything else (whitespace, an escape,
+//! numbers; [`compact_measurement`], [`compact_passage`] and
+//! [`compact_pulse`] read exactly that shape and borrow the strings. Anything else (whitespace, an escape,
 //! an unknown or repeated key, a missing field, an empty object or array, a
 //! value of another type, a number serde would refuse, a passage's
 //! `segments` of a line) is `None`, and the caller parses the message with
@@ -22,7 +23,7 @@
 //! the same double either way; the tests compare the two on the written
 //! shape and on thousands of variations of it.
 
-use super::{AxleFields, MeasurementFields, PassageFields};
+use super::{AxleFields, MeasurementFields, PassageFields, PulseFields};
 use crate::event::{BogiePosition, Direction, Quantity};
 use crate::wire::json::number;
 use crate::wire::CreepageMsg;
@@ -62,6 +63,28 @@ pub(crate) fn compact_measurement(data: &[u8]) -> Option<MeasurementFields<'_>> 
         train_id: train_id.flatten(),
         axle_index: axle_index.flatten(),
         value: value?,
+    })
+}
+
+/// The fields of a pulse message in the compact shape, or `None` (then
+/// [`super::parse`] decides).
+pub(crate) fn compact_pulse(data: &[u8]) -> Option<PulseFields<'_>> {
+    let text = std::str::from_utf8(data).ok()?;
+    let mut scan = Scan { text, at: 0 };
+    let mut applicator_id = None;
+    let mut rail = None;
+    let mut mass_g = None;
+    scan.object(|scan, key| match key {
+        "applicator_id" => once(&mut applicator_id, scan.string()?),
+        "rail" => once(&mut rail, scan.string()?),
+        "mass_g" => once(&mut mass_g, scan.number()?),
+        _ => None,
+    })?;
+    scan.end()?;
+    Some(PulseFields {
+        applicator_id: applicator_id?,
+        rail: rail?,
+        mass_g: mass_g?,
     })
 }
 
@@ -303,7 +326,7 @@ impl<'a> Scan<'a> {
 mod tests {
     use super::*;
     use crate::decode::parse;
-    use crate::wire::{AxleMsg, MeasurementMsg, PassageMsg, PerRail};
+    use crate::wire::{AxleMsg, MeasurementMsg, PassageMsg, PerRail, PulseMsg};
 
     /// Numbers as JSON has them and as it does not, for a number field.
     const NUMBERS: &[&str] = &[
@@ -500,6 +523,63 @@ mod tests {
         for_each_mutation(base, |case, prefix| {
             same(case);
             assert!(!prefix || compact_measurement(case).is_none());
+        });
+        assert!(read > 10, "the shortcut read only {read} of the cases");
+    }
+
+    fn same_pulse(data: &[u8]) {
+        let text = String::from_utf8_lossy(data);
+        if let Some(fields) = compact_pulse(data) {
+            let msg = parse::<PulseMsg>(data)
+                .unwrap_or_else(|_| panic!("serde refuses what the compact reader took: {text}"));
+            let expected = PulseFields::from(&msg);
+            assert_eq!(fields, expected, "{text}");
+            assert_eq!(fields.mass_g.to_bits(), expected.mass_g.to_bits(), "{text}");
+        }
+    }
+
+    /// A pulse as written is read by the shortcut; its variations, byte by
+    /// byte, agree with serde or are left to it.
+    #[test]
+    fn pulses_agree_with_serde_or_are_left_to_it() {
+        for msg in [
+            PulseMsg {
+                applicator_id: "A1".into(),
+                rail: "high".into(),
+                mass_g: 0.2065,
+            },
+            PulseMsg {
+                applicator_id: "wayside ü".into(),
+                rail: "left".into(),
+                mass_g: 0.0,
+            },
+        ] {
+            let data = serde_json::to_vec(&msg).unwrap();
+            let fields = compact_pulse(&data)
+                .unwrap_or_else(|| panic!("not read: {}", String::from_utf8_lossy(&data)));
+            assert_eq!(fields, PulseFields::from(&msg));
+        }
+        let base = br#"{"applicator_id":"A1","rail":"high","mass_g":0.2065}"#;
+        let text = std::str::from_utf8(base).unwrap();
+        let mut cases: Vec<String> = NUMBERS.iter().map(|v| text.replace("0.2065", v)).collect();
+        cases.extend([
+            text.replace(',', ", "),
+            text.replace(",\"mass_g\":0.2065", ""),
+            text.replace("\"rail\":\"high\"", "\"rail\":\"high\",\"rail\":\"low\""),
+            text.replace("\"rail\":\"high\"", "\"extra\":1,\"rail\":\"high\""),
+            text.replace("\"A1\"", "\"A\\u0031\""),
+            text.replace("\"A1\"", "null"),
+            r#"{"mass_g":1,"rail":"low","applicator_id":"A2"}"#.to_string(),
+            "{}".to_string(),
+        ]);
+        let mut read = 0;
+        for case in &cases {
+            same_pulse(case.as_bytes());
+            read += usize::from(compact_pulse(case.as_bytes()).is_some());
+        }
+        for_each_mutation(base, |case, prefix| {
+            same_pulse(case);
+            assert!(!prefix || compact_pulse(case).is_none());
         });
         assert!(read > 10, "the shortcut read only {read} of the cases");
     }

@@ -389,10 +389,14 @@ impl RecordingReader {
                     Ok((EventKind::Passage(p), keep(&|| Wire::Passage(msg.clone()))))
                 }),
             },
-            Topic::Pulse => decode::parse::<PulseMsg>(data).and_then(|msg| {
-                let p = decoder.pulse(&msg)?;
-                Ok((EventKind::Pulse(p), keep_wire.then_some(Wire::Pulse(msg))))
-            }),
+            // A pulse in the compact shape is read without serde too.
+            Topic::Pulse => match (!keep_wire).then(|| decode::compact_pulse(data)).flatten() {
+                Some(fields) => decoder.pulse(fields).map(|p| (EventKind::Pulse(p), None)),
+                None => decode::parse::<PulseMsg>(data).and_then(|msg| {
+                    let p = decoder.pulse((&msg).into())?;
+                    Ok((EventKind::Pulse(p), keep_wire.then_some(Wire::Pulse(msg))))
+                }),
+            },
             // Most messages are measurements: those in the compact shape are
             // read without serde (decode/compact.rs), unless the wire
             // message is kept.

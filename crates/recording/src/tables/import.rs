@@ -93,7 +93,7 @@ pub fn import_dir(dir: &Path, out: &Path) -> Result<ImportSummary, ConvertError>
     for item in &items {
         let result = match &item.msg {
             Msg::Passage(m) => decoder.passage(m.into(), item.log_time_ns).map(drop),
-            Msg::Pulse(m) => decoder.pulse(m).map(drop),
+            Msg::Pulse(m) => decoder.pulse(m.into()).map(drop),
             Msg::Weather(m) => decoder.weather(m).map(drop),
             Msg::Measurement(m) => decoder.measurement(m.into()).map(drop),
         };
