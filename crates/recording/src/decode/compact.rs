@@ -379,20 +379,29 @@ mod tests {
         }
     }
 
-    /// What serde makes of the same bytes, as fields.
-    fn by_serde(data: &[u8]) -> Option<MeasurementMsg> {
-        parse::<MeasurementMsg>(data).ok()
+    /// Whatever a shortcut read from `data` (its fields printed, `read`),
+    /// serde reads the same: `{:?}` shows every number exactly (`-0.0`
+    /// too).
+    fn agrees_with_serde<M: for<'de> crate::wire::json::FromJson<'de>>(
+        data: &[u8],
+        read: Option<String>,
+        print: impl Fn(&M) -> String,
+    ) {
+        let Some(read) = read else {
+            return;
+        };
+        let text = String::from_utf8_lossy(data);
+        let msg = parse::<M>(data)
+            .unwrap_or_else(|_| panic!("serde refuses what the compact reader took: {text}"));
+        assert_eq!(read, print(&msg), "{text}");
     }
 
     fn same(data: &[u8]) {
-        let text = String::from_utf8_lossy(data);
-        if let Some(fields) = compact_measurement(data) {
-            let msg = by_serde(data)
-                .unwrap_or_else(|| panic!("serde refuses what the compact reader took: {text}"));
-            let expected = MeasurementFields::from(&msg);
-            assert_eq!(fields, expected, "{text}");
-            assert_eq!(fields.value.to_bits(), expected.value.to_bits(), "{text}");
-        }
+        agrees_with_serde::<MeasurementMsg>(
+            data,
+            compact_measurement(data).map(|f| format!("{f:?}")),
+            |m| format!("{:?}", MeasurementFields::from(m)),
+        );
     }
 
     /// The shape tortwin's writer produces is read by the shortcut, and
@@ -528,14 +537,9 @@ mod tests {
     }
 
     fn same_pulse(data: &[u8]) {
-        let text = String::from_utf8_lossy(data);
-        if let Some(fields) = compact_pulse(data) {
-            let msg = parse::<PulseMsg>(data)
-                .unwrap_or_else(|_| panic!("serde refuses what the compact reader took: {text}"));
-            let expected = PulseFields::from(&msg);
-            assert_eq!(fields, expected, "{text}");
-            assert_eq!(fields.mass_g.to_bits(), expected.mass_g.to_bits(), "{text}");
-        }
+        agrees_with_serde::<PulseMsg>(data, compact_pulse(data).map(|f| format!("{f:?}")), |m| {
+            format!("{:?}", PulseFields::from(m))
+        });
     }
 
     /// A pulse as written is read by the shortcut; its variations, byte by

@@ -1,5 +1,5 @@
 //! Records parsed with the mcap crate, after their length prefixes are
-//! checked against the record.
+//! checked against the record; a Message record's fixed header by hand.
 //!
 //! `mcap::parse_record` reserves the length a string or byte field claims
 //! before it reads it: a corrupt 4-byte prefix inside a 100-byte record made
