@@ -396,6 +396,26 @@ mod tests {
         assert_eq!(read, print(&msg), "{text}");
     }
 
+    /// `same` on every case and every mutation of `base`; the shortcut
+    /// (`reads`) reads no prefix of `base`, and more than ten of the cases.
+    fn each_case_and_mutation(
+        cases: &[String],
+        base: &[u8],
+        same: impl Fn(&[u8]),
+        reads: impl Fn(&[u8]) -> bool,
+    ) {
+        let mut read = 0;
+        for case in cases {
+            same(case.as_bytes());
+            read += usize::from(reads(case.as_bytes()));
+        }
+        for_each_mutation(base, |case, prefix| {
+            same(case);
+            assert!(!prefix || !reads(case));
+        });
+        assert!(read > 10, "the shortcut read only {read} of the cases");
+    }
+
     fn same(data: &[u8]) {
         agrees_with_serde::<MeasurementMsg>(
             data,
@@ -524,16 +544,7 @@ mod tests {
             text.replace('}', ",}"),
             text.replace('{', "{,"),
         ]);
-        let mut read = 0;
-        for case in &cases {
-            same(case.as_bytes());
-            read += usize::from(compact_measurement(case.as_bytes()).is_some());
-        }
-        for_each_mutation(base, |case, prefix| {
-            same(case);
-            assert!(!prefix || compact_measurement(case).is_none());
-        });
-        assert!(read > 10, "the shortcut read only {read} of the cases");
+        each_case_and_mutation(&cases, base, same, |d| compact_measurement(d).is_some());
     }
 
     fn same_pulse(data: &[u8]) {
@@ -576,16 +587,7 @@ mod tests {
             r#"{"mass_g":1,"rail":"low","applicator_id":"A2"}"#.to_string(),
             "{}".to_string(),
         ]);
-        let mut read = 0;
-        for case in &cases {
-            same_pulse(case.as_bytes());
-            read += usize::from(compact_pulse(case.as_bytes()).is_some());
-        }
-        for_each_mutation(base, |case, prefix| {
-            same_pulse(case);
-            assert!(!prefix || compact_pulse(case).is_none());
-        });
-        assert!(read > 10, "the shortcut read only {read} of the cases");
+        each_case_and_mutation(&cases, base, same_pulse, |d| compact_pulse(d).is_some());
     }
 
     /// What serde makes of a passage's bytes, as fields, printed: `{:?}`
