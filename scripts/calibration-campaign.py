@@ -135,6 +135,9 @@ def site(args, rng, number):
         key = c["key"].split(".", 1)[1]
         if c["determined"] and c["ci95"]:
             lo, hi = c["ci95"]
+            # JSON has no infinity: an open bound is written as null.
+            lo = -math.inf if lo is None else lo
+            hi = math.inf if hi is None else hi
             intervals.append({"key": key, "truth": truth[key], "ci95": [lo, hi], "value": c["value"],
                               "holds": lo <= truth[key] <= hi, "moved": key in moved})
     found = report["effects_found"]

@@ -1579,12 +1579,20 @@ fn calibrate_anew(
 /// The seed 20261146 campaign showed why: `km_kg` -33 % held at the
 /// laboratory's value (its interval held both) moved `mu_d` by -1.7 %,
 /// five of its standard errors.
+///
+/// A held constant's spread counts at most [`THETA_MAX`]: no constant is
+/// let further from its reference value than that, so a held one the
+/// recording leaves open cannot push more. The seed 20261208 campaign (site
+/// 4) held `m_max_kg` with a standard error of 2.4 million in `ln p` (its
+/// sensitivity gone at the final fit); through an absorption of 0.003 it
+/// widened `mu_d`, determined to a fraction of a percent, to 95 % 0–inf,
+/// written as `null` in report.json.
 fn lean_of_held(fits: &mut [Option<Fit>], cond: &Conditional, fitted: &[usize]) {
     let held: Vec<(usize, f64, f64)> = fits
         .iter()
         .enumerate()
         .filter(|(u, _)| !fitted.contains(u))
-        .filter_map(|(u, f)| f.as_ref().map(|f| (u, f.theta, f.sd)))
+        .filter_map(|(u, f)| f.as_ref().map(|f| (u, f.theta, f.sd.min(THETA_MAX))))
         .filter(|&(_, theta, sd)| theta.is_finite() && sd.is_finite())
         .collect();
     for (slot, &k) in fitted.iter().enumerate() {
@@ -2016,6 +2024,40 @@ mod tests {
     /// A Jacobian of `n` rows from column functions of the row index.
     fn jacobian(n: usize, columns: &[&dyn Fn(usize) -> f64]) -> DMatrix<f64> {
         DMatrix::from_fn(n, columns.len(), |i, c| columns[c](i))
+    }
+
+    /// A held constant the recording leaves open (a standard error of
+    /// millions in `ln p`) widens a determined constant beside it by at most
+    /// what moving it to the edge of its range ([`THETA_MAX`]) would push,
+    /// and a held one the recording pins down by what its spread pushes.
+    #[test]
+    fn a_held_constant_pushes_no_more_than_its_range_allows() {
+        let fit = |sd: f64, determined: bool| Fit {
+            theta: 0.01,
+            value_theta: 0.0,
+            sd,
+            lean: 0.0,
+            determined,
+            partners: Vec::new(),
+            pinned: false,
+            flat: false,
+        };
+        // Knob 0 determined and fitted; 1 held, open; 2 held, pinned down.
+        let mut fits = vec![
+            Some(fit(0.004, true)),
+            Some(fit(2.4e6, false)),
+            Some(fit(0.05, false)),
+        ];
+        let cond = Conditional {
+            sd: vec![0.0039],
+            absorbs: DMatrix::from_row_slice(1, 3, &[1.0, 0.003, 0.2]),
+        };
+        lean_of_held(&mut fits, &cond, &[0]);
+        let sd = fits[0].as_ref().map(|f| f.sd).unwrap();
+        let most =
+            (0.0039f64.powi(2) + (0.003 * THETA_MAX).powi(2) + (0.2 * 0.05f64).powi(2)).sqrt();
+        assert!((sd - most).abs() < 1e-12, "{sd} against {most}");
+        assert!(sd < 0.02, "{sd}");
     }
 
     #[test]
