@@ -452,3 +452,36 @@ fn a_bad_hidden_effect_is_a_usage_error() {
     // Nothing written, not even a temporary file.
     assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0);
 }
+
+/// A hidden effect that drives friction out of any physical range (a power
+/// law of the creepage with a negative exponent, near zero creepage: mu
+/// 11.8 on the tangent at seed 5439; the discover campaign of seed 20261208
+/// drew it) is refused as the reader would refuse the file: exit 2, the
+/// measurement named, nothing left behind.
+#[test]
+fn a_truth_model_out_of_range_is_refused_not_written() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("wild.mcap");
+    let o = run_synth(
+        &out,
+        &[
+            "--days",
+            "3",
+            "--preset",
+            "tangent",
+            "--seed",
+            "5439",
+            "--noise-sigma",
+            "0.01",
+            "--hidden",
+            "generic:acts_on=friction_boundary,driver=creepage,form=power,n=-0.9231",
+            "-q",
+        ],
+    );
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{stderr}");
+    for needle in ["mu measurement", "log_time", "within -10 and 10"] {
+        assert!(stderr.contains(needle), "{stderr}");
+    }
+    assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0);
+}

@@ -106,11 +106,12 @@ pub enum Error {
         log_time_ns: u64,
         index_in_file: Option<u64>,
     },
-    /// A synthetic measurement JSON cannot hold (a truth model whose
-    /// friction is infinite there).
+    /// A synthetic measurement a recording cannot hold (a truth model whose
+    /// friction is infinite there, or outside the format's range).
     #[error(
-        "{}: the {quantity} measurement at log_time {log_time_ns} ns is {value}, which JSON \
-         cannot hold",
+        "{}: the {quantity} measurement at log_time {log_time_ns} ns is {value}, which a \
+         recording cannot hold (JSON has no infinity, and a measurement lies within -10 and 10: \
+         the truth model drives friction out of any physical range there)",
         .file.display()
     )]
     NotFinite {
@@ -154,6 +155,9 @@ impl Error {
             Error::Convert(ConvertError::Input(_)) => true,
             Error::Convert(ConvertError::File(e)) => e.is_input(),
             Error::Context { source, .. } => source.is_input(),
+            // The truth model asked for (`--hidden`, `--truth-config`)
+            // drives friction where no recording can hold it.
+            Error::NotFinite { .. } => true,
             // Outputs (and inputs) the machine refuses: a full disk, a
             // read-only folder, a missing file.
             Error::Table(_) | Error::Convert(_) | Error::Recording { .. } | Error::Io { .. } => {
@@ -164,7 +168,6 @@ impl Error {
             | Error::Optimiser(_)
             | Error::NoFitPoint
             | Error::NotSimulated { .. }
-            | Error::NotFinite { .. }
             | Error::Inconsistent(_)
             | Error::Cancelled => false,
         }

@@ -215,13 +215,18 @@ pub(super) fn weather_msg(w: &Weather) -> WeatherMsg {
 }
 
 /// A measurement's `/measurement/friction` with the measured `value`;
-/// `None` when `value` is not finite: JSON cannot hold it.
+/// `None` when `value` is not finite (JSON cannot hold it) or outside the
+/// format's range (`limits::MEASURED_VALUE`: the reader refuses it).
 pub(super) fn measurement_msg(
     section: &Section,
     m: &Measurement,
     value: f64,
 ) -> Option<MeasurementMsg> {
-    if !value.is_finite() {
+    // What the reader would refuse is not written: a truth model that
+    // drives friction out of any physical range (a hidden power law of
+    // the creepage with a negative exponent, near zero creepage) is an
+    // error here, not a recording that no replay reads.
+    if !tortwin_recording::limits::MEASURED_VALUE.contains(value) {
         return None;
     }
     Some(MeasurementMsg {
