@@ -553,3 +553,36 @@ fn a_dry_friction_falling_with_humidity_at_a_site_with_a_high_mu_d_is_named() {
         report["rmse_after"]
     );
 }
+
+/// The seed 20261208 calibration campaign's site 4 (tangent, kc 25 % low,
+/// rail ageing hidden): `m_max_kg` is held with no sensitivity left at the
+/// final fit (a standard error of millions in `ln p`). Through what held
+/// constants may push into a determined one it widened `mu_d` to "95 %
+/// 0–inf", written as `null`; a held constant now pushes no more than its
+/// range allows. Every determined interval is finite and holds the truth,
+/// and a held constant the recording leaves open is said to be open.
+#[test]
+fn a_held_constant_the_recording_leaves_open_neither_opens_nor_is_fixed() {
+    let dir = tempfile::tempdir().unwrap();
+    let truth_toml = "[product]\nkc = 0.4284219256840386\n";
+    let rec = synth(
+        dir.path(),
+        "tangent",
+        5368,
+        truth_toml,
+        &["rail_ageing:tau_s=7200"],
+    );
+    let report = calibrate(&rec, &dir.path().join("report"), None);
+    let truth = ModelConfig::from_overlay_str(truth_toml, "truth").unwrap();
+    assert!(determined_hold_the_truth(&report, &truth) >= 1);
+    let mu_d = constant(&report, "product.mu_d");
+    assert_eq!(mu_d["determined"], true, "{mu_d}");
+    let ci = mu_d["ci95"].as_array().unwrap();
+    assert!(ci[1].as_f64().unwrap() < 0.6, "{mu_d}");
+    let m_max = constant(&report, "product.m_max_kg");
+    let text = m_max["description"].as_str().unwrap();
+    assert!(
+        m_max["status"] != "held" || text.contains("leaves it open"),
+        "{m_max}"
+    );
+}

@@ -1874,7 +1874,13 @@ fn describe_fitted(
         ));
     }
     let with = with.join(", ");
+    // An interval wider than the range a constant may move at all
+    // (THETA_MAX either way) fixes nothing.
+    let open = Z95 * fit.sd > THETA_MAX;
     let description = match (with.is_empty(), fit.pinned) {
+        (true, true) if open => format!(
+            "not determined alone; with the others held the recording leaves it open (95 % {ci_text}, wider than the factor 2.5 a constant may move): {keeping}"
+        ),
         (true, true) => format!(
             "not determined alone; with the others held the recording fixes it within 95 % {ci_text}, which holds {reference_text}: kept there"
         ),
