@@ -95,25 +95,17 @@ pub unsafe fn exp4_register(xv: std::arch::x86_64::__m256d) -> std::arch::x86_64
     let r = _mm256_fmadd_pd(kd, _mm256_set1_pd(NEG_LN2_HI_N), xv);
     let r = _mm256_fmadd_pd(kd, _mm256_set1_pd(NEG_LN2_LO_N), r);
     // The table pair of k mod 128; the exponent k / 128 goes to the top.
-    // Four scalar loads each: AMD's gather instructions are slower.
+    // Each lane's (tail, bits) pair is one 16-byte load, and two unpacks
+    // sort the four pairs into tails and bits (no gather: AMD's are slow).
     let mut k = [0u64; 4];
     _mm256_storeu_si256(k.as_mut_ptr().cast(), ki);
-    let pair = |j: usize| {
-        let i = 2 * (k[j] as usize & 127);
-        (TABLE[i], TABLE[i + 1])
-    };
-    let (p0, p1, p2, p3) = (pair(0), pair(1), pair(2), pair(3));
+    let pair = |j: usize| _mm_loadu_si128(TABLE.as_ptr().add(2 * (k[j] as usize & 127)).cast());
+    // [tail0, bits0 | tail2, bits2] and [tail1, bits1 | tail3, bits3].
+    let even = _mm256_inserti128_si256::<1>(_mm256_castsi128_si256(pair(0)), pair(2));
+    let odd = _mm256_inserti128_si256::<1>(_mm256_castsi128_si256(pair(1)), pair(3));
     let top = _mm256_slli_epi64::<45>(ki);
-    let tail = _mm256_castsi256_pd(_mm256_set_epi64x(
-        p3.0 as i64,
-        p2.0 as i64,
-        p1.0 as i64,
-        p0.0 as i64,
-    ));
-    let sbits = _mm256_add_epi64(
-        _mm256_set_epi64x(p3.1 as i64, p2.1 as i64, p1.1 as i64, p0.1 as i64),
-        top,
-    );
+    let tail = _mm256_castsi256_pd(_mm256_unpacklo_epi64(even, odd));
+    let sbits = _mm256_add_epi64(_mm256_unpackhi_epi64(even, odd), top);
     let r2 = _mm256_mul_pd(r, r);
     let p23 = _mm256_fmadd_pd(r, _mm256_set1_pd(C3), _mm256_set1_pd(C2));
     let p45 = _mm256_fmadd_pd(r, _mm256_set1_pd(C5), _mm256_set1_pd(C4));

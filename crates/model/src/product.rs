@@ -622,20 +622,15 @@ unsafe fn roll_given4_register(
     // (t * 1.0).min(0.5): min_pd gives its second operand where t is NaN,
     // as f64::min does.
     let fraction = _mm256_min_pd(_mm256_mul_pd(t, splat!(1.0)), splat!(TRANSFER_FRACTION_MAX));
-    let wheel_gives = _mm256_cmp_pd::<_CMP_GT_OQ>(w0, r0);
-    let rail_gives = _mm256_cmp_pd::<_CMP_GT_OQ>(r0, w0);
-    let moved_w = _mm256_mul_pd(fraction, _mm256_sub_pd(w0, r0));
-    let moved_r = _mm256_mul_pd(fraction, _mm256_sub_pd(r0, w0));
-    let w_t = pick!(
-        wheel_gives,
-        _mm256_sub_pd(w0, moved_w),
-        pick!(rail_gives, _mm256_add_pd(w0, moved_r), w0),
-    );
-    let r_t = pick!(
-        wheel_gives,
-        _mm256_add_pd(r0, moved_w),
-        pick!(rail_gives, _mm256_sub_pd(r0, moved_r), r0),
-    );
+    // [`transfer`]'s three cases in one: where the rail gives, its
+    // `fraction (r - w)` is exactly `-(fraction (w - r))` (negation commutes
+    // with rounding), so `w + moved` there is `w - fraction (w - r)`, bit for
+    // bit; where the masses are equal, `fraction (w - r)` is zero (fraction is
+    // finite: `min` never returns NaN) and leaves both as they are. Lanes
+    // with a NaN mass have `positive` unset and keep their masses below.
+    let moved = _mm256_mul_pd(fraction, _mm256_sub_pd(w0, r0));
+    let w_t = _mm256_sub_pd(w0, moved);
+    let r_t = _mm256_add_pd(r0, moved);
     let transferred = _mm256_and_pd(transfers, positive);
     let w1 = pick!(transferred, w_t, w0);
     let r1 = pick!(transferred, r_t, r0);
