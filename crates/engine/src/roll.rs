@@ -4,7 +4,7 @@
 
 /// The vector kernel's operations in AVX2 and FMA registers ([`Vector`]):
 /// four lanes' exponentials and quotients at once, steps 3 to 5 of four
-/// contacts, and runs of ordinary steps ([`RollContext::runs_fma`]). A
+/// contacts, and runs of steps in registers ([`RollContext::runs_fma`]). A
 /// macro, to be expanded in a function compiled for AVX2 and FMA and run
 /// only where the CPU has them: closures written there are compiled for
 /// them and inlined into it (made in a function of their own, they were
@@ -691,17 +691,19 @@ impl<F> Roll4 for F where
 {
 }
 
-/// Runs of ordinary steps in registers ([`RollContext::runs_fma`]): given
-/// one or two groups' lanes (of different tracks), the first step and the
-/// step to stop before, returns the first step it did not take.
+/// Runs of steps in registers ([`RollContext::runs_fma`]): given one or
+/// two groups' lanes (of different tracks), the first step and the step to
+/// stop before, returns the first step it did not take.
 trait Run4: Fn(&RollContext<'_>, &mut [RunPart<'_>], usize, usize) -> usize + Copy {}
 impl<F> Run4 for F where F: Fn(&RollContext<'_>, &mut [RunPart<'_>], usize, usize) -> usize + Copy {}
 
-/// One group's part in a run of ordinary steps ([`Run4`]).
+/// One group's part in a run of steps ([`Run4`]).
 struct RunPart<'s> {
+    record: &'s TrainRecord,
+    track: usize,
     lanes: &'s mut [Lane; LANES],
     state: &'s mut TrackState,
-    observed: &'s mut Observed,
+    work: &'s mut TrackWork,
     special: &'s [bool],
     up: bool,
     /// Each lane's constant transfer and consumption factors
@@ -740,6 +742,16 @@ impl RunPart<'_> {
         self.at(s).iter().any(|&i| self.special[i])
     }
 
+    /// The first step from `s` on at which a lane is at a special point
+    /// (`usize::MAX` if no lane reaches one).
+    #[inline(always)]
+    fn special_from(&self, s: usize) -> usize {
+        match self.special_at(s) {
+            true => s,
+            false => self.next_special(s),
+        }
+    }
+
     /// The first step after `s` at which a lane is at a special point,
     /// none being at `s` (`usize::MAX` if no lane reaches one). Lane 0
     /// leads and the others follow it over the points it passed, none of
@@ -762,7 +774,7 @@ struct Vector<E, D, R, U> {
     exp: E,
     div: D,
     roll: R,
-    /// Runs of ordinary steps; `None` where the kernel has no such path
+    /// Runs of steps in registers; `None` where the kernel has no such path
     /// (the portable kernel, the line's).
     run: Option<U>,
 }
@@ -1095,7 +1107,7 @@ struct Wave<'r> {
     lanes: [Lane; LANES],
     clocks: Clocks,
     clock_free: Option<[(f64, f64); LANES]>,
-    /// The lanes' constant factors where runs of ordinary steps may take
+    /// The lanes' constant factors where runs of steps in registers may take
     /// their steps ([`RollContext::runs`]).
     runs: Option<[(f64, f64); LANES]>,
 }
@@ -1115,12 +1127,12 @@ struct Lane {
     roller: Roller,
 }
 
-/// One group's lanes in a run of ordinary steps
-/// ([`RollContext::runs_fma`]), in AVX registers: what the lanes carry from
-/// one step to the next (the wheels' masses and loss totals, the rail mass
-/// each lane leaves for the next lane, which reads that point at the next
-/// step) and the conditions' parts that do not change between special
-/// points (whether and where the wheel passed an applicator, its factors).
+/// One group's lanes in a run of steps ([`RollContext::runs_fma`]), in AVX
+/// registers: what the lanes carry from one step to the next (the wheels'
+/// masses and loss totals, the rail mass each lane leaves for the next
+/// lane, which reads that point at the next step) and the conditions' parts
+/// that change only where a special point's events act (whether and where
+/// the wheel passed an applicator, its factors).
 /// Of the rail masses left, only the last lane's is stored at each step
 /// (no lane of the group reads its point again); the others' when the run
 /// ends.
@@ -1131,8 +1143,9 @@ struct RunLanes {
     observing: bool,
     /// Each lane's distance from the applicator it passed last (0 where it
     /// passed none), its index in the revolution factors, and how that
-    /// changes from one step to the next (+1 or -1: a run never crosses an
-    /// applicator's point, which is special).
+    /// changes from one step to the next (+1 where it passed one: a wheel
+    /// moves away from it; passing another is a special step, after which
+    /// the run takes its lanes up again).
     revolution_at: std::arch::x86_64::__m256i,
     revolution_step: std::arch::x86_64::__m256i,
     transfer_factor: std::arch::x86_64::__m256d,
@@ -1200,11 +1213,10 @@ impl RunLanes {
         // check its indices: every distance on the track is in the table.
         assert!(ctx.revolution.len() >= part.special.len());
         let (at, step): ([i64; LANES], [i64; LANES]) = {
+            // A wheel moves away from the applicator it passed last (from
+            // its point, where a special step may start a run, on).
             let of = |j: usize| match lanes[j].st.applicator_point {
-                Some(ia) => (
-                    is[j].abs_diff(ia) as i64,
-                    if (is[j] > ia) == part.up { 1 } else { -1 },
-                ),
+                Some(ia) => (is[j].abs_diff(ia) as i64, 1),
                 None => (0, 0),
             };
             let lane = [of(0), of(1), of(2), of(3)];
@@ -1267,8 +1279,8 @@ impl RunLanes {
             let m = store_pd!(_mm256_add_pd(self.wheel, self.rail));
             let after = store_pd!(rolled.wheel);
             for j in (0..LANES).filter(|&j| self.observe[j]) {
-                part.observed.mass_kg[is[j]] = m[j];
-                part.observed.wheel_mass_kg[is[j]] = after[j];
+                part.work.observed.mass_kg[is[j]] = m[j];
+                part.work.observed.wheel_mass_kg[is[j]] = after[j];
             }
         }
         self.wheel = rolled.wheel;
@@ -1296,6 +1308,23 @@ impl RunLanes {
         self.revolution_at = _mm256_add_epi64(self.revolution_at, self.revolution_step);
     }
 
+    /// The lanes back in memory before step `s` (after [`RunLanes::advance`]
+    /// to it), for a special point's events to act on: the rail masses
+    /// lanes 1 to 3 are about to read (those lanes 0 to 2 left at the step
+    /// before) at their points, and the lanes' masses and totals in their
+    /// states. [`RunLanes::start`] takes them up again.
+    ///
+    /// # Safety
+    /// The CPU must have AVX.
+    #[inline(always)]
+    unsafe fn suspend(&self, part: &mut RunPart<'_>) {
+        let rail = store_pd!(self.rail);
+        for (&i, &m) in self.is.iter().zip(&rail).skip(1) {
+            part.state.rail_mass_kg[i] = m;
+        }
+        self.store_lanes(part);
+    }
+
     /// The end of the run after a step: the rail masses the other lanes
     /// left, and the lanes' masses and totals back in their states.
     ///
@@ -1307,6 +1336,15 @@ impl RunLanes {
         for (&i, &m) in self.is.iter().zip(&left).take(LANES - 1) {
             part.state.rail_mass_kg[i] = m;
         }
+        self.store_lanes(part);
+    }
+
+    /// The lanes' masses and loss totals back in their states.
+    ///
+    /// # Safety
+    /// The CPU must have AVX.
+    #[inline(always)]
+    unsafe fn store_lanes(&self, part: &mut RunPart<'_>) {
         let wheel = store_pd!(self.wheel);
         let consumed = store_pd!(self.consumed);
         let capped = store_pd!(self.capped);
@@ -1645,7 +1683,7 @@ impl RollContext<'_> {
     }
 
     /// [`RollContext::roll_group`] of two full groups on different tracks,
-    /// side by side where the kernel takes runs of ordinary steps in
+    /// side by side where the kernel takes runs of steps in
     /// registers; one after the other where it does not.
     fn roll_pair(
         &self,
@@ -1709,13 +1747,15 @@ impl RollContext<'_> {
         self.roll_pair_with(groups, tracks, v);
     }
 
-    /// Ordinary steps of one or two groups' lanes (on different tracks)
-    /// from `first` on, in registers ([`RunLanes`]): each step is
+    /// The steps of one or two groups' lanes (on different tracks) from
+    /// `first` until before `end`, in registers ([`RunLanes`]): each step is
     /// [`RollContext::contacts4`]'s with clock-free lanes, the same
     /// operations on the same values, so the same bits. Two groups' steps
-    /// are independent chains the core overlaps. Stops before `end` or
-    /// before a step where a lane of either group is at a special point;
-    /// returns the step it stopped at.
+    /// are independent chains the core overlaps. A step where a lane is at
+    /// a special point is taken in the run too
+    /// ([`RollContext::special_step`]; before 2026-12-04 the run stopped
+    /// there, and the wavefront's own step, four times as costly, took
+    /// it). Returns the step it stopped at (`end`).
     ///
     /// Only for lanes without tangents, the wheel_edge_reservoir effect or
     /// every wheel's contacts kept ([`RollContext::runs`]).
@@ -1747,25 +1787,32 @@ impl RollContext<'_> {
         end: usize,
     ) -> usize {
         let mut s = first;
-        if s >= end || parts.iter().any(|p| p.special_at(s)) {
+        if s >= end {
             return s;
         }
-        // The step the run stops before, found once rather than by looking
-        // at the lanes' points at every step.
-        let stop = parts
-            .iter()
-            .map(|p| p.next_special(s))
-            .fold(end, usize::min);
+        // The next step at which a lane of each group is at a special
+        // point, found when the run starts and after each such step rather
+        // than by looking at the lanes' points at every step.
+        let mut next: [usize; K] = std::array::from_fn(|k| parts[k].special_from(s));
         let mut runs: [RunLanes; K] = std::array::from_fn(|k| RunLanes::start(self, &parts[k], s));
         // A copy the loop's stores cannot reach: its reciprocals are taken
         // once, not at every step.
         let params = *self.product;
         loop {
-            for (run, part) in runs.iter_mut().zip(parts.iter_mut()) {
-                run.step(self, &params, part);
+            if next.contains(&s) {
+                self.special_step(&mut runs, parts, &next, &params, s);
+                for (n, part) in next.iter_mut().zip(parts.iter()) {
+                    if *n == s {
+                        *n = part.special_from(s + 1);
+                    }
+                }
+            } else {
+                for (run, part) in runs.iter_mut().zip(parts.iter_mut()) {
+                    run.step(self, &params, part);
+                }
             }
             s += 1;
-            if s >= stop {
+            if s >= end {
                 break;
             }
             for (run, part) in runs.iter_mut().zip(parts.iter()) {
@@ -1776,6 +1823,65 @@ impl RollContext<'_> {
             run.finish(part);
         }
         s
+    }
+
+    /// Step `s` of a run where a lane of a group is at a special point, in
+    /// [`RollContext::wave_step`]'s order: the events there before its
+    /// wheel (on the lanes back in memory, then taken up again), the step,
+    /// then its sites. The four lanes' points are distinct and each event
+    /// acts on its own point only.
+    ///
+    /// # Safety
+    /// The CPU must have AVX2 and FMA.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    unsafe fn special_step<const K: usize>(
+        &self,
+        runs: &mut [RunLanes; K],
+        parts: &mut [RunPart<'_>; K],
+        next: &[usize; K],
+        params: &ProductParams,
+        s: usize,
+    ) {
+        use std::arch::x86_64::_mm256_add_pd;
+        let mut at_s = [[f64::NAN; LANES]; K];
+        let mut seen = [[0.0; LANES]; K];
+        for k in (0..K).filter(|&k| next[k] == s) {
+            let part = &mut parts[k];
+            let is = part.at(s);
+            // Only a pulse or reading still to run there, or an applicator
+            // the wheel passes, changes what the lanes hold; at a site
+            // alone only the wheel's time is wanted.
+            let changes = |i: usize| {
+                part.work.pending_at[i] != 0 || self.applicator_at[part.track][i] != NO_APPLICATOR
+            };
+            if (0..LANES).any(|j| part.special[is[j]] && changes(is[j])) {
+                runs[k].suspend(part);
+                for j in (0..LANES).filter(|&j| part.special[is[j]]) {
+                    let lane = &mut part.lanes[j];
+                    at_s[k][j] =
+                        self.special_before(part.track, part.state, part.work, lane, is[j]);
+                }
+                runs[k] = RunLanes::start(self, part, s);
+            } else {
+                for j in (0..LANES).filter(|&j| part.special[is[j]]) {
+                    at_s[k][j] = part.lanes[j].roller.time_at(self.d_m, is[j]);
+                }
+            }
+            seen[k] = store_pd!(_mm256_add_pd(runs[k].wheel, runs[k].rail));
+        }
+        for (run, part) in runs.iter_mut().zip(parts.iter_mut()) {
+            run.step(self, params, part);
+        }
+        for k in (0..K).filter(|&k| next[k] == s) {
+            let part = &mut parts[k];
+            let is = part.at(s);
+            for j in (0..LANES).filter(|&j| part.special[is[j]]) {
+                let lane = &part.lanes[j];
+                let (t, m) = (at_s[k][j], seen[k][j]);
+                self.special_after(part.record, part.track, part.work, lane, is[j], t, m);
+            }
+        }
     }
 
     #[inline(always)]
@@ -1806,7 +1912,7 @@ impl RollContext<'_> {
 
     /// Two groups of as many wheels as there are lanes, on different
     /// tracks, rolled step by step side by side: [`RollContext::roll_group`]
-    /// of each, with their runs of ordinary steps taken together (two
+    /// of each, with their runs of steps in registers taken together (two
     /// independent chains for the core to overlap). The tracks share
     /// nothing while a train rolls (they may roll on different threads), so
     /// the order of one's steps against the other's changes nothing.
@@ -1847,7 +1953,7 @@ impl RollContext<'_> {
     }
 
     /// The wavefront of `group` before its first step. `runs`: the kernel
-    /// has runs of ordinary steps ([`Vector::run`]).
+    /// has runs of steps in registers ([`Vector::run`]).
     #[inline(always)]
     fn wave<'r>(&self, group: &Group<'r>, runs: bool) -> Wave<'r> {
         let Group {
@@ -1873,7 +1979,7 @@ impl RollContext<'_> {
             true => None,
             false => clock_free(&lanes),
         };
-        // Runs of ordinary steps where the kernel has them and the lanes
+        // Runs of steps in registers where the kernel has them and the lanes
         // allow.
         let runs = match runs && self.runs(&lanes) {
             true => clock_free,
@@ -1899,14 +2005,14 @@ impl RollContext<'_> {
         self.d_m.len() + wave.n - 1
     }
 
-    /// Whether a run of ordinary steps may start at step `s`: every lane is
+    /// Whether a run of steps may start at step `s`: every lane is
     /// on the track, none takes its last step, and the lanes allow runs.
     #[inline(always)]
     fn runs_at(&self, wave: &Wave<'_>, s: usize) -> bool {
         wave.runs.is_some() && wave.n == LANES && s + 1 >= LANES && s + 1 < self.d_m.len()
     }
 
-    /// A wavefront's part in a run of ordinary steps.
+    /// A wavefront's part in a run of steps.
     #[inline(always)]
     fn run_part<'s>(
         &'s self,
@@ -1915,9 +2021,11 @@ impl RollContext<'_> {
         work: &'s mut TrackWork,
     ) -> RunPart<'s> {
         RunPart {
+            record: wave.record,
+            track: wave.track,
             lanes: &mut wave.lanes,
             state,
-            observed: &mut work.observed,
+            work,
             special: &self.special[wave.track],
             up: wave.up,
             factors: wave.runs.unwrap_or_default(),
@@ -2048,7 +2156,7 @@ impl RollContext<'_> {
         )
     }
 
-    /// Whether [`RollContext::runs_fma`] may take these lanes' ordinary
+    /// Whether [`RollContext::runs_fma`] may take these lanes'
     /// steps: no tangents, no wheel_edge_reservoir and no row of every
     /// wheel's contacts to keep (the steps it leaves out).
     fn runs(&self, lanes: &[Lane; LANES]) -> bool {
