@@ -1877,26 +1877,16 @@ fn describe_fitted(
     // An interval wider than the range a constant may move at all
     // (THETA_MAX either way) fixes nothing.
     let open = Z95 * fit.sd > THETA_MAX;
-    let description = match (with.is_empty(), fit.pinned) {
-        (true, true) if open => format!(
-            "not determined alone; with the others held the recording leaves it open (95 % {ci_text}, wider than the factor 2.5 a constant may move): {keeping}"
-        ),
-        (true, true) => format!(
-            "not determined alone; with the others held the recording fixes it within 95 % {ci_text}, which holds {reference_text}: kept there"
-        ),
-        (true, false) => format!(
-            "not determined alone; with the others held the recording puts it at {} (95 % {ci_text})",
-            fmt_param(estimate)
-        ),
-        (false, true) => format!(
-            "not determined alone: it acts on these measurements as {with} do; the recording fixes the combination {expression} within 95 % {ci_text}, which holds {reference_text}: kept there"
-        ),
-        (false, false) => format!(
-            "not determined alone: it acts on these measurements as {with} do; the recording fixes the combination {expression} = {} (95 % {ci_text}), carried by {} with {with} at their reference values",
-            fmt_param(estimate),
-            key.name()
-        ),
-    };
+    let description = RepresentativeText {
+        with: &with,
+        expression: &expression,
+        estimate,
+        name: key.name(),
+        ci_text: &ci_text,
+        reference_text: &reference_text,
+        keeping,
+    }
+    .describe(fit.pinned, open);
     SiteConstant {
         ci95: None,
         determined: false,
@@ -1910,6 +1900,63 @@ fn describe_fitted(
         }),
         description,
         ..base
+    }
+}
+
+/// What a representative's description is made of ([`describe_fitted`]).
+struct RepresentativeText<'a> {
+    /// The held constants it cannot be told from, by name ("" if none).
+    with: &'a str,
+    /// Its combination with them, as a product of powers.
+    expression: &'a str,
+    /// The fitted value of the representative (of the combination).
+    estimate: f64,
+    name: &'a str,
+    ci_text: &'a str,
+    /// The reference value, saying whose it is.
+    reference_text: &'a str,
+    /// Where a constant the recording leaves open is kept.
+    keeping: &'a str,
+}
+
+impl RepresentativeText<'_> {
+    /// The description of a representative `held` at its reference value
+    /// or carrying the fit, whose interval is `open` (wider than the range
+    /// a constant may move at all): an open interval fixes nothing, alone
+    /// or as a combination.
+    fn describe(&self, held: bool, open: bool) -> String {
+        let Self {
+            with,
+            expression,
+            estimate,
+            name,
+            ci_text,
+            reference_text,
+            keeping,
+        } = *self;
+        let acts = format!("not determined alone: it acts on these measurements as {with} do");
+        match (with.is_empty(), held) {
+            (true, true) if open => format!(
+                "not determined alone; with the others held the recording leaves it open (95 % {ci_text}, wider than the factor 2.5 a constant may move): {keeping}"
+            ),
+            (true, true) => format!(
+                "not determined alone; with the others held the recording fixes it within 95 % {ci_text}, which holds {reference_text}: kept there"
+            ),
+            (true, false) => format!(
+                "not determined alone; with the others held the recording puts it at {} (95 % {ci_text})",
+                fmt_param(estimate)
+            ),
+            (false, true) if open => format!(
+                "{acts}; the recording leaves the combination {expression} open (95 % {ci_text}, wider than the factor 2.5 a constant may move): {keeping}"
+            ),
+            (false, true) => format!(
+                "{acts}; the recording fixes the combination {expression} within 95 % {ci_text}, which holds {reference_text}: kept there"
+            ),
+            (false, false) => format!(
+                "{acts}; the recording fixes the combination {expression} = {} (95 % {ci_text}), carried by {name} with {with} at their reference values",
+                fmt_param(estimate),
+            ),
+        }
     }
 }
 
@@ -2064,6 +2111,37 @@ mod tests {
             (0.0039f64.powi(2) + (0.003 * THETA_MAX).powi(2) + (0.2 * 0.05f64).powi(2)).sqrt();
         assert!((sd - most).abs() < 1e-12, "{sd} against {most}");
         assert!(sd < 0.02, "{sd}");
+    }
+
+    #[test]
+    fn an_open_interval_fixes_no_combination_either() {
+        let text = RepresentativeText {
+            with: "km2",
+            expression: "m0_kg × (km2 / 1.2)^1.00",
+            estimate: 2e-4,
+            name: "m0_kg",
+            ci_text: "1.1e-6–0.037",
+            reference_text: "the laboratory's 0.0002",
+            keeping: "kept at the laboratory's value",
+        };
+        let open = text.describe(true, true);
+        assert!(
+            open.contains("leaves the combination m0_kg × (km2 / 1.2)^1.00 open"),
+            "{open}"
+        );
+        assert!(!open.contains("fixes"), "{open}");
+        let narrow = text.describe(true, false);
+        assert!(narrow.contains("fixes the combination"), "{narrow}");
+        // Alone, the same.
+        let alone = RepresentativeText { with: "", ..text };
+        assert!(alone.describe(true, true).contains("leaves it open"));
+        assert!(alone.describe(true, false).contains("fixes it within"));
+        // Carrying the fit, the interval is given with the value.
+        let carried = text.describe(false, true);
+        assert!(
+            carried.contains("(95 % 1.1e-6–0.037), carried by m0_kg"),
+            "{carried}"
+        );
     }
 
     #[test]
