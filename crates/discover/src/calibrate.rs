@@ -1935,9 +1935,12 @@ impl RepresentativeText<'_> {
             keeping,
         } = *self;
         let acts = format!("not determined alone: it acts on these measurements as {with} do");
+        let left_open = format!(
+            "open (95 % {ci_text}, wider than the factor 2.5 a constant may move): {keeping}"
+        );
         match (with.is_empty(), held) {
             (true, true) if open => format!(
-                "not determined alone; with the others held the recording leaves it open (95 % {ci_text}, wider than the factor 2.5 a constant may move): {keeping}"
+                "not determined alone; with the others held the recording leaves it {left_open}"
             ),
             (true, true) => format!(
                 "not determined alone; with the others held the recording fixes it within 95 % {ci_text}, which holds {reference_text}: kept there"
@@ -1946,9 +1949,9 @@ impl RepresentativeText<'_> {
                 "not determined alone; with the others held the recording puts it at {} (95 % {ci_text})",
                 fmt_param(estimate)
             ),
-            (false, true) if open => format!(
-                "{acts}; the recording leaves the combination {expression} open (95 % {ci_text}, wider than the factor 2.5 a constant may move): {keeping}"
-            ),
+            (false, true) if open => {
+                format!("{acts}; the recording leaves the combination {expression} {left_open}")
+            }
             (false, true) => format!(
                 "{acts}; the recording fixes the combination {expression} within 95 % {ci_text}, which holds {reference_text}: kept there"
             ),
