@@ -1849,13 +1849,9 @@ impl RollContext<'_> {
         for k in (0..K).filter(|&k| next[k] == s) {
             let part = &mut parts[k];
             let is = part.at(s);
-            // Only a pulse or reading still to run there, or an applicator
-            // the wheel passes, changes what the lanes hold; at a site
-            // alone only the wheel's time is wanted.
-            let changes = |i: usize| {
-                part.work.pending_at[i] != 0 || self.applicator_at[part.track][i] != NO_APPLICATOR
-            };
-            if (0..LANES).any(|j| part.special[is[j]] && changes(is[j])) {
+            // At a site alone only the wheel's time is wanted.
+            let acts = |i: usize| self.acts_before(part.track, part.work, i);
+            if (0..LANES).any(|j| part.special[is[j]] && acts(is[j])) {
                 runs[k].suspend(part);
                 for j in (0..LANES).filter(|&j| part.special[is[j]]) {
                     let lane = &mut part.lanes[j];
@@ -2431,6 +2427,13 @@ impl RollContext<'_> {
         let m_kg = self.contact(lane, state, work, i);
         self.special_after(record, track, work, lane, i, t, m_kg);
         m_kg
+    }
+
+    /// Whether [`RollContext::special_before`] at point `i` can change
+    /// more than it returns (a pulse or reading still to run there, or an
+    /// applicator the wheel passes); where not, it is the wheel's time.
+    fn acts_before(&self, track: usize, work: &TrackWork, i: usize) -> bool {
+        work.pending_at[i] != 0 || self.applicator_at[track][i] != NO_APPLICATOR
     }
 
     /// What comes before `lane`'s contact at the special point `i`: the
