@@ -228,16 +228,23 @@ pub struct SinkThread {
 }
 
 impl SinkThread {
-    /// Starts `sink` on a thread named `name`, which runs behind the engine
-    /// ([`tortwin_handover::behind_the_engine`]: a batch replay's outputs).
-    pub fn spawn<S: Sink + Send + 'static>(name: &str, sink: S) -> std::io::Result<Self> {
+    /// Starts `sink` on a thread named `name`; with `behind`, the thread runs
+    /// behind the engine ([`tortwin_handover::behind_the_engine`]: a batch
+    /// replay's outputs, unless they weigh as much as the engine).
+    pub fn spawn<S: Sink + Send + 'static>(
+        name: &str,
+        sink: S,
+        behind: bool,
+    ) -> std::io::Result<Self> {
         let (to_thread, calls) = tortwin_handover::channel::<Vec<Call>>(QUEUE);
         let failed = Arc::new(AtomicBool::new(false));
         let flag = Arc::clone(&failed);
         let thread = std::thread::Builder::new()
             .name(name.to_owned())
             .spawn(move || {
-                tortwin_handover::behind_the_engine();
+                if behind {
+                    tortwin_handover::behind_the_engine();
+                }
                 let result = run(sink, &calls);
                 if result.is_err() {
                     flag.store(true, Ordering::Release);
@@ -573,7 +580,7 @@ mod tests {
         let (mut direct, direct_lines, _) = log(None);
         drive(&mut direct, 700).expect("the direct sink takes every call");
         let (sink, threaded_lines, dropped) = log(None);
-        let mut threaded = SinkThread::spawn("test", sink).expect("a thread");
+        let mut threaded = SinkThread::spawn("test", sink, true).expect("a thread");
         drive(&mut threaded, 700).expect("the threaded sink takes every call");
         assert!(dropped.load(Ordering::Acquire), "finish ends the thread");
         let (a, b) = (direct_lines.lock().unwrap(), threaded_lines.lock().unwrap());
@@ -585,7 +592,7 @@ mod tests {
     fn an_error_of_the_sink_comes_back_and_the_sink_is_dropped() {
         for fail_at in [0, 1, 1500, 4901] {
             let (sink, _, dropped) = log(Some(fail_at));
-            let mut threaded = SinkThread::spawn("test", sink).expect("a thread");
+            let mut threaded = SinkThread::spawn("test", sink, true).expect("a thread");
             let err = drive(&mut threaded, 700).expect_err("the sink fails");
             assert_eq!(err.to_string(), format!("disk full at call {fail_at}"));
             drop(threaded);
@@ -593,7 +600,7 @@ mod tests {
         }
         // Dropped unfinished (the engine failed): the sink is gone too.
         let (sink, lines, dropped) = log(None);
-        let mut threaded = SinkThread::spawn("test", sink).expect("a thread");
+        let mut threaded = SinkThread::spawn("test", sink, true).expect("a thread");
         threaded
             .train(&TrainEvent {
                 log_time_ns: 0,

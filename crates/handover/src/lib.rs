@@ -47,7 +47,9 @@ pub const BEHIND_NICE: i32 = 19;
 /// not only to its engine, so beside other busy work the replay's reading
 /// and writing wait for it. A batch replay's threads are put behind; a
 /// live twin's (`tortwin live`, which must keep up with the recording as
-/// it is written) are not.
+/// it is written) are not, nor the MCAP writer of a long replay and the
+/// thread that feeds it, whose work weighs as much as the engine's
+/// (`McapCompression::runs_behind_the_engine` in tortwin-outputs).
 ///
 /// Linux keeps the policy and the nice value per thread, so only the
 /// calling thread changes; neither can be undone without privileges, so

@@ -7,7 +7,7 @@ use tortwin_engine::alerts::{AlertMemory, Alerting};
 use tortwin_engine::sink::{Fanout, RunSummary, Sink, SinkThread};
 use tortwin_engine::{Engine, EngineOptions, EngineState};
 use tortwin_files::usage::UsageError;
-use tortwin_outputs::mcap_out::McapSink;
+use tortwin_outputs::mcap_out::{McapCompression, McapSink};
 use tortwin_outputs::provenance::Provenance;
 use tortwin_outputs::rerun_out::{RerunOptions, RerunSink};
 use tortwin_recording::error::InputError;
@@ -254,8 +254,12 @@ fn run(
             .sinks
             .extend(rrd.map(|s| Box::new(s) as Box<dyn Sink + Send>));
         let path = args.out_mcap.as_ref().or(args.out_rrd.as_ref());
+        // Behind the engine unless it feeds an MCAP writer as busy as the
+        // engine (McapCompression::runs_behind_the_engine).
+        let behind = args.out_mcap.is_none()
+            || McapCompression::for_recording(reader.message_count()).runs_behind_the_engine();
         Some(
-            SinkThread::spawn("tortwin-outputs", files).map_err(|source| Error::Io {
+            SinkThread::spawn("tortwin-outputs", files, behind).map_err(|source| Error::Io {
                 what: "cannot start the thread that writes",
                 path: path.cloned().unwrap_or_default(),
                 source,

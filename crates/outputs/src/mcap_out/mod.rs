@@ -234,7 +234,8 @@ impl McapSink {
         compression: McapCompression,
         line: bool,
     ) -> Result<McapSink, McapError> {
-        let file = McapFile::create(path, provenance, compression, line, true)?;
+        let behind = compression.runs_behind_the_engine();
+        let file = McapFile::create(path, provenance, compression, line, behind)?;
         Ok(Self::with_file(Some(file), path.to_path_buf(), None))
     }
 
@@ -1017,6 +1018,22 @@ impl McapCompression {
             McapCompression::Fast => 1,
             McapCompression::Small => 8,
         }
+    }
+
+    /// Whether a replay's MCAP writer thread, and the thread that feeds it,
+    /// run behind the engine ([`tortwin_handover::behind_the_engine`]).
+    /// At level 1 they are light, and behind the engine they cannot take a
+    /// core it wants (the 3-day benchmark, medians of 20: 79.4 ms behind,
+    /// 82.4 ms not). At level 8 the writer's work is about the engine's
+    /// (the year: 8 to 12 CPU-s against 9.5). Behind it, the engine's
+    /// thread slept 7.3 s of the year's 16.8 s on their full queues, and
+    /// a core idled 4.8 s (`perf sched`: threads of the idle policy waited,
+    /// runnable, behind each other on one core while the other had
+    /// nothing); at normal priority the year ran 12.8-14.0 s where it ran
+    /// 13.1-14.2 s behind (four runs each, this option its only
+    /// difference, the project's 2-core machine).
+    pub fn runs_behind_the_engine(self) -> bool {
+        self == McapCompression::Fast
     }
 
     /// The mcap writer's options for these chunks.
