@@ -1056,7 +1056,7 @@ impl Engine {
         // The weather over the occupation, and the point events per track.
         self.timeline.reset(self.weather);
         for work in &mut self.work {
-            work.events.clear();
+            work.clear_events();
         }
         for (b, buffered) in self.window.iter().enumerate() {
             match &buffered.event.kind {
@@ -1068,7 +1068,7 @@ impl Engine {
                     let tracks = &self.pulse_tracks[p.applicator][p.rail];
                     for &track in tracks {
                         let point = self.applicator_points[p.applicator];
-                        self.work[track].events.push(PointEvent {
+                        self.work[track].push_event(PointEvent {
                             point,
                             time_s: buffered.time_s,
                             buffered: b,
@@ -1078,20 +1078,18 @@ impl Engine {
                             },
                             done: false,
                         });
-                        self.work[track].pending_at[point] += 1;
                     }
                 }
                 EventKind::Measurement(m) if m.of == Measured::RailMu => {
                     let track = self.reading_track[m.rail];
                     let point = self.site_points[m.site];
-                    self.work[track].events.push(PointEvent {
+                    self.work[track].push_event(PointEvent {
                         point,
                         time_s: buffered.time_s,
                         buffered: b,
                         kind: PointEventKind::Reading,
                         done: false,
                     });
-                    self.work[track].pending_at[point] += 1;
                 }
                 _ => {}
             }

@@ -900,8 +900,11 @@ fn parallel_min_contacts(opts: &crate::EngineOptions) -> usize {
 pub(crate) struct TrackWork {
     /// The pulses and readings of the window on this track.
     pub(crate) events: Vec<PointEvent>,
-    /// Per point: how many of `events` are still to run there.
-    pub(crate) pending_at: Vec<u32>,
+    /// Per point: no later than the earliest time of `events` still to run
+    /// there (infinite where none is). Exact after a wheel's look at the
+    /// point ([`RollContext::run_events_before`]); an event run otherwise
+    /// leaves it earlier, which only costs the next wheel a look.
+    next_at: Vec<f64>,
     /// What the last wheel (or every wheel) saw.
     pub(crate) observed: Observed,
     /// This train's axles whose wheel runs on this track, in order.
@@ -946,10 +949,25 @@ pub(crate) struct Reading {
 }
 
 impl TrackWork {
+    /// Adds a pulse or reading of the window.
+    pub(crate) fn push_event(&mut self, event: PointEvent) {
+        let at = &mut self.next_at[event.point];
+        *at = at.min(event.time_s);
+        self.events.push(event);
+    }
+
+    /// Forgets the window's events, for the next train's.
+    pub(crate) fn clear_events(&mut self) {
+        for event in &self.events {
+            self.next_at[event.point] = f64::INFINITY;
+        }
+        self.events.clear();
+    }
+
     pub(crate) fn new(points: usize) -> Self {
         Self {
             events: Vec::new(),
-            pending_at: vec![0; points],
+            next_at: vec![f64::INFINITY; points],
             observed: Observed::new(points),
             axles: Vec::new(),
             ledger: Vec::new(),
@@ -1850,8 +1868,11 @@ impl RollContext<'_> {
             let part = &mut parts[k];
             let is = part.at(s);
             // At a site alone only the wheel's time is wanted.
-            let acts = |i: usize| self.acts_before(part.track, part.work, i);
-            if (0..LANES).any(|j| part.special[is[j]] && acts(is[j])) {
+            let acts = |j: usize| {
+                let t = part.lanes[j].roller.time_at(self.d_m, is[j]);
+                self.acts_before(part.track, part.work, is[j], t)
+            };
+            if (0..LANES).any(|j| part.special[is[j]] && acts(j)) {
                 runs[k].suspend(part);
                 for j in (0..LANES).filter(|&j| part.special[is[j]]) {
                     let lane = &mut part.lanes[j];
@@ -2429,11 +2450,12 @@ impl RollContext<'_> {
         m_kg
     }
 
-    /// Whether [`RollContext::special_before`] at point `i` can change
-    /// more than it returns (a pulse or reading still to run there, or an
-    /// applicator the wheel passes); where not, it is the wheel's time.
-    fn acts_before(&self, track: usize, work: &TrackWork, i: usize) -> bool {
-        work.pending_at[i] != 0 || self.applicator_at[track][i] != NO_APPLICATOR
+    /// Whether [`RollContext::special_before`] at point `i`, for a wheel
+    /// there at `t`, can change more than it returns (a pulse or reading
+    /// there before `t` still to run, or an applicator the wheel passes);
+    /// where not, it is the wheel's time.
+    fn acts_before(&self, track: usize, work: &TrackWork, i: usize, t: f64) -> bool {
+        work.next_at[i] < t || self.applicator_at[track][i] != NO_APPLICATOR
     }
 
     /// What comes before `lane`'s contact at the special point `i`: the
@@ -2511,22 +2533,33 @@ impl RollContext<'_> {
         i: usize,
         t: f64,
     ) {
-        if work.pending_at[i] == 0 {
+        // Most wheels find nothing due: the window's events at the point
+        // come after them (the next train's), or ran before them.
+        let due = work.next_at[i] < t;
+        if !due {
             return;
         }
+        let mut next = f64::INFINITY;
         for k in 0..work.events.len() {
             let ev = work.events[k];
-            if !ev.done && ev.point == i && ev.time_s < t {
-                let weather = *self.timeline.at(ev.time_s);
-                if let Ran::Pulse(totals) = self.run_point_event(track, state, work, k, &weather) {
-                    work.ledger.push(Addend {
-                        order: lane.serial << 32 | lane.pulses,
-                        kind: AddendKind::Pulse(totals),
-                    });
-                    lane.pulses += 1;
-                }
+            if ev.done || ev.point != i {
+                continue;
+            }
+            let due = ev.time_s < t;
+            if !due {
+                next = next.min(ev.time_s);
+                continue;
+            }
+            let weather = *self.timeline.at(ev.time_s);
+            if let Ran::Pulse(totals) = self.run_point_event(track, state, work, k, &weather) {
+                work.ledger.push(Addend {
+                    order: lane.serial << 32 | lane.pulses,
+                    kind: AddendKind::Pulse(totals),
+                });
+                lane.pulses += 1;
             }
         }
+        work.next_at[i] = next;
     }
 
     /// A wheel (axle `a` on `track`'s rail) ready to roll: everything that
@@ -2833,7 +2866,6 @@ impl RollContext<'_> {
             }
         };
         work.events[k].done = true;
-        work.pending_at[ev.point] -= 1;
         ran
     }
 }
