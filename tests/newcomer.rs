@@ -11,7 +11,10 @@
 //! the other dependencies are not compiled a second time within CI's time
 //! (a cold build of them is what CI's own build from a clean clone does).
 //! The test fails if the clone's builds compile any of them again but
-//! pyo3's crates, which only the extension module uses: that is a feature
+//! pyo3's crates, which only the extension module uses, and the crates
+//! built from the clone's own sources (third_party/mcap, a patched crate)
+//! with those above them, whose fingerprints name the clone's folder
+//! ([`built_from_the_clone`]): that is a feature
 //! set that differs from the test build's (Cargo.toml, "feature
 //! alignment"), and it costs every newcomer and CI minutes. Commands
 //! written with `tortwin` run the clone's own build
@@ -152,7 +155,16 @@ fn the_readme_commands_work_in_a_fresh_clone() {
         ran += 1;
     }
     assert!(ran >= 8, "only {ran} README commands ran: {commands:?}");
-    let compiled_again = third_party_compiled_since(&target, seeded);
+    let ours = built_from_the_clone(&clone);
+    let compiled_again: Vec<String> = third_party_compiled_since(&target, seeded)
+        .into_iter()
+        .filter(|unit| {
+            let name = unit
+                .rsplit_once('-')
+                .map_or(unit.as_str(), |(name, _)| name);
+            !ours.contains(name)
+        })
+        .collect();
     assert!(
         compiled_again.is_empty(),
         "the clone's builds compiled these third-party crates again, with \
@@ -208,6 +220,56 @@ find "$1/deps" -maxdepth 1 -type f -name 'lib*' ! -name 'libtortwin*' \
         .unwrap();
     common::check(&o, "seeding the clone's target folder");
     std::fs::rename(&seeding, target).unwrap();
+}
+
+/// The packages of the clone's build whose units are the clone's own: those
+/// built from its folders (the workspace's crates and third_party/mcap,
+/// which `[patch.crates-io]` puts in the crates.io crate's place) and every
+/// package that depends on one of them (foxglove on mcap). Their
+/// fingerprints depend on the clone's path, so the clone compiles them
+/// whatever the features; from `cargo metadata`'s resolved graph.
+fn built_from_the_clone(clone: &Path) -> std::collections::BTreeSet<String> {
+    let o = Command::new(env!("CARGO"))
+        .args(["metadata", "--format-version", "1"])
+        .current_dir(clone)
+        .output()
+        .expect("cargo runs");
+    common::check(&o, "cargo metadata in the clone");
+    let metadata: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let packages = metadata["packages"].as_array().unwrap();
+    let name_of = |id: &str| {
+        packages
+            .iter()
+            .find(|p| p["id"] == id)
+            .and_then(|p| p["name"].as_str())
+            .unwrap()
+            .to_owned()
+    };
+    let mut ours: std::collections::BTreeSet<String> = packages
+        .iter()
+        .filter(|p| p["source"].is_null())
+        .map(|p| p["id"].as_str().unwrap().to_owned())
+        .collect();
+    let nodes = metadata["resolve"]["nodes"].as_array().unwrap();
+    loop {
+        let above: Vec<String> = nodes
+            .iter()
+            .filter(|n| !ours.contains(n["id"].as_str().unwrap()))
+            .filter(|n| {
+                n["dependencies"]
+                    .as_array()
+                    .unwrap()
+                    .iter()
+                    .any(|d| ours.contains(d.as_str().unwrap()))
+            })
+            .map(|n| n["id"].as_str().unwrap().to_owned())
+            .collect();
+        if above.is_empty() {
+            break;
+        }
+        ours.extend(above);
+    }
+    ours.iter().map(|id| name_of(id)).collect()
 }
 
 /// The third-party units (cargo's fingerprint folders, `name-hash`) that a
