@@ -7,7 +7,7 @@ use tortwin_engine::alerts::{AlertMemory, Alerting};
 use tortwin_engine::sink::{Fanout, RunSummary, Sink, SinkThread};
 use tortwin_engine::{Engine, EngineOptions, EngineState};
 use tortwin_files::usage::UsageError;
-use tortwin_outputs::mcap_out::{McapCompression, McapSink};
+use tortwin_outputs::mcap_out::McapSink;
 use tortwin_outputs::provenance::Provenance;
 use tortwin_outputs::rerun_out::{RerunOptions, RerunSink};
 use tortwin_recording::error::InputError;
@@ -245,6 +245,9 @@ fn run(
         .transpose()?;
     // The files are encoded and written on a thread of their own while the
     // engine steps (the same calls in the same order: the same files).
+    // Behind the engine unless it feeds an MCAP writer as busy as the
+    // engine (McapCompression::runs_behind_the_engine).
+    let behind = mcap.as_ref().is_none_or(McapSink::writer_runs_behind);
     let mut files = if mcap.is_some() || rrd.is_some() {
         let mut files: Fanout<Box<dyn Sink + Send>> = Fanout::default();
         files
@@ -254,10 +257,6 @@ fn run(
             .sinks
             .extend(rrd.map(|s| Box::new(s) as Box<dyn Sink + Send>));
         let path = args.out_mcap.as_ref().or(args.out_rrd.as_ref());
-        // Behind the engine unless it feeds an MCAP writer as busy as the
-        // engine (McapCompression::runs_behind_the_engine).
-        let behind = args.out_mcap.is_none()
-            || McapCompression::for_recording(reader.message_count()).runs_behind_the_engine();
         Some(
             SinkThread::spawn("tortwin-outputs", files, behind).map_err(|source| Error::Io {
                 what: "cannot start the thread that writes",

@@ -170,6 +170,8 @@ struct McapFile {
     writer: WriterThread,
     temp: PartialFile,
     channel_ids: [u16; Topic::ALL.len()],
+    /// Whether the writer thread runs behind the engine.
+    behind: bool,
 }
 
 /// How a daily output names and opens its files.
@@ -269,6 +271,13 @@ impl McapSink {
             .format("%Y-%m-%d")
             .to_string();
         folder.join(format!("{stem}.{date}.mcap"))
+    }
+
+    /// Whether the file's writer thread runs behind the engine
+    /// ([`McapCompression::runs_behind_the_engine`]), so that the thread
+    /// feeding it may too.
+    pub fn writer_runs_behind(&self) -> bool {
+        self.file.as_ref().is_none_or(|f| f.behind)
     }
 
     fn with_file(file: Option<McapFile>, path: PathBuf, daily: Option<Daily>) -> McapSink {
@@ -433,6 +442,7 @@ impl McapFile {
             writer: WriterThread::start(writer, path, behind)?,
             temp,
             channel_ids,
+            behind,
         })
     }
 
