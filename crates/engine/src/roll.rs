@@ -1192,13 +1192,12 @@ struct RunLanes {
     capped: std::arch::x86_64::__m256d,
     /// The rail masses the lanes read at this step, at the lanes' points.
     rail: std::arch::x86_64::__m256d,
-    /// The points of lane 0 (which reads a new point at each step) and of
-    /// the last lane (which leaves the only rail mass stored at each
-    /// step), and how both change from one step to the next (+1 going up,
-    /// -1 wrapped going down): two additions a step where the four points
-    /// were worked out anew ([`RunPart::at`]).
+    /// The point of lane 0 (which reads a new point at each step; lane j
+    /// is j points behind it, [`RunLanes::points`]), and how it changes
+    /// from one step to the next (+1 going up, -1 wrapped going down): an
+    /// addition a step where the four points were worked out anew
+    /// ([`RunPart::at`]).
     lead: usize,
-    last: usize,
     stride: usize,
     /// The rail masses the lanes left at the last step.
     left: std::arch::x86_64::__m256d,
@@ -1281,7 +1280,6 @@ impl RunLanes {
             capped: lanes_pd!(|j| lanes[j].st.capped_kg),
             rail: lanes_pd!(|j| rail_kg[is[j]]),
             lead: is[0],
-            last: is[LANES - 1],
             stride: if part.up { 1 } else { usize::MAX },
             left: _mm256_setzero_pd(),
         }
@@ -1331,24 +1329,19 @@ impl RunLanes {
         self.consumed = _mm256_add_pd(self.consumed, rolled.consumed);
         self.capped = _mm256_add_pd(self.capped, rolled.capped);
         self.left = rolled.rail;
-        part.state.rail_mass_kg[self.last] =
+        part.state.rail_mass_kg[self.points()[LANES - 1]] =
             _mm256_cvtsd_f64(_mm256_permute4x64_pd::<0b11>(rolled.rail));
     }
 
-    /// To step `s`, the step after the last: lane j + 1 reads what lane j
+    /// To the step after the last: lane j + 1 reads what lane j
     /// left, lane 0 a new point.
     ///
     /// # Safety
     /// The CPU must have AVX2.
     #[inline(always)]
-    unsafe fn advance(&mut self, part: &RunPart<'_>, s: usize) {
+    unsafe fn advance(&mut self, part: &RunPart<'_>) {
         use std::arch::x86_64::*;
         self.lead = self.lead.wrapping_add(self.stride);
-        self.last = self.last.wrapping_add(self.stride);
-        debug_assert_eq!([self.lead, self.last], {
-            let is = part.at(s);
-            [is[0], is[LANES - 1]]
-        });
         self.rail = _mm256_blend_pd::<0b0001>(
             _mm256_permute4x64_pd::<0b10_01_00_11>(self.left),
             _mm256_set1_pd(part.state.rail_mass_kg[self.lead]),
@@ -1873,7 +1866,7 @@ impl RollContext<'_> {
                 break;
             }
             for (run, part) in runs.iter_mut().zip(parts.iter()) {
-                run.advance(part, s);
+                run.advance(part);
             }
         }
         for (run, part) in runs.iter().zip(parts.iter_mut()) {
