@@ -504,8 +504,8 @@ mod tests {
     }
 
     proptest::proptest! {
-        /// Decimals of 1 to 17 digits (those over 15 go to serde), halfway
-        /// cases among them wherever they fall.
+        /// Decimals of 1 to 17 digits, the point anywhere, leading zeros
+        /// after it (those over 15 digits go to serde).
         #[test]
         fn long_decimals_are_serdes_doubles(
             negative in proptest::bool::ANY,
