@@ -628,23 +628,18 @@ fn footer_ends_file(path: &Path, offset: u64, end: u64, file_len: u64) -> Result
     ))
 }
 
-/// A chunk's Channel and Message records in file order (a message by its
-/// header and data length), decompressed and CRC-checked; the record's
-/// header's time range.
+/// A chunk's Channel and Message records in file order, decompressed and
+/// CRC-checked; the record's header's time range. A kept chunk's messages
+/// are listed once, in `kept` (their data lengths are their ranges'); the
+/// others' headers and data lengths in `messages`.
 struct ChunkContents {
     message_start_time: u64,
     message_end_time: u64,
-    records: Vec<ChunkEntry>,
+    /// Each Channel record with the number of messages before it in the
+    /// chunk. Boxed: a chunk holds a handful of channels.
+    channels: Vec<(usize, Box<mcap::records::Channel>)>,
+    messages: Vec<(mcap::records::MessageHeader, u64)>,
     kept: Option<ChunkMessages>,
-}
-
-enum ChunkEntry {
-    /// Boxed: a chunk holds a handful of channels and thousands of messages.
-    Channel(Box<mcap::records::Channel>),
-    Message {
-        header: mcap::records::MessageHeader,
-        data_len: u64,
-    },
 }
 
 /// Reads a chunk record (given whole), keeping its messages if `keep`:
@@ -657,19 +652,24 @@ fn read_chunk(record: &[u8], keep: bool) -> Result<ChunkContents, String> {
             header.uncompressed_size
         ));
     }
-    let mut records = Vec::with_capacity(expected_messages(&header));
     let mut kept = keep.then(|| ChunkMessages::with_capacity(&header));
+    let mut channels = Vec::new();
+    // A kept chunk's messages are listed in `kept` alone: a second list of
+    // them was as large as the first, memory the layout pass touched fresh.
+    let mut messages = match keep {
+        true => Vec::new(),
+        false => Vec::with_capacity(expected_messages(&header)),
+    };
+    let mut count = 0;
     let whole = chunk_records_whole(record, &header, |opcode, body, at| {
         match record::parse(opcode, body)? {
-            Record::Channel(channel) => records.push(ChunkEntry::Channel(Box::new(channel))),
+            Record::Channel(channel) => channels.push((count, Box::new(channel))),
             Record::Message { header, data } => {
-                if let Some(kept) = &mut kept {
-                    kept.push(header, body, &data, at);
+                match &mut kept {
+                    Some(kept) => kept.push(header, body, &data, at),
+                    None => messages.push((header, data.len() as u64)),
                 }
-                records.push(ChunkEntry::Message {
-                    header,
-                    data_len: data.len() as u64,
-                });
+                count += 1;
             }
             _ => {}
         }
@@ -681,7 +681,8 @@ fn read_chunk(record: &[u8], keep: bool) -> Result<ChunkContents, String> {
     Ok(ChunkContents {
         message_start_time: header.message_start_time,
         message_end_time: header.message_end_time,
-        records,
+        channels,
+        messages,
         kept,
     })
 }
@@ -717,35 +718,67 @@ fn add_chunk(
     layout: &mut Layout,
     message_count: &mut u64,
 ) -> Result<(u64, Option<ChunkMessages>), String> {
-    let (start, end) = (contents.message_start_time, contents.message_end_time);
+    let ChunkContents {
+        message_start_time: start,
+        message_end_time: end,
+        channels,
+        messages,
+        kept,
+    } = contents;
+    let mut channels = channels.into_iter().peekable();
     let mut failure: Option<String> = None;
-    for entry in contents.records {
-        match entry {
-            ChunkEntry::Channel(channel) => {
-                if let Err(e) = add_channel(&mut layout.channels, *channel) {
-                    failure.get_or_insert(e);
-                }
+    // The chunk's records in file order: the channels defined before the
+    // message at `position`, then the message.
+    let mut add = |position: usize, header: &mcap::records::MessageHeader, data_len: u64| {
+        while let Some((_, channel)) = channels.next_if(|(before, _)| *before <= position) {
+            if let Err(e) = add_channel(&mut layout.channels, *channel) {
+                failure.get_or_insert(e);
             }
-            ChunkEntry::Message { header, data_len } => {
-                if header.log_time < start || header.log_time > end {
-                    failure.get_or_insert(format!(
-                        "message {} has log_time {} ns, outside the chunk's \
-                         message_start_time..message_end_time ({start}..{end})",
-                        *message_count, header.log_time
-                    ));
-                }
-                let checked = message_key(layout, &header, *message_count)
-                    .and_then(|key| check_message_size(key, data_len));
-                if let Err(e) = checked {
-                    failure.get_or_insert(e);
-                }
-                *message_count += 1;
+        }
+        if header.log_time < start || header.log_time > end {
+            failure.get_or_insert(format!(
+                "message {} has log_time {} ns, outside the chunk's \
+                 message_start_time..message_end_time ({start}..{end})",
+                *message_count, header.log_time
+            ));
+        }
+        let checked = message_key(layout, header, *message_count)
+            .and_then(|key| check_message_size(key, data_len));
+        if let Err(e) = checked {
+            failure.get_or_insert(e);
+        }
+        *message_count += 1;
+    };
+    match &kept {
+        Some(kept) => {
+            for (position, (header, range)) in kept.messages.iter().enumerate() {
+                add(position, header, range.len() as u64);
+            }
+        }
+        None => {
+            for (position, (header, data_len)) in messages.iter().enumerate() {
+                add(position, header, *data_len);
             }
         }
     }
+    // The channels after the last message.
+    add_channels_after(layout, channels, &mut failure);
     match failure {
         Some(e) => Err(e),
-        None => Ok((start, contents.kept)),
+        None => Ok((start, kept)),
+    }
+}
+
+/// The channels a chunk defines after its last message.
+fn add_channels_after(
+    layout: &mut Layout,
+    channels: impl Iterator<Item = (usize, Box<mcap::records::Channel>)>,
+    failure: &mut Option<String>,
+) {
+    for (_, channel) in channels {
+        if let Err(e) = add_channel(&mut layout.channels, *channel) {
+            failure.get_or_insert(e);
+        }
     }
 }
 
