@@ -51,9 +51,9 @@ fn main() -> ExitCode {
 /// then moving up) and trims a heap's top once 4 MiB are free there (by
 /// default 128 KiB). Each page the system hands out costs a fault and a
 /// zeroed page: 1.3-1.5 µs on the project's 2-core machine (a VM), where a
-/// replay of the 3-day curve took about 5 800 of them in 80 ms (4 900-5 100
+/// replay of the 3-day curve took about 5 800 of them in 80 ms (4 900-5 400
 /// with these settings). The price is memory held between peaks: the
-/// year's replay peaks at about 71 MB instead of 60 (32 MiB and 128 MiB
+/// year's replay peaks at 67-72 MB instead of 60-63 (32 MiB and 128 MiB
 /// gave 89 MB for no fewer faults). For `replay` alone: discover's
 /// parallel replays ran about 9 % slower with it (the clogged nozzle: 11.5
 /// against 10.6 s).
