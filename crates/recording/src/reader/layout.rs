@@ -762,23 +762,14 @@ fn add_chunk(
         }
     }
     // The channels after the last message.
-    add_channels_after(layout, channels, &mut failure);
-    match failure {
-        Some(e) => Err(e),
-        None => Ok((start, kept)),
-    }
-}
-
-/// The channels a chunk defines after its last message.
-fn add_channels_after(
-    layout: &mut Layout,
-    channels: impl Iterator<Item = (usize, Box<mcap::records::Channel>)>,
-    failure: &mut Option<String>,
-) {
     for (_, channel) in channels {
         if let Err(e) = add_channel(&mut layout.channels, *channel) {
             failure.get_or_insert(e);
         }
+    }
+    match failure {
+        Some(e) => Err(e),
+        None => Ok((start, kept)),
     }
 }
 
