@@ -202,12 +202,17 @@ fn run(
     let (reader, provenance) = std::thread::scope(|scope| {
         let hashing =
             wants_provenance.then(|| scope.spawn(|| Provenance::of_run(&provenance_inputs, &cfg)));
-        let reader = RecordingReader::open(&args.recording, ctx);
+        // The layout pass checks the recording beside the replay.
+        let reader = RecordingReader::open_beside(&args.recording, ctx);
         let provenance = hashing.map(|h| h.join().unwrap_or_else(|p| std::panic::resume_unwind(p)));
         (reader, provenance)
     });
-    let reader = reader?;
-    let provenance = provenance.transpose()?;
+    let mut reader = reader?;
+    // What the layout pass finds wrong with the recording goes before an
+    // error of the replay's own, as if it had been laid out first.
+    let provenance = provenance
+        .transpose()
+        .map_err(|e| layout_first(&mut reader, e))?;
     let opts = EngineOptions {
         snapshot_every_wheel: args.every_wheel,
         every_wheel_contacts: args.per_train,
@@ -220,9 +225,11 @@ fn run(
     let mut per_train = args
         .per_train
         .then(|| PerTrain::new(reader.section(), &cfg, &Target::default()))
-        .transpose()?;
-    let mut engine = engine_for(&reader, cfg, opts, start.as_ref(), &source)?;
-    let memory = alert_memory(&reader, start.as_ref())?;
+        .transpose()
+        .map_err(|e| layout_first(&mut reader, e))?;
+    let mut engine = engine_for(&reader, cfg, opts, start.as_ref(), &source)
+        .map_err(|e| layout_first(&mut reader, e))?;
+    let memory = alert_memory(&reader, start.as_ref()).map_err(|e| layout_first(&mut reader, e))?;
 
     let mcap = args
         .out_mcap
@@ -231,7 +238,8 @@ fn run(
             let line = reader.line().is_some();
             McapSink::for_replay(p, provenance.as_ref(), reader.message_count(), line)
         })
-        .transpose()?;
+        .transpose()
+        .map_err(|e| layout_first(&mut reader, e))?;
     let rrd = args
         .out_rrd
         .as_deref()
@@ -242,7 +250,8 @@ fn run(
             };
             RerunSink::create(p, options)
         })
-        .transpose()?;
+        .transpose()
+        .map_err(|e| layout_first(&mut reader, e))?;
     // The files are encoded and written on a thread of their own while the
     // engine steps (the same calls in the same order: the same files).
     // Behind the engine unless it feeds an MCAP writer as busy as the
@@ -258,10 +267,13 @@ fn run(
             .extend(rrd.map(|s| Box::new(s) as Box<dyn Sink + Send>));
         let path = args.out_mcap.as_ref().or(args.out_rrd.as_ref());
         Some(
-            SinkThread::spawn("tortwin-outputs", files, behind).map_err(|source| Error::Io {
-                what: "cannot start the thread that writes",
-                path: path.cloned().unwrap_or_default(),
-                source,
+            SinkThread::spawn("tortwin-outputs", files, behind).map_err(|source| {
+                let e = Error::Io {
+                    what: "cannot start the thread that writes",
+                    path: path.cloned().unwrap_or_default(),
+                    source,
+                };
+                layout_first(&mut reader, e)
             })?,
         )
     } else {
@@ -304,7 +316,8 @@ fn run(
         }
         Ok(())
     });
-    stepped?;
+    let mut reader = reader;
+    stepped.map_err(|e| layout_first(&mut reader, e))?;
     let summary = engine.finish(&mut fanout, reader.unknown_topic_messages())?;
     progress.done(message_count);
     let mut state = engine.state();
@@ -346,6 +359,17 @@ pub(crate) fn engine_for(
             .map_err(|e| InputError::file(Path::new(&s.name), e.to_string()))?,
         None => Engine::on_line(section, line, cfg, opts, reader.origin_ns()),
     })
+}
+
+/// `e`, an error of the replay's own, or what the layout pass found wrong
+/// with the recording if it did ([`RecordingReader::layout_verdict`]):
+/// the error a replay of the recording laid out first would have stopped
+/// on.
+fn layout_first(reader: &mut RecordingReader, e: impl Into<Error>) -> Error {
+    match reader.layout_verdict() {
+        Ok(()) => e.into(),
+        Err(layout) => layout.into(),
+    }
 }
 
 /// What `start`'s alerts remembered, checked against `reader`'s section.

@@ -118,10 +118,60 @@ fn remove(value: &mut Value, pointer: &str, key: &str) {
         .unwrap();
 }
 
+/// Reads `path` whole with [`RecordingReader::open`], and again with
+/// [`RecordingReader::open_beside`] (the layout pass beside the replay),
+/// which must end the same way: the same events if the file is sound, the
+/// same error if not (before it, a reader beside the pass may have given
+/// events that one laid out first never gives).
 fn read_all(path: &Path, ctx: ReaderContext) -> Result<(RecordingReader, Vec<Event>), InputError> {
-    let mut reader = RecordingReader::open(path, ctx)?;
-    let events = reader.by_ref().collect::<Result<Vec<_>, _>>()?;
-    Ok((reader, events))
+    let (laid, laid_items) = read_items(path, ctx, RecordingReader::open);
+    let (beside, beside_items) = read_items(path, ctx, RecordingReader::open_beside);
+    match laid {
+        Some(_) => assert_eq!(laid_items, beside_items, "{path:?}: beside the layout pass"),
+        None => assert_eq!(
+            laid_items.last(),
+            beside_items.last(),
+            "{path:?}: beside the layout pass"
+        ),
+    }
+    let mut events = Vec::new();
+    for item in laid_items {
+        events.push(item?);
+    }
+    let (Some(laid), Some(beside)) = (laid, beside) else {
+        unreachable!("a reader that did not open gave its error above")
+    };
+    assert_eq!(laid.layout(), beside.layout(), "{path:?}: the layout");
+    assert_eq!(laid.message_count(), beside.message_count());
+    Ok((laid, events))
+}
+
+/// The reader `open` gives for `path` and everything it reads (an error
+/// ends it), or no reader and the error it opened with.
+fn read_items(
+    path: &Path,
+    ctx: ReaderContext,
+    open: fn(&Path, ReaderContext) -> Result<RecordingReader, InputError>,
+) -> (Option<RecordingReader>, Vec<Result<Event, InputError>>) {
+    match open(path, ctx) {
+        Ok(mut reader) => {
+            let items = reader.by_ref().collect();
+            assert!(reader.next().is_none(), "{path:?}: more after the end");
+            (Some(reader), items)
+        }
+        Err(e) => (None, vec![Err(e)]),
+    }
+}
+
+/// Why `path` is refused, read both ways ([`read_all`]).
+fn refused(path: &Path) -> InputError {
+    match read_all(path, ReaderContext::default()) {
+        Ok((_, events)) => panic!(
+            "expected {path:?} to be refused, read {} events",
+            events.len()
+        ),
+        Err(e) => e,
+    }
 }
 
 fn read_msgs(msgs: &[Msg], layout: Layout) -> Result<(RecordingReader, Vec<Event>), InputError> {
@@ -168,10 +218,7 @@ fn expect_error(msgs: &[Msg], index: usize, needles: &[&str]) {
 
 /// An error without a message location (the file as a whole is bad).
 fn expect_file_error(path: &Path, needles: &[&str]) {
-    let err = match RecordingReader::open(path, ReaderContext::default()) {
-        Ok(_) => panic!("expected {path:?} to be refused"),
-        Err(err) => err,
-    };
+    let err = refused(path);
     assert_eq!(err.file, path, "{err}");
     assert_eq!(err.location, None, "{err}");
     for needle in needles {
@@ -928,7 +975,7 @@ fn truncated_file() {
         .chain(bytes.len() - 16..bytes.len());
     for len in lengths {
         std::fs::write(&cut, &bytes[..len]).unwrap();
-        assert!(RecordingReader::open(&cut, ReaderContext::default()).is_err());
+        refused(&cut);
     }
 }
 
@@ -1015,9 +1062,7 @@ fn the_first_bad_chunk_in_file_order_is_the_error() {
         break_crc(&mut broken, first);
         break_crc(&mut broken, later);
         std::fs::write(&bad, &broken).unwrap();
-        let err = RecordingReader::open(&bad, ReaderContext::default())
-            .err()
-            .expect("a broken chunk is refused");
+        let err = refused(&bad);
         let text = err.to_string();
         assert!(
             text.contains(&format!("unreadable chunk at byte {}:", chunks[first].0)),
@@ -1026,9 +1071,7 @@ fn the_first_bad_chunk_in_file_order_is_the_error() {
         // A record after the later chunk claiming more bytes than the file
         // has: the broken chunk is still the error.
         std::fs::write(&bad, overlong_record_after(&broken, chunks[later])).unwrap();
-        let err = RecordingReader::open(&bad, ReaderContext::default())
-            .err()
-            .expect("a broken chunk is refused");
+        let err = refused(&bad);
         assert!(
             err.to_string()
                 .contains(&format!("unreadable chunk at byte {}:", chunks[first].0)),
@@ -1037,9 +1080,7 @@ fn the_first_bad_chunk_in_file_order_is_the_error() {
     }
     // Only the overlong record: it is the error.
     std::fs::write(&bad, overlong_record_after(&bytes, chunks[6])).unwrap();
-    let err = RecordingReader::open(&bad, ReaderContext::default())
-        .err()
-        .expect("a corrupt record is refused");
+    let err = refused(&bad);
     assert!(
         err.to_string().contains("past the end of the file"),
         "{err}"
@@ -1213,4 +1254,104 @@ fn an_axle_s_segments_that_break_line_md_are_refused_naming_the_field() {
     for (segments, needles) in cases {
         expect_error(&with_axle_segments(true, segments), 3, needles);
     }
+}
+
+// ---------------------------------------------------------------------------
+// The layout pass beside the replay (`RecordingReader::open_beside`).
+
+/// A file with a chunk per message, its last chunk's CRC broken, and the
+/// byte offset of that chunk.
+fn last_chunk_broken(dir: &Path, msgs: &[Msg]) -> (std::path::PathBuf, usize) {
+    let path = dir.join("recording.mcap");
+    write_recording(&path, msgs, Layout::ChunkPerMessage);
+    let mut bytes = std::fs::read(&path).unwrap();
+    let &(_, offset, _) = top_level_records(&bytes)
+        .iter()
+        .rfind(|(opcode, _, _)| *opcode == 0x06)
+        .unwrap();
+    // A chunk's CRC is bytes 24..28 of its body.
+    bytes[offset + 9 + 24] ^= 0xff;
+    let bad = dir.join("bad.mcap");
+    std::fs::write(&bad, &bytes).unwrap();
+    (bad, offset)
+}
+
+/// Beside the pass the replay starts before the last chunk is checked:
+/// the reader opens a file `open` refuses, gives the events before that
+/// chunk is due and then the same error, and none after it.
+#[test]
+fn beside_the_layout_pass_a_broken_chunk_is_the_error_when_it_is_due() {
+    let dir = tempfile::tempdir().unwrap();
+    let (bad, offset) = last_chunk_broken(dir.path(), &base());
+    let laid = RecordingReader::open(&bad, ReaderContext::default())
+        .err()
+        .expect("a broken chunk is refused");
+    assert!(
+        laid.message
+            .contains(&format!("unreadable chunk at byte {offset}:")),
+        "{laid}"
+    );
+    let mut reader = RecordingReader::open_beside(&bad, ReaderContext::default())
+        .expect("the replay starts before the last chunk is checked");
+    let items: Vec<_> = reader.by_ref().collect();
+    let (last, events) = items.split_last().unwrap();
+    assert_eq!(last.as_ref().err(), Some(&laid));
+    // The sound file's events, but the last (the broken chunk's).
+    let (_, sound) =
+        read_all(&dir.path().join("recording.mcap"), ReaderContext::default()).unwrap();
+    let events: Vec<Event> = events.iter().map(|e| e.clone().unwrap()).collect();
+    assert_eq!(events, sound[..sound.len() - 1]);
+    assert!(reader.next().is_none());
+    assert_eq!(reader.layout_verdict(), Err(laid));
+}
+
+/// What `open` refuses once the file is laid out (a second `/section`, a
+/// `/line` that is not next after it, a second `/line`) is the error
+/// beside the pass too, wherever the replay meets the message: also when
+/// a caller stops first and asks for the verdict.
+#[test]
+fn beside_the_layout_pass_the_section_and_line_checks_come_first() {
+    let mut second_section = base();
+    second_section.push(msg("/section", T0 + 20 * SEC, section()));
+    let mut second_line = with_line(1, T0);
+    let again = second_line[1].clone();
+    second_line.push(Msg {
+        log_time: T0 + 20 * SEC,
+        ..again
+    });
+    let cases = [
+        (second_section, "a second /section"),
+        (
+            with_line(5, T0 + 20 * SEC),
+            "not at the /section's log_time",
+        ),
+        (second_line, "a second /line"),
+    ];
+    for (msgs, needle) in cases {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("bad.mcap");
+        write_recording(&path, &msgs, Layout::ChunkPerMessage);
+        let laid = refused(&path);
+        assert!(laid.message.contains(needle), "{laid}");
+        // A caller that stops after the first event and asks.
+        let mut reader = RecordingReader::open_beside(&path, ReaderContext::default())
+            .expect("the replay starts before the file is laid out");
+        assert!(reader.next().is_some_and(|e| e.is_ok()));
+        assert_eq!(reader.layout_verdict(), Err(laid.clone()), "{needle}");
+        assert_eq!(reader.layout_verdict(), Err(laid), "asked again");
+    }
+}
+
+/// A sound file: the verdict is `Ok` at any time, the counts the file's.
+#[test]
+fn beside_the_layout_pass_a_sound_file_reads_as_laid_out() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("recording.mcap");
+    write_recording(&path, &base(), Layout::ChunkPerMessage);
+    let (laid, events) = read_all(&path, ReaderContext::default()).unwrap();
+    let mut reader = RecordingReader::open_beside(&path, ReaderContext::default()).unwrap();
+    assert_eq!(reader.layout_verdict(), Ok(()));
+    assert_eq!(reader.layout(), laid.layout());
+    let again: Vec<Event> = reader.by_ref().map(Result::unwrap).collect();
+    assert_eq!(again, events);
 }

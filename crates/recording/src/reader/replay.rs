@@ -28,9 +28,10 @@ use std::sync::Arc;
 
 use mcap::records::op;
 
+use super::feed::Feed;
 use super::layout::{
     chunk_messages, message_header, rank_of, read_at, read_exact_vec, record_frame, Channels,
-    ChunkInfo, LooseRun, ReplayKey, TopicRank, MAX_MESSAGE_BYTES, MESSAGE_HEADER_BYTES,
+    ChunkInfo, Layout, LooseRun, ReplayKey, TopicRank, MAX_MESSAGE_BYTES, MESSAGE_HEADER_BYTES,
     RECORD_HEADER_BYTES,
 };
 use crate::error::{InputError, MessageLocation};
@@ -117,6 +118,9 @@ pub(super) struct ReplayQueue {
     /// Whether messages on topics tortwin does not read keep their data
     /// (outside chunks they are otherwise not read at all).
     keep_unknown: bool,
+    /// The layout pass, when it runs beside the replay: the chunks come
+    /// from it (module `feed`).
+    feed: Option<Feed>,
 }
 
 /// A decompressed chunk: its messages in replay order, the next one at
@@ -183,7 +187,7 @@ impl ReplayQueue {
         let mut waiting_chunks: Vec<ChunkInfo> =
             chunks.into_iter().filter(|c| c.message_count > 0).collect();
         // Next chunk last; equal start times in file order.
-        waiting_chunks.sort_by_key(|c| Reverse((c.message_start_time, c.first_index)));
+        waiting_chunks.sort_by_key(|c| Reverse((c.message_start_time, c.number)));
         let mut waiting_runs = loose;
         waiting_runs.sort_by_key(|r| Reverse(r.first));
         Self {
@@ -195,7 +199,41 @@ impl ReplayQueue {
             active_runs: BinaryHeap::new(),
             ready: BinaryHeap::new(),
             keep_unknown,
+            feed: None,
         }
+    }
+
+    /// The replay of a file whose layout pass runs beside it (`feed`);
+    /// `chunks` as the file's framing gave them
+    /// ([`super::layout::chunk_heads`]).
+    pub(super) fn beside(
+        path: &Path,
+        file: BufReader<File>,
+        chunks: Vec<ChunkInfo>,
+        feed: Feed,
+    ) -> Self {
+        let mut queue = Self::new(
+            path,
+            file,
+            Channels::default(),
+            Vec::new(),
+            Vec::new(),
+            false,
+        );
+        let mut waiting_chunks = chunks;
+        waiting_chunks.sort_by_key(|c| Reverse((c.message_start_time, c.number)));
+        queue.waiting_chunks = waiting_chunks;
+        queue.feed = Some(feed);
+        queue
+    }
+
+    /// With the layout pass beside the replay: waits for it to end and
+    /// returns its layout (its chunks without messages), or the first
+    /// thing it found wrong with the file. `None` for a file laid out
+    /// before the replay.
+    pub(super) fn finish_layout(&mut self) -> Option<Result<&Layout, InputError>> {
+        let feed = self.feed.as_mut()?;
+        Some(feed.finish(&mut self.channels))
     }
 
     fn error(&self, location: MessageLocation, message: String) -> InputError {
@@ -290,6 +328,30 @@ impl ReplayQueue {
     }
 
     fn load_chunk(&mut self, chunk: ChunkInfo) -> Result<(), InputError> {
+        let chunk = match &mut self.feed {
+            None => chunk,
+            Some(feed) => {
+                let added = feed.take(chunk.number, &mut self.channels)?;
+                // The same bytes read twice give the same chunk.
+                let same = |a: &ChunkInfo| {
+                    (a.record_offset, a.body_len, a.message_start_time)
+                        == (
+                            chunk.record_offset,
+                            chunk.body_len,
+                            chunk.message_start_time,
+                        )
+                };
+                match added {
+                    Some(added) if same(&added) => added,
+                    _ => {
+                        return Err(self.corrupt(format!(
+                            "the chunk at byte {} changed while it was read",
+                            chunk.record_offset
+                        )))
+                    }
+                }
+            }
+        };
         let kept = match chunk.kept {
             Some(kept) => kept,
             None => {
