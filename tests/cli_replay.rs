@@ -394,3 +394,97 @@ fn tortwin_replay_refuses_every_conformance_file_clearly() {
         "nothing written"
     );
 }
+
+/// Runs `cmd` to its end, or fails the test after two minutes (a replay of
+/// a reference day takes a fraction of a second).
+fn output_within_two_minutes(cmd: &mut std::process::Command) -> std::process::Output {
+    let mut child = cmd
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(120);
+    while child.try_wait().unwrap().is_none() {
+        if std::time::Instant::now() > deadline {
+            child.kill().unwrap();
+            panic!("still running after two minutes: {cmd:?}");
+        }
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    child.wait_with_output().unwrap()
+}
+
+/// The layout pass runs beside the replay of a short recording on a thread
+/// of its own: with rayon's pool only the thread that replays (one core,
+/// or RAYON_NUM_THREADS=1) the replay still ends, with the same state.
+#[test]
+fn a_replay_with_one_thread_in_the_pool_ends_with_the_same_state() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut states = Vec::new();
+    for threads in ["1", "2"] {
+        let state = dir.path().join(format!("state-{threads}.json"));
+        let out = output_within_two_minutes(
+            tortwin()
+                .env("RAYON_NUM_THREADS", threads)
+                .arg("replay")
+                .arg(reference("curve_2day.mcap"))
+                .arg("--state-out")
+                .arg(&state)
+                .arg("-q"),
+        );
+        common::check(&out, &format!("replay with {threads} rayon threads"));
+        states.push(std::fs::read_to_string(&state).unwrap());
+    }
+    assert_eq!(states[0], states[1]);
+}
+
+/// Beside the replay, what the layout pass finds wrong with the recording
+/// is the error even when the replay stops first on one of its own (a
+/// state from another section), as it was when the pass came first.
+#[test]
+fn a_broken_chunk_is_the_error_before_a_state_that_does_not_fit() {
+    let dir = tempfile::tempdir().unwrap();
+    let work = dir.path().join("out");
+    std::fs::create_dir(&work).unwrap();
+    // A state of the tangent's section, for the curve.
+    let state = dir.path().join("tangent.json");
+    let out = tortwin()
+        .arg("replay")
+        .arg(reference("tangent_day.mcap"))
+        .arg("--state-out")
+        .arg(&state)
+        .arg("-q")
+        .output()
+        .unwrap();
+    common::check(&out, "the tangent's replay");
+    let state_in = ["--state-in", state.to_str().unwrap()];
+    let sound = reference("curve_2day.mcap");
+    let msg = replay_fails(&sound, &state_in, &work);
+    assert!(msg.contains("tangent.json"), "{msg}");
+    // The curve's last chunk's CRC broken (bytes 24..28 of a chunk's body).
+    let mut bytes = std::fs::read(&sound).unwrap();
+    let (mut offset, mut last) = (8, None);
+    loop {
+        let len = u64::from_le_bytes(bytes[offset + 1..offset + 9].try_into().unwrap()) as usize;
+        match bytes[offset] {
+            0x06 => last = Some(offset),
+            0x0f => break,
+            _ => {}
+        }
+        offset += 9 + len;
+    }
+    let last = last.expect("a chunk");
+    bytes[last + 9 + 24] ^= 0xff;
+    let broken = dir.path().join("broken.mcap");
+    std::fs::write(&broken, &bytes).unwrap();
+    let msg = replay_fails(&broken, &state_in, &work);
+    assert!(
+        msg.contains(&format!("unreadable chunk at byte {last}")),
+        "{msg}"
+    );
+    let msg = replay_fails(&broken, &[], &work);
+    assert!(
+        msg.contains(&format!("unreadable chunk at byte {last}")),
+        "{msg}"
+    );
+}

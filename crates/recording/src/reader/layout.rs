@@ -8,7 +8,8 @@
 //! dropped again. A Message record outside any chunk keeps only its replay
 //! key and file offset. Channel records are kept (a handful). Chunks are
 //! decompressed on rayon's threads as they are read, up to four ahead, and
-//! added in file order.
+//! added in file order; beside the replay (module `feed`), one at a time on
+//! the pass's own thread, each handed over as it is added.
 //! Memory: up to five compressed chunk records (about 32 MiB at most) with
 //! their messages' headers, one decompressed chunk per thread, plus a few
 //! words per chunk. The first chunks' messages,
@@ -21,7 +22,8 @@
 //! outside chunks, and counting by decompression needs no optional Message
 //! Index records. It also means a corrupt chunk anywhere in the file fails
 //! [`super::RecordingReader::open`], before the engine has done a day of
-//! work.
+//! work (beside the replay, before the chunk is replayed, and it is the
+//! error the replay reports: module `feed`).
 //!
 //! The top-level framing is read here because the replay needs each chunk's
 //! file offset, which the mcap crate's readers do not report; inside a chunk
@@ -394,6 +396,21 @@ impl PendingChunks {
         self.keep_left = if keep { self.keep_left - size } else { 0 };
         let number = self.read;
         self.read += 1;
+        if self.feed.is_some() {
+            // Beside the replay the pass scans its chunks on its own thread,
+            // one at a time: the other core is the engine's, and rayon's
+            // threads may be the replay's own (a pool of one, the thread
+            // that waits for the chunk, would never run the scan).
+            let scan = std::panic::catch_unwind(|| read_chunk(&record, keep));
+            self.pending.push_back(Pending {
+                number,
+                offset,
+                body_len,
+                bytes: record.len(),
+                contents: Some(scan),
+            });
+            return self.settle_oldest(path, layout);
+        }
         self.pending.push_back(Pending {
             number,
             offset,
@@ -443,13 +460,7 @@ impl PendingChunks {
             if rayon::yield_now() == Some(rayon::Yield::Executed) {
                 continue;
             }
-            // Beside the replay, the other core is the replay's: polling
-            // for a scan there took it from the engine (the 3-day curve,
-            // medians of 20: 74.6 ms without, 77.4 ms polling while the
-            // replay waited for a chunk).
-            if self.feed.is_none()
-                && polling_since.get_or_insert_with(Instant::now).elapsed() < POLL
-            {
+            if polling_since.get_or_insert_with(Instant::now).elapsed() < POLL {
                 std::thread::yield_now();
                 continue;
             }
