@@ -554,11 +554,12 @@ fn read_line(
     let Some(first) = check_lines(path, lines, section_log_time_ns)? else {
         return Ok(None);
     };
-    let message = queue.next_message()?;
-    line_is_next(path, first, message.as_ref().map(|m| m.key))?;
-    let Some(message) = message else {
-        unreachable!("line_is_next refuses the end of the file")
+    let message = match queue.next_message()? {
+        Some(message) => message,
+        // The end of the file: refused.
+        None => return line_is_next(path, first, None).map(|()| None),
     };
+    line_is_next(path, first, Some(message.key))?;
     queue.check_json(&message)?;
     let at = |text: String| InputError::at(path, line_location(&first), text);
     let msg: LineMsg = decode::parse(message.data.as_slice()).map_err(|e| at(e.message))?;
