@@ -210,9 +210,33 @@ fn run(
     let mut reader = reader?;
     // What the layout pass finds wrong with the recording goes before an
     // error of the replay's own, as if it had been laid out first.
-    let provenance = provenance
-        .transpose()
-        .map_err(|e| layout_first(&mut reader, e))?;
+    replay_opened(
+        args,
+        &mut reader,
+        provenance,
+        cfg,
+        alerts,
+        start,
+        extra,
+        progress,
+    )
+    .map_err(|e| layout_first(&mut reader, e))
+}
+
+/// [`run`] once the recording is open: the engine and the outputs made,
+/// the recording stepped through.
+#[allow(clippy::too_many_arguments)]
+fn replay_opened(
+    args: &ReplayArgs,
+    reader: &mut RecordingReader,
+    provenance: Option<std::result::Result<Provenance, InputError>>,
+    cfg: tortwin_model::config::ModelConfig,
+    alerts: tortwin_model::config::alerts::AlertConfig,
+    start: Option<SavedState<'_>>,
+    extra: &mut [&mut dyn Sink],
+    progress: &dyn Progress,
+) -> Result<Replayed> {
+    let provenance = provenance.transpose()?;
     let opts = EngineOptions {
         snapshot_every_wheel: args.every_wheel,
         every_wheel_contacts: args.per_train,
@@ -225,11 +249,9 @@ fn run(
     let mut per_train = args
         .per_train
         .then(|| PerTrain::new(reader.section(), &cfg, &Target::default()))
-        .transpose()
-        .map_err(|e| layout_first(&mut reader, e))?;
-    let mut engine = engine_for(&reader, cfg, opts, start.as_ref(), &source)
-        .map_err(|e| layout_first(&mut reader, e))?;
-    let memory = alert_memory(&reader, start.as_ref()).map_err(|e| layout_first(&mut reader, e))?;
+        .transpose()?;
+    let mut engine = engine_for(reader, cfg, opts, start.as_ref(), &source)?;
+    let memory = alert_memory(reader, start.as_ref())?;
 
     let mcap = args
         .out_mcap
@@ -238,8 +260,7 @@ fn run(
             let line = reader.line().is_some();
             McapSink::for_replay(p, provenance.as_ref(), reader.message_count(), line)
         })
-        .transpose()
-        .map_err(|e| layout_first(&mut reader, e))?;
+        .transpose()?;
     let rrd = args
         .out_rrd
         .as_deref()
@@ -250,8 +271,7 @@ fn run(
             };
             RerunSink::create(p, options)
         })
-        .transpose()
-        .map_err(|e| layout_first(&mut reader, e))?;
+        .transpose()?;
     // The files are encoded and written on a thread of their own while the
     // engine steps (the same calls in the same order: the same files).
     // Behind the engine unless it feeds an MCAP writer as busy as the
@@ -267,13 +287,10 @@ fn run(
             .extend(rrd.map(|s| Box::new(s) as Box<dyn Sink + Send>));
         let path = args.out_mcap.as_ref().or(args.out_rrd.as_ref());
         Some(
-            SinkThread::spawn("tortwin-outputs", files, behind).map_err(|source| {
-                let e = Error::Io {
-                    what: "cannot start the thread that writes",
-                    path: path.cloned().unwrap_or_default(),
-                    source,
-                };
-                layout_first(&mut reader, e)
+            SinkThread::spawn("tortwin-outputs", files, behind).map_err(|source| Error::Io {
+                what: "cannot start the thread that writes",
+                path: path.cloned().unwrap_or_default(),
+                source,
             })?,
         )
     } else {
@@ -298,7 +315,7 @@ fn run(
     // The /section message was read when the reader opened. The rest are
     // read ahead on a thread of their own while the engine steps.
     let message_count = reader.message_count();
-    let (stepped, reader) = read_ahead(reader, |events| -> Result<()> {
+    read_ahead(reader, |events| -> Result<()> {
         let mut messages = 1u64;
         for event in events {
             let event = event?;
@@ -315,9 +332,7 @@ fn run(
                 })?;
         }
         Ok(())
-    });
-    let mut reader = reader;
-    stepped.map_err(|e| layout_first(&mut reader, e))?;
+    })?;
     let summary = engine.finish(&mut fanout, reader.unknown_topic_messages())?;
     progress.done(message_count);
     let mut state = engine.state();

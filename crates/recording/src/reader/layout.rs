@@ -396,21 +396,6 @@ impl PendingChunks {
         self.keep_left = if keep { self.keep_left - size } else { 0 };
         let number = self.read;
         self.read += 1;
-        if self.feed.is_some() {
-            // Beside the replay the pass scans its chunks on its own thread,
-            // one at a time: the other core is the engine's, and rayon's
-            // threads may be the replay's own (a pool of one, the thread
-            // that waits for the chunk, would never run the scan).
-            let scan = std::panic::catch_unwind(|| read_chunk(&record, keep));
-            self.pending.push_back(Pending {
-                number,
-                offset,
-                body_len,
-                bytes: record.len(),
-                contents: Some(scan),
-            });
-            return self.settle_oldest(path, layout);
-        }
         self.pending.push_back(Pending {
             number,
             offset,
@@ -418,6 +403,17 @@ impl PendingChunks {
             bytes: record.len(),
             contents: None,
         });
+        if self.feed.is_some() {
+            // Beside the replay the pass scans its chunks on its own thread,
+            // one at a time: the other core is the engine's, and rayon's
+            // threads may be the replay's own (a pool of one, the thread
+            // that waits for the chunk, would never run the scan).
+            self.file((
+                number,
+                std::panic::catch_unwind(|| read_chunk(&record, keep)),
+            ));
+            return self.settle_oldest(path, layout);
+        }
         let done = self.done.0.clone();
         rayon::spawn(move || {
             let scan = std::panic::catch_unwind(|| read_chunk(&record, keep));
@@ -627,7 +623,8 @@ pub(super) struct ChunkHeads {
 
 /// The chunks of a file whose messages are all in chunks, each followed by
 /// its Message Index records, read from the framing of the top-level
-/// records and the first field of each chunk's header: a few hundred bytes
+/// records and the first three fields of each chunk's header (its times
+/// and uncompressed size): a few dozen bytes
 /// a chunk, nothing decompressed. `None` for any other file: one with
 /// Channel or Message records outside chunks, a chunk without indexes, a
 /// framing the layout pass would refuse. Such files are laid out before

@@ -930,20 +930,17 @@ fn read_ahead_weight(event: &Result<Event, InputError>) -> usize {
 /// Runs `consume` over `reader`'s events while a thread of its own reads
 /// them ahead (decompressing chunks, merging, parsing JSON and checking
 /// every rule), a few batches in front; returns what `consume` returned
-/// and the reader (for its counts). The events come in the same order as
+/// (the reader is the caller's again, for its counts and its
+/// [`RecordingReader::layout_verdict`]). The events come in the same order as
 /// from the reader itself; when `consume` stops early, the thread stops at
 /// its next batch. The reading thread runs behind the engine
 /// ([`tortwin_handover::behind_the_engine`]): a batch replay's reader.
-pub fn read_ahead<T>(
-    reader: RecordingReader,
-    consume: impl FnOnce(&mut ReadAhead) -> T,
-) -> (T, RecordingReader) {
+pub fn read_ahead<T>(reader: &mut RecordingReader, consume: impl FnOnce(&mut ReadAhead) -> T) -> T {
     type Batch = Vec<Result<Event, InputError>>;
     let (mut batches, incoming) = tortwin_handover::channel::<Batch>(READ_AHEAD_QUEUE);
     std::thread::scope(|scope| {
         let producer = scope.spawn(move || {
             tortwin_handover::behind_the_engine();
-            let mut reader = reader;
             loop {
                 let batch = batches.batch();
                 let mut ended = false;
@@ -964,7 +961,7 @@ pub fn read_ahead<T>(
                 batch.reverse();
                 // An error: the consumer stopped early.
                 if batches.hand_over().is_err() || ended {
-                    return reader;
+                    return;
                 }
             }
         });
@@ -975,7 +972,7 @@ pub fn read_ahead<T>(
         let out = consume(&mut events);
         drop(events);
         match producer.join() {
-            Ok(reader) => (out, reader),
+            Ok(()) => out,
             Err(panic) => std::panic::resume_unwind(panic),
         }
     })

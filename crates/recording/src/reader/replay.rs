@@ -184,10 +184,8 @@ impl ReplayQueue {
         loose: Vec<LooseRun>,
         keep_unknown: bool,
     ) -> Self {
-        let mut waiting_chunks: Vec<ChunkInfo> =
-            chunks.into_iter().filter(|c| c.message_count > 0).collect();
-        // Next chunk last; equal start times in file order.
-        waiting_chunks.sort_by_key(|c| Reverse((c.message_start_time, c.number)));
+        let waiting_chunks =
+            in_waiting_order(chunks.into_iter().filter(|c| c.message_count > 0).collect());
         let mut waiting_runs = loose;
         waiting_runs.sort_by_key(|r| Reverse(r.first));
         Self {
@@ -220,9 +218,8 @@ impl ReplayQueue {
             Vec::new(),
             false,
         );
-        let mut waiting_chunks = chunks;
-        waiting_chunks.sort_by_key(|c| Reverse((c.message_start_time, c.number)));
-        queue.waiting_chunks = waiting_chunks;
+        // Their message counts are the pass's to tell: none is left out.
+        queue.waiting_chunks = in_waiting_order(chunks);
         queue.feed = Some(feed);
         queue
     }
@@ -506,6 +503,13 @@ impl ReplayQueue {
     pub(super) fn path(&self) -> &Path {
         &self.path
     }
+}
+
+/// Chunks in the order they wait in: by `message_start_time`, equal ones
+/// in file order, the next one last.
+fn in_waiting_order(mut chunks: Vec<ChunkInfo>) -> Vec<ChunkInfo> {
+    chunks.sort_by_key(|c| Reverse((c.message_start_time, c.number)));
+    chunks
 }
 
 /// Where a message is, for an error about it: its channel's topic (none if
