@@ -1038,8 +1038,8 @@ impl McapCompression {
     /// Whether a replay's MCAP writer thread, and the thread that feeds it,
     /// run behind the engine ([`tortwin_handover::behind_the_engine`]).
     /// At a fast level they are light, and behind the engine they cannot
-    /// take a core it wants (the 3-day benchmark, medians of 20: 79.4 ms behind,
-    /// 82.4 ms not). At level 8 the writer's work is about the engine's
+    /// take a core it wants (the 3-day benchmark, medians of 20: 79.4 ms
+    /// behind, 82.4 ms not). At level 8 the writer's work is about the engine's
     /// (the year: 8 to 12 CPU-s against 9.5). Behind it, the engine's
     /// thread slept 7.3 s of the year's 16.8 s on their full queues, and
     /// a core idled 4.8 s (`perf sched`: threads of the idle policy waited,
