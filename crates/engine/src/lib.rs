@@ -178,6 +178,12 @@ pub struct EngineOptions {
     /// is the default. The two give the same bits (crates/engine/tests/
     /// kernel.rs checks it); this is for checking that, and for timing it.
     pub portable_kernel: bool,
+    /// Where the CPU has AVX-512, still roll a track's wheels in
+    /// wavefronts of four (AVX2 registers) rather than two consecutive
+    /// groups as one wavefront of eight (AVX-512 registers). The two give
+    /// the same bits (crates/engine/tests/kernel.rs checks it); this is for
+    /// checking that, and for timing it.
+    pub narrow_kernel: bool,
     /// On a line: after each train, give [`Sink::line_wheels`] what axle
     /// `K` and the next saw along each rail and axle `K`'s tread bands
     /// (the train's last two axles when it has no axle `K + 1`). Ignored

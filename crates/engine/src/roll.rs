@@ -988,8 +988,9 @@ impl TrackWork {
 /// an array and moved into the wavefront they were copied three to four
 /// times (on the 3-day curve, callgrind: memcpy 5.0 % of the engine
 /// thread's instructions before, 2.4 % after).
+/// Two of them: a wavefront of eight wheels is two groups' ([`DeepPart`]).
 #[derive(Clone, Default)]
-pub(crate) struct WaveLanes(Option<Box<[Lane; LANES]>>);
+pub(crate) struct WaveLanes([Option<Box<[Lane; LANES]>>; 2]);
 
 impl std::fmt::Debug for WaveLanes {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
@@ -1115,6 +1116,11 @@ pub(crate) struct RollContext<'a> {
     tangent_width: usize,
     /// Never the vector kernel ([`crate::EngineOptions::portable_kernel`]).
     portable: bool,
+    /// Two consecutive groups of a track as one wavefront of eight wheels
+    /// whose runs of steps take AVX-512 registers ([`RunDeep`]): the CPU
+    /// has AVX-512F, and neither [`crate::EngineOptions::portable_kernel`]
+    /// nor [`crate::EngineOptions::narrow_kernel`] is asked for.
+    deep: bool,
     origin_ns: i64,
     /// On a line: its layout.
     line: Option<&'a crate::line::LineLayout>,
@@ -1145,6 +1151,8 @@ struct Wave<'r> {
     /// The lanes' constant factors where runs of steps in registers may take
     /// their steps ([`RollContext::runs`]).
     runs: Option<[(f64, f64); LANES]>,
+    /// Where in [`TrackWork`]'s [`WaveLanes`] its lanes go back.
+    slot: usize,
 }
 
 /// A wheel in the wavefront.
@@ -1406,6 +1414,267 @@ impl RunLanes {
     }
 }
 
+/// Wheels in a wavefront of two groups ([`DeepPart`]).
+const DEEP: usize = 2 * LANES;
+
+/// Two consecutive full groups of one track in a run of steps
+/// ([`RollContext::run_deep`]) as one wavefront of eight wheels: lane j at
+/// step s - j of its path, lanes 4 to 7 the second group's (four steps
+/// behind the first, so its lane 0 reads what the first's lane 3 left, as
+/// lane j + 1 reads what lane j left).
+struct DeepPart<'s> {
+    record: &'s TrainRecord,
+    track: usize,
+    groups: [&'s mut [Lane; LANES]; 2],
+    state: &'s mut TrackState,
+    work: &'s mut TrackWork,
+    special: &'s [bool],
+    up: bool,
+    /// Each lane's constant transfer and consumption factors.
+    factors: [(f64, f64); DEEP],
+}
+
+impl DeepPart<'_> {
+    #[inline(always)]
+    fn lane(&self, j: usize) -> &Lane {
+        &self.groups[j / LANES][j % LANES]
+    }
+
+    #[inline(always)]
+    fn lane_mut(&mut self, j: usize) -> &mut Lane {
+        &mut self.groups[j / LANES][j % LANES]
+    }
+
+    /// The eight lanes' points at step `s` (of the first group's path).
+    #[inline(always)]
+    fn at(&self, s: usize) -> [usize; DEEP] {
+        let points = self.special.len();
+        std::array::from_fn(|j| point_of(self.up, points, s - j))
+    }
+
+    /// The first step from `s` on at which a lane is at a special point
+    /// (`usize::MAX` if no lane reaches one), as [`RunPart::special_from`]:
+    /// lane 0 leads, and the others follow it over the points it passed.
+    #[inline(always)]
+    fn special_from(&self, s: usize) -> usize {
+        let is = self.at(s);
+        if is.iter().any(|&i| self.special[i]) {
+            return s;
+        }
+        let lead = is[0];
+        let ahead = match self.up {
+            true => self.special[lead + 1..].iter().position(|&b| b),
+            false => self.special[..lead].iter().rev().position(|&b| b),
+        };
+        ahead.map_or(usize::MAX, |k| s + 1 + k)
+    }
+}
+
+/// [`RunLanes`] of a wavefront of eight wheels on one track ([`DeepPart`])
+/// in AVX-512 registers: each step lane by lane the operations of
+/// [`RunLanes::step`] ([`product::roll8_register`]), so the same bits, in
+/// about the instructions four lanes take there. Two tracks' wavefronts
+/// are two chains of steps the core overlaps.
+#[cfg(target_arch = "x86_64")]
+struct RunDeep {
+    observe: [bool; DEEP],
+    observing: bool,
+    revolution_at: std::arch::x86_64::__m512i,
+    revolution_step: std::arch::x86_64::__m512i,
+    transfer_factor: std::arch::x86_64::__m512d,
+    /// The lanes whose wheel passed an applicator.
+    transfers: std::arch::x86_64::__mmask8,
+    factor: std::arch::x86_64::__m512d,
+    fp_fc: std::arch::x86_64::__m512d,
+    wheel: std::arch::x86_64::__m512d,
+    consumed: std::arch::x86_64::__m512d,
+    capped: std::arch::x86_64::__m512d,
+    rail: std::arch::x86_64::__m512d,
+    lead: usize,
+    stride: usize,
+    left: std::arch::x86_64::__m512d,
+}
+
+/// An AVX-512 register's eight lanes as an array.
+macro_rules! store8_pd {
+    ($v:expr) => {{
+        let mut a = [0.0; DEEP];
+        std::arch::x86_64::_mm512_storeu_pd(a.as_mut_ptr(), $v);
+        a
+    }};
+}
+
+/// Eight lanes' values as an AVX-512 register, lane 0 first.
+macro_rules! lanes8_pd {
+    (|$j:ident| $e:expr) => {{
+        let a: [f64; DEEP] = std::array::from_fn(|$j| $e);
+        std::arch::x86_64::_mm512_loadu_pd(a.as_ptr())
+    }};
+}
+
+#[cfg(target_arch = "x86_64")]
+impl RunDeep {
+    /// The lanes of `part` about to take step `s`, as [`RunLanes::start`].
+    ///
+    /// # Safety
+    /// The CPU must have AVX-512F.
+    #[inline(always)]
+    unsafe fn start(ctx: &RollContext<'_>, part: &DeepPart<'_>, s: usize) -> Self {
+        use std::arch::x86_64::*;
+        let is = part.at(s);
+        let rail_kg = &part.state.rail_mass_kg;
+        // The gather does not check its indices: every distance on the
+        // track is in the table.
+        assert!(ctx.revolution.len() >= part.special.len());
+        let of = |j: usize| match part.lane(j).st.applicator_point {
+            Some(ia) => (is[j].abs_diff(ia) as i64, 1),
+            None => (0, 0),
+        };
+        let lane: [(i64, i64); DEEP] = std::array::from_fn(of);
+        let at = lane.map(|l| l.0);
+        let step = lane.map(|l| l.1);
+        let mut transfers = 0u8;
+        for j in 0..DEEP {
+            if part.lane(j).st.applicator_point.is_some() {
+                transfers |= 1 << j;
+            }
+        }
+        let observe: [bool; DEEP] = std::array::from_fn(|j| part.lane(j).roller.observe);
+        Self {
+            observe,
+            observing: observe.iter().any(|&o| o),
+            revolution_at: _mm512_loadu_si512(at.as_ptr().cast()),
+            revolution_step: _mm512_loadu_si512(step.as_ptr().cast()),
+            transfer_factor: lanes8_pd!(|j| part.factors[j].0),
+            transfers,
+            factor: lanes8_pd!(|j| part.factors[j].1),
+            fp_fc: lanes8_pd!(|j| part.lane(j).roller.fp_fc),
+            wheel: lanes8_pd!(|j| part.lane(j).st.wheel_kg),
+            consumed: lanes8_pd!(|j| part.lane(j).st.consumed_kg),
+            capped: lanes8_pd!(|j| part.lane(j).st.capped_kg),
+            rail: lanes8_pd!(|j| rail_kg[is[j]]),
+            lead: is[0],
+            stride: if part.up { 1 } else { usize::MAX },
+            left: _mm512_setzero_pd(),
+        }
+    }
+
+    /// One step, as [`RunLanes::step`]: only the last lane's rail mass is
+    /// stored (no lane of the wavefront reads its point again).
+    ///
+    /// # Safety
+    /// The CPU must have AVX-512F, AVX2 and FMA.
+    #[inline(always)]
+    unsafe fn step(
+        &mut self,
+        ctx: &RollContext<'_>,
+        params: &ProductParams,
+        part: &mut DeepPart<'_>,
+    ) {
+        use std::arch::x86_64::*;
+        let revolution = _mm512_maskz_mov_pd(
+            self.transfers,
+            _mm512_mul_pd(
+                _mm512_i64gather_pd::<8>(self.revolution_at, ctx.revolution.as_ptr()),
+                self.transfer_factor,
+            ),
+        );
+        let conditions = product::Conditions8 {
+            transfers: self.transfers,
+            revolution,
+            factor: self.factor,
+            fp_fc: self.fp_fc,
+        };
+        let rolled = product::roll8_register(params, (self.wheel, self.rail), &conditions);
+        if self.observing {
+            let m = store8_pd!(_mm512_add_pd(self.wheel, self.rail));
+            let after = store8_pd!(rolled.wheel);
+            let is = self.points();
+            for j in (0..DEEP).filter(|&j| self.observe[j]) {
+                part.work.observed.mass_kg[is[j]] = m[j];
+                part.work.observed.wheel_mass_kg[is[j]] = after[j];
+            }
+        }
+        self.wheel = rolled.wheel;
+        self.consumed = _mm512_add_pd(self.consumed, rolled.consumed);
+        self.capped = _mm512_add_pd(self.capped, rolled.capped);
+        self.left = rolled.rail;
+        let high = _mm512_extractf64x4_pd::<1>(rolled.rail);
+        part.state.rail_mass_kg[self.points()[DEEP - 1]] =
+            _mm256_cvtsd_f64(_mm256_permute4x64_pd::<0b11>(high));
+    }
+
+    /// To the step after the last: lane j + 1 reads what lane j left, lane
+    /// 0 a new point.
+    ///
+    /// # Safety
+    /// The CPU must have AVX-512F.
+    #[inline(always)]
+    unsafe fn advance(&mut self, part: &DeepPart<'_>) {
+        use std::arch::x86_64::*;
+        self.lead = self.lead.wrapping_add(self.stride);
+        let shifted = _mm512_permutexvar_pd(_mm512_setr_epi64(7, 0, 1, 2, 3, 4, 5, 6), self.left);
+        self.rail = _mm512_mask_blend_pd(
+            0b0000_0001,
+            shifted,
+            _mm512_set1_pd(part.state.rail_mass_kg[self.lead]),
+        );
+        self.revolution_at = _mm512_add_epi64(self.revolution_at, self.revolution_step);
+    }
+
+    /// The lanes back in memory before step `s`, as [`RunLanes::suspend`].
+    ///
+    /// # Safety
+    /// The CPU must have AVX-512F.
+    #[inline(always)]
+    unsafe fn suspend(&self, part: &mut DeepPart<'_>) {
+        let rail = store8_pd!(self.rail);
+        for (&i, &m) in self.points().iter().zip(&rail).skip(1) {
+            part.state.rail_mass_kg[i] = m;
+        }
+        self.store_lanes(part);
+    }
+
+    /// The end of the run after a step, as [`RunLanes::finish`].
+    ///
+    /// # Safety
+    /// The CPU must have AVX-512F.
+    #[inline(always)]
+    unsafe fn finish(&self, part: &mut DeepPart<'_>) {
+        let left = store8_pd!(self.left);
+        for (&i, &m) in self.points().iter().zip(&left).take(DEEP - 1) {
+            part.state.rail_mass_kg[i] = m;
+        }
+        self.store_lanes(part);
+    }
+
+    /// The eight lanes' points (lane j follows lane 0 by j points).
+    #[inline(always)]
+    fn points(&self) -> [usize; DEEP] {
+        std::array::from_fn(|j| {
+            self.lead
+                .wrapping_add(self.stride.wrapping_mul(j).wrapping_neg())
+        })
+    }
+
+    /// The lanes' masses and loss totals back in their states.
+    ///
+    /// # Safety
+    /// The CPU must have AVX-512F.
+    #[inline(always)]
+    unsafe fn store_lanes(&self, part: &mut DeepPart<'_>) {
+        let wheel = store8_pd!(self.wheel);
+        let consumed = store8_pd!(self.consumed);
+        let capped = store8_pd!(self.capped);
+        for j in 0..DEEP {
+            let st = &mut part.lane_mut(j).st;
+            st.wheel_kg = wheel[j];
+            st.consumed_kg = consumed[j];
+            st.capped_kg = capped[j];
+        }
+    }
+}
+
 impl Engine {
     /// The engine's fields split into what rolling reads and the per-track
     /// state it changes.
@@ -1436,6 +1705,9 @@ impl Engine {
                     (true, _) => SLOTS,
                 },
                 portable: self.opts.portable_kernel,
+                deep: !self.opts.portable_kernel
+                    && !self.opts.narrow_kernel
+                    && tortwin_model::exp::exp8_is_available(),
                 origin_ns: self.origin_ns,
                 line: self.line.as_ref(),
             },
@@ -1678,16 +1950,61 @@ impl RollContext<'_> {
         work: &mut TrackWork,
     ) {
         let axles = std::mem::take(&mut work.axles);
-        for (g, group) in axles.chunks(LANES).enumerate() {
-            let group = Group {
-                record,
-                track,
-                axles: group,
-                first_row: g * LANES,
-            };
-            self.roll_group(&group, state, work);
+        let group = |g: usize| Group {
+            record,
+            track,
+            axles: &axles[g * LANES..axles.len().min((g + 1) * LANES)],
+            first_row: g * LANES,
+        };
+        let groups = axles.len().div_ceil(LANES);
+        let mut g = 0;
+        while g < groups {
+            // Two full groups as one wavefront of eight wheels.
+            if (g + 2) * LANES <= axles.len()
+                && self.roll_deep_one([&group(g), &group(g + 1)], state, work)
+            {
+                g += 2;
+                continue;
+            }
+            self.roll_group(&group(g), state, work);
+            g += 1;
         }
         work.axles = axles;
+    }
+
+    /// [`RollContext::roll_deep_with`] of two full groups of one track, if
+    /// this kernel rolls them so ([`RollContext::rolls_deep`]).
+    fn roll_deep_one(
+        &self,
+        groups: [&Group<'_>; 2],
+        state: &mut TrackState,
+        work: &mut TrackWork,
+    ) -> bool {
+        #[cfg(target_arch = "x86_64")]
+        if self.rolls_deep() {
+            // SAFETY: the CPU has AVX-512F, AVX2 and FMA (`deep`).
+            unsafe { self.roll_deep_with_one(groups, state, work) };
+            return true;
+        }
+        let _ = (groups, state, work);
+        false
+    }
+
+    /// [`RollContext::roll_deep_with`] of two full groups of each of two
+    /// tracks, if this kernel rolls them so ([`RollContext::rolls_deep`]).
+    fn roll_deep_two(
+        &self,
+        groups: [[&Group<'_>; 2]; 2],
+        tracks: [(&mut TrackState, &mut TrackWork); 2],
+    ) -> bool {
+        #[cfg(target_arch = "x86_64")]
+        if self.rolls_deep() {
+            // SAFETY: the CPU has AVX-512F, AVX2 and FMA (`deep`).
+            unsafe { self.roll_deep_with_two(groups, tracks) };
+            return true;
+        }
+        let _ = (groups, tracks);
+        false
     }
 
     /// [`RollContext::roll_track`] of two tracks: their groups of
@@ -1704,17 +2021,30 @@ impl RollContext<'_> {
             std::mem::take(&mut work_b.axles),
         ];
         let groups = axles.each_ref().map(|a| a.len().div_ceil(LANES));
-        for g in 0..groups[0].max(groups[1]) {
-            let group = |k: usize| {
-                let axles = axles[k].chunks(LANES).nth(g)?;
-                Some(Group {
-                    record,
-                    track: tracks[k],
-                    axles,
-                    first_row: g * LANES,
-                })
-            };
-            match (group(0), group(1)) {
+        let group = |k: usize, g: usize| {
+            let axles = axles[k].chunks(LANES).nth(g)?;
+            Some(Group {
+                record,
+                track: tracks[k],
+                axles,
+                first_row: g * LANES,
+            })
+        };
+        let mut g = 0;
+        while g < groups[0].max(groups[1]) {
+            // Two full groups of each track as wavefronts of eight wheels.
+            if (g + 2) * LANES <= axles[0].len().min(axles[1].len()) {
+                let deep = [0, 1].map(|k| [g, g + 1].map(|g| group(k, g).expect("a full group")));
+                let [a, b] = &deep;
+                let tracks = [(&mut *state_a, &mut *work_a), (&mut *state_b, &mut *work_b)];
+                if self.roll_deep_two([[&a[0], &a[1]], [&b[0], &b[1]]], tracks) {
+                    g += 2;
+                    continue;
+                }
+            }
+            let this = g;
+            g += 1;
+            match (group(0, this), group(1, this)) {
                 (Some(a), Some(b)) if a.axles.len() == LANES && b.axles.len() == LANES => {
                     self.roll_pair(&a, &b, [(state_a, work_a), (state_b, work_b)]);
                 }
@@ -1875,6 +2205,225 @@ impl RollContext<'_> {
         s
     }
 
+    /// [`RollContext::run_fma`] of wavefronts of eight wheels ([`DeepPart`],
+    /// one or two tracks) in AVX-512 registers ([`RunDeep`]): the same
+    /// steps lane by lane, so the same bits. Returns the step it stopped at
+    /// (`end`).
+    ///
+    /// # Safety
+    /// The CPU must have AVX-512F, AVX2 and FMA.
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    unsafe fn run_deep<const K: usize>(
+        &self,
+        parts: &mut [DeepPart<'_>; K],
+        first: usize,
+        end: usize,
+    ) -> usize {
+        let mut s = first;
+        if s >= end {
+            return s;
+        }
+        let mut next: [usize; K] = std::array::from_fn(|k| parts[k].special_from(s));
+        let mut runs: [RunDeep; K] = std::array::from_fn(|k| RunDeep::start(self, &parts[k], s));
+        let params = *self.product;
+        loop {
+            if next.contains(&s) {
+                self.special_step_deep(&mut runs, parts, &next, &params, s);
+                for (n, part) in next.iter_mut().zip(parts.iter()) {
+                    if *n == s {
+                        *n = part.special_from(s + 1);
+                    }
+                }
+            } else {
+                for (run, part) in runs.iter_mut().zip(parts.iter_mut()) {
+                    run.step(self, &params, part);
+                }
+            }
+            s += 1;
+            if s >= end {
+                break;
+            }
+            for (run, part) in runs.iter_mut().zip(parts.iter()) {
+                run.advance(part);
+            }
+        }
+        for (run, part) in runs.iter().zip(parts.iter_mut()) {
+            run.finish(part);
+        }
+        s
+    }
+
+    /// [`RollContext::special_step`] of wavefronts of eight wheels.
+    ///
+    /// # Safety
+    /// The CPU must have AVX-512F, AVX2 and FMA.
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    unsafe fn special_step_deep<const K: usize>(
+        &self,
+        runs: &mut [RunDeep; K],
+        parts: &mut [DeepPart<'_>; K],
+        next: &[usize; K],
+        params: &ProductParams,
+        s: usize,
+    ) {
+        use std::arch::x86_64::_mm512_add_pd;
+        let mut at_s = [[f64::NAN; DEEP]; K];
+        let mut seen = [[0.0; DEEP]; K];
+        for k in (0..K).filter(|&k| next[k] == s) {
+            let part = &mut parts[k];
+            let is = part.at(s);
+            let acts = |j: usize| {
+                let t = part.lane(j).roller.time_at(self.d_m, is[j]);
+                self.acts_before(part.track, part.work, is[j], t)
+            };
+            if (0..DEEP).any(|j| part.special[is[j]] && acts(j)) {
+                runs[k].suspend(part);
+                for j in (0..DEEP).filter(|&j| part.special[is[j]]) {
+                    let (track, i) = (part.track, is[j]);
+                    let lane = &mut part.groups[j / LANES][j % LANES];
+                    at_s[k][j] = self.special_before(track, part.state, part.work, lane, i);
+                }
+                runs[k] = RunDeep::start(self, part, s);
+            } else {
+                for j in (0..DEEP).filter(|&j| part.special[is[j]]) {
+                    at_s[k][j] = part.lane(j).roller.time_at(self.d_m, is[j]);
+                }
+            }
+            seen[k] = store8_pd!(_mm512_add_pd(runs[k].wheel, runs[k].rail));
+        }
+        for (run, part) in runs.iter_mut().zip(parts.iter_mut()) {
+            run.step(self, params, part);
+        }
+        for k in (0..K).filter(|&k| next[k] == s) {
+            let part = &mut parts[k];
+            let is = part.at(s);
+            for j in (0..DEEP).filter(|&j| part.special[is[j]]) {
+                let (t, m) = (at_s[k][j], seen[k][j]);
+                let lane = &part.groups[j / LANES][j % LANES];
+                self.special_after(part.record, part.track, part.work, lane, is[j], t, m);
+            }
+        }
+    }
+
+    /// Two consecutive full groups of each of `K` tracks (one or two) as
+    /// wavefronts of eight wheels ([`DeepPart`]): each track's second group
+    /// steps four steps behind its first, so every point still sees the
+    /// wheels in their order, and each wave steps as in
+    /// [`RollContext::roll_group_with`]; where every lane of every wave is
+    /// on its track, their runs of steps go to [`RollContext::run_deep`].
+    ///
+    /// # Safety
+    /// The CPU must have AVX-512F, AVX2 and FMA.
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    unsafe fn roll_deep_with<const K: usize>(
+        &self,
+        groups: [[&Group<'_>; 2]; K],
+        mut tracks: [(&mut TrackState, &mut TrackWork); K],
+        v: Vector<impl Exp4, impl Div4, impl Roll4, impl Run4>,
+    ) {
+        let mut waves: [[Wave<'_>; 2]; K] = {
+            let mut k = 0;
+            std::array::from_fn(|_| {
+                let kept = &mut tracks[k].1.wave_lanes;
+                let pair = [
+                    self.wave(groups[k][0], true, kept, 0),
+                    self.wave(groups[k][1], true, kept, 1),
+                ];
+                k += 1;
+                pair
+            })
+        };
+        let end = self.d_m.len() - 1;
+        // Every wave has LANES wheels: the same steps each.
+        let steps = self.wave_steps(&waves[0][0]);
+        let mut s = 0;
+        while s < steps + LANES {
+            let runs = s >= LANES
+                && waves
+                    .iter()
+                    .all(|[a, b]| self.runs_at(a, s) && self.runs_at(b, s - LANES));
+            if runs {
+                let mut pairs = waves.iter_mut().zip(tracks.iter_mut());
+                let mut parts: [DeepPart<'_>; K] = std::array::from_fn(|_| {
+                    let ([a, b], (state, work)) = pairs.next().expect("K waves and tracks");
+                    let mut factors = [(0.0, 0.0); DEEP];
+                    factors[..LANES].copy_from_slice(&a.runs.unwrap_or_default());
+                    factors[LANES..].copy_from_slice(&b.runs.unwrap_or_default());
+                    DeepPart {
+                        record: a.record,
+                        track: a.track,
+                        groups: [&mut a.lanes, &mut b.lanes],
+                        state,
+                        work,
+                        special: &self.special[a.track],
+                        up: a.up,
+                        factors,
+                    }
+                });
+                let next = self.run_deep(&mut parts, s, end);
+                if next > s {
+                    s = next;
+                    continue;
+                }
+            }
+            for ([a, b], (state, work)) in waves.iter_mut().zip(tracks.iter_mut()) {
+                if s < steps {
+                    self.wave_step(a, state, work, s, v);
+                }
+                if s >= LANES {
+                    self.wave_step(b, state, work, s - LANES, v);
+                }
+            }
+            s += 1;
+        }
+        for ([a, b], (state, work)) in waves.into_iter().zip(tracks.iter_mut()) {
+            self.wave_end(a, state, work);
+            self.wave_end(b, state, work);
+        }
+    }
+
+    /// [`RollContext::roll_deep_with`] of one track, compiled for AVX-512F,
+    /// AVX2 and FMA.
+    ///
+    /// # Safety
+    /// The CPU must have AVX-512F, AVX2 and FMA.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma,avx512f")]
+    unsafe fn roll_deep_with_one(
+        &self,
+        groups: [&Group<'_>; 2],
+        state: &mut TrackState,
+        work: &mut TrackWork,
+    ) {
+        self.roll_deep_with([groups], [(state, work)], vector_fma!());
+    }
+
+    /// [`RollContext::roll_deep_with`] of two tracks, compiled for
+    /// AVX-512F, AVX2 and FMA.
+    ///
+    /// # Safety
+    /// The CPU must have AVX-512F, AVX2 and FMA.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma,avx512f")]
+    unsafe fn roll_deep_with_two(
+        &self,
+        groups: [[&Group<'_>; 2]; 2],
+        tracks: [(&mut TrackState, &mut TrackWork); 2],
+    ) {
+        self.roll_deep_with(groups, tracks, vector_fma!());
+    }
+
+    /// Whether two consecutive groups of a track roll as one wavefront of
+    /// eight wheels ([`RollContext::roll_deep_with`]): the CPU has AVX-512
+    /// ([`RollContext::deep`]), and the steps are those runs take (no
+    /// tangents, no row of every wheel's contacts kept).
+    fn rolls_deep(&self) -> bool {
+        self.deep && self.tangent_width == 0 && !self.keep_seen
+    }
+
     /// Step `s` of a run where a lane of a group is at a special point, in
     /// [`RollContext::wave_step`]'s order: the events there before its
     /// wheel (on the lanes back in memory, then taken up again), the step,
@@ -1941,7 +2490,7 @@ impl RollContext<'_> {
         work: &mut TrackWork,
         v: Vector<impl Exp4, impl Div4, impl Roll4, impl Run4>,
     ) {
-        let mut wave = self.wave(group, v.run.is_some(), &mut work.wave_lanes);
+        let mut wave = self.wave(group, v.run.is_some(), &mut work.wave_lanes, 0);
         let end = self.d_m.len() - 1;
         let mut s = 0;
         while s < self.wave_steps(&wave) {
@@ -1972,8 +2521,8 @@ impl RollContext<'_> {
         [(state_a, work_a), (state_b, work_b)]: [(&mut TrackState, &mut TrackWork); 2],
         v: Vector<impl Exp4, impl Div4, impl Roll4, impl Run4>,
     ) {
-        let mut a = self.wave(groups[0], v.run.is_some(), &mut work_a.wave_lanes);
-        let mut b = self.wave(groups[1], v.run.is_some(), &mut work_b.wave_lanes);
+        let mut a = self.wave(groups[0], v.run.is_some(), &mut work_a.wave_lanes, 0);
+        let mut b = self.wave(groups[1], v.run.is_some(), &mut work_b.wave_lanes, 0);
         let end = self.d_m.len() - 1;
         let steps = self.wave_steps(&a).max(self.wave_steps(&b));
         let mut s = 0;
@@ -2004,7 +2553,13 @@ impl RollContext<'_> {
     /// The wavefront of `group` before its first step. `runs`: the kernel
     /// has runs of steps in registers ([`Vector::run`]).
     #[inline(always)]
-    fn wave<'r>(&self, group: &Group<'r>, runs: bool, kept: &mut WaveLanes) -> Wave<'r> {
+    fn wave<'r>(
+        &self,
+        group: &Group<'r>,
+        runs: bool,
+        kept: &mut WaveLanes,
+        slot: usize,
+    ) -> Wave<'r> {
         let Group {
             record,
             track,
@@ -2019,7 +2574,7 @@ impl RollContext<'_> {
             Some(&a) => self.lane(record, track, a, first_row + j),
             None => self.lane(record, track, group[0], first_row),
         };
-        let lanes = match kept.0.take() {
+        let lanes = match kept.0[slot].take() {
             Some(mut lanes) => {
                 for (j, l) in lanes.iter_mut().enumerate() {
                     *l = lane(j);
@@ -2053,6 +2608,7 @@ impl RollContext<'_> {
             clocks,
             clock_free,
             runs,
+            slot,
         }
     }
 
@@ -2175,7 +2731,7 @@ impl RollContext<'_> {
         if wave.clock_free.is_some() && wave.last {
             self.store_touches(&wave.lanes[wave.n - 1], state);
         }
-        work.wave_lanes.0 = Some(wave.lanes);
+        work.wave_lanes.0[wave.slot] = Some(wave.lanes);
     }
 
     /// One contact of `lane`'s wheel at point `i`, its exponentials taken

@@ -1,6 +1,8 @@
-//! The stepping kernel's two builds give the same bits: the vector one
-//! (four wheels' exponentials and quotients in one AVX2/FMA register, the
-//! default where the CPU has them) and the portable one
+//! The stepping kernel's builds give the same bits: the vector one (four
+//! wheels' exponentials and quotients in one AVX2/FMA register, the
+//! default where the CPU has them; where it has AVX-512F, two consecutive
+//! groups of a track as one wavefront of eight wheels in AVX-512 registers,
+//! unless `EngineOptions::narrow_kernel`) and the portable one
 //! (`EngineOptions::portable_kernel`: `f64::exp` and `/` lane by lane).
 //! Every measurement's simulated value, every read-out mass and its
 //! tangent, the state before every train and at the end, and the run's
@@ -66,7 +68,7 @@ fn replay(
     cfg: &ModelConfig,
     tangents: bool,
     portable: bool,
-    serial: bool,
+    (serial, narrow): (bool, bool),
 ) -> (Vec<String>, Vec<String>) {
     let mut engine = Engine::on_line(
         rec.section.clone(),
@@ -75,6 +77,7 @@ fn replay(
         EngineOptions {
             tangents,
             portable_kernel: portable,
+            narrow_kernel: narrow,
             beside_output_threads: serial,
             ..EngineOptions::default()
         },
@@ -160,13 +163,14 @@ fn the_vector_kernel_gives_the_portable_kernels_bits() {
     );
 }
 
-/// The vector kernel (tracks in parallel and side by side) against the
+/// The vector kernel (tracks in parallel and side by side, in wavefronts
+/// of eight wheels where the CPU has AVX-512 and of four) against the
 /// portable one on `rec`, with and without tangents.
 fn assert_kernels_agree(rec: &Recording, cfg: &ModelConfig, name: &str) {
     for tangents in [false, true] {
-        let (portable, portable_state) = replay(rec, cfg, tangents, true, false);
-        for serial in [false, true] {
-            let (vector, vector_state) = replay(rec, cfg, tangents, false, serial);
+        let (portable, portable_state) = replay(rec, cfg, tangents, true, (false, false));
+        for (serial, narrow) in [(false, false), (true, false), (false, true), (true, true)] {
+            let (vector, vector_state) = replay(rec, cfg, tangents, false, (serial, narrow));
             // The field line has 32 measurements; every section
             // recording more than 100.
             let least = if rec.line.is_some() { 30 } else { 100 };
@@ -175,7 +179,7 @@ fn assert_kernels_agree(rec: &Recording, cfg: &ModelConfig, name: &str) {
                 "{name}: {} measurements",
                 vector.len()
             );
-            let case = format!("{name} (tangents {tangents}, serial {serial})");
+            let case = format!("{name} (tangents {tangents}, serial {serial}, narrow {narrow})");
             assert_eq!(vector.len(), portable.len(), "{case}");
             if let Some(k) = (0..vector.len()).find(|&k| vector[k] != portable[k]) {
                 panic!(
