@@ -697,18 +697,25 @@ impl<F> Roll4 for F where
 trait Run4: Fn(&RollContext<'_>, &mut [RunPart<'_>], usize, usize) -> usize + Copy {}
 impl<F> Run4 for F where F: Fn(&RollContext<'_>, &mut [RunPart<'_>], usize, usize) -> usize + Copy {}
 
-/// One group's part in a run of steps ([`Run4`]).
-struct RunPart<'s> {
+/// Wheels in a wavefront of two groups ([`RunPart`] with `G` = 2).
+const DEEP: usize = 2 * LANES;
+
+/// A wavefront's part in a run of steps ([`RollContext::run_lanes`]): `G`
+/// consecutive groups of one track (one, [`Run4`], or two, [`RunDeep`]) as
+/// one wavefront of `G` x [`LANES`] wheels, lane j at step s - j of its path
+/// (a second group four steps behind the first, so that its lane 0 reads
+/// what the first's lane 3 left, as lane j + 1 reads what lane j left).
+struct RunPart<'s, const G: usize = 1> {
     record: &'s TrainRecord,
     track: usize,
-    lanes: &'s mut [Lane; LANES],
+    groups: [&'s mut [Lane; LANES]; G],
     state: &'s mut TrackState,
     work: &'s mut TrackWork,
     special: &'s [bool],
     up: bool,
     /// Each lane's constant transfer and consumption factors
-    /// ([`Roller::clock_free`]).
-    factors: [(f64, f64); LANES],
+    /// ([`Roller::clock_free`]); the first `G` x [`LANES`] used.
+    factors: [(f64, f64); DEEP],
 }
 
 /// The point of a track of `points` points a wheel is at after `step`
@@ -729,17 +736,34 @@ fn lane_points(up: bool, points: usize, s: usize) -> [usize; LANES] {
     std::array::from_fn(|j| point_of(up, points, s - j))
 }
 
-impl RunPart<'_> {
-    /// The four lanes' points at step `s`.
+impl<const G: usize> RunPart<'_, G> {
+    /// The wavefront's lanes.
+    const N: usize = G * LANES;
+
     #[inline(always)]
-    fn at(&self, s: usize) -> [usize; LANES] {
-        lane_points(self.up, self.special.len(), s)
+    fn lane(&self, j: usize) -> &Lane {
+        &self.groups[j / LANES][j % LANES]
+    }
+
+    #[inline(always)]
+    fn lane_mut(&mut self, j: usize) -> &mut Lane {
+        &mut self.groups[j / LANES][j % LANES]
+    }
+
+    /// The lanes' points at step `s` (0 past the last lane).
+    #[inline(always)]
+    fn at(&self, s: usize) -> [usize; DEEP] {
+        let points = self.special.len();
+        std::array::from_fn(|j| match j < Self::N {
+            true => point_of(self.up, points, s - j),
+            false => 0,
+        })
     }
 
     /// Whether a lane is at a special point at step `s`.
     #[inline(always)]
     fn special_at(&self, s: usize) -> bool {
-        self.at(s).iter().any(|&i| self.special[i])
+        self.at(s)[..Self::N].iter().any(|&i| self.special[i])
     }
 
     /// The first step from `s` on at which a lane is at a special point
@@ -755,7 +779,7 @@ impl RunPart<'_> {
     /// The first step after `s` at which a lane is at a special point,
     /// none being at `s` (`usize::MAX` if no lane reaches one). Lane 0
     /// leads and the others follow it over the points it passed, none of
-    /// them special between lane 3's and lane 0's at `s`: it is the step at
+    /// them special between the last lane's and lane 0's at `s`: it is the step at
     /// which lane 0 reaches the next special point ahead of it.
     #[inline(always)]
     fn next_special(&self, s: usize) -> usize {
@@ -988,7 +1012,7 @@ impl TrackWork {
 /// an array and moved into the wavefront they were copied three to four
 /// times (on the 3-day curve, callgrind: memcpy 5.0 % of the engine
 /// thread's instructions before, 2.4 % after).
-/// Two of them: a wavefront of eight wheels is two groups' ([`DeepPart`]).
+/// Two of them: a wavefront of eight wheels is two groups' ([`RunPart`]).
 #[derive(Clone, Default)]
 pub(crate) struct WaveLanes([Option<Box<[Lane; LANES]>>; 2]);
 
@@ -1244,8 +1268,32 @@ macro_rules! store_pd {
     }};
 }
 
+/// Lanes in registers through a run of steps ([`RollContext::run_lanes`]):
+/// [`RunLanes`], a wavefront of one group, and [`RunDeep`], of two.
 #[cfg(target_arch = "x86_64")]
-impl RunLanes {
+trait Registers<const G: usize>: Sized {
+    /// The lanes of `part` about to take step `s`.
+    unsafe fn start(ctx: &RollContext<'_>, part: &RunPart<'_, G>, s: usize) -> Self;
+    /// One step of every lane.
+    unsafe fn step(
+        &mut self,
+        ctx: &RollContext<'_>,
+        params: &ProductParams,
+        part: &mut RunPart<'_, G>,
+    );
+    /// To the step after the last.
+    unsafe fn advance(&mut self, part: &RunPart<'_, G>);
+    /// The lanes back in memory before a step, for a special point's events.
+    unsafe fn suspend(&self, part: &mut RunPart<'_, G>);
+    /// The end of the run after a step.
+    unsafe fn finish(&self, part: &mut RunPart<'_, G>);
+    /// Each lane's wheel and rail mass before the step: the step-2 mass a
+    /// site keeps (the first `G` x [`LANES`]).
+    unsafe fn seen(&self) -> [f64; DEEP];
+}
+
+#[cfg(target_arch = "x86_64")]
+impl Registers<1> for RunLanes {
     /// The lanes of `part` about to take step `s`.
     ///
     /// # Safety
@@ -1255,7 +1303,7 @@ impl RunLanes {
         use std::arch::x86_64::_mm256_setzero_pd;
         const _: () = assert!(LANES == 4);
         use std::arch::x86_64::_mm256_setr_epi64x;
-        let lanes = &*part.lanes;
+        let lanes = &*part.groups[0];
         let is = part.at(s);
         let rail_kg = &part.state.rail_mass_kg;
         // The revolution factors are read with a gather, which does not
@@ -1388,6 +1436,17 @@ impl RunLanes {
         self.store_lanes(part);
     }
 
+    #[inline(always)]
+    unsafe fn seen(&self) -> [f64; DEEP] {
+        let mut seen = [0.0; DEEP];
+        let m = store_pd!(std::arch::x86_64::_mm256_add_pd(self.wheel, self.rail));
+        seen[..LANES].copy_from_slice(&m);
+        seen
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+impl RunLanes {
     /// The four lanes' points (lane j follows lane 0 by j points).
     #[inline(always)]
     fn points(&self) -> [usize; LANES] {
@@ -1406,7 +1465,7 @@ impl RunLanes {
         let wheel = store_pd!(self.wheel);
         let consumed = store_pd!(self.consumed);
         let capped = store_pd!(self.capped);
-        for (j, lane) in part.lanes.iter_mut().enumerate() {
+        for (j, lane) in part.groups[0].iter_mut().enumerate() {
             lane.st.wheel_kg = wheel[j];
             lane.st.consumed_kg = consumed[j];
             lane.st.capped_kg = capped[j];
@@ -1414,63 +1473,7 @@ impl RunLanes {
     }
 }
 
-/// Wheels in a wavefront of two groups ([`DeepPart`]).
-const DEEP: usize = 2 * LANES;
-
-/// Two consecutive full groups of one track in a run of steps
-/// ([`RollContext::run_deep`]) as one wavefront of eight wheels: lane j at
-/// step s - j of its path, lanes 4 to 7 the second group's (four steps
-/// behind the first, so its lane 0 reads what the first's lane 3 left, as
-/// lane j + 1 reads what lane j left).
-struct DeepPart<'s> {
-    record: &'s TrainRecord,
-    track: usize,
-    groups: [&'s mut [Lane; LANES]; 2],
-    state: &'s mut TrackState,
-    work: &'s mut TrackWork,
-    special: &'s [bool],
-    up: bool,
-    /// Each lane's constant transfer and consumption factors.
-    factors: [(f64, f64); DEEP],
-}
-
-impl DeepPart<'_> {
-    #[inline(always)]
-    fn lane(&self, j: usize) -> &Lane {
-        &self.groups[j / LANES][j % LANES]
-    }
-
-    #[inline(always)]
-    fn lane_mut(&mut self, j: usize) -> &mut Lane {
-        &mut self.groups[j / LANES][j % LANES]
-    }
-
-    /// The eight lanes' points at step `s` (of the first group's path).
-    #[inline(always)]
-    fn at(&self, s: usize) -> [usize; DEEP] {
-        let points = self.special.len();
-        std::array::from_fn(|j| point_of(self.up, points, s - j))
-    }
-
-    /// The first step from `s` on at which a lane is at a special point
-    /// (`usize::MAX` if no lane reaches one), as [`RunPart::special_from`]:
-    /// lane 0 leads, and the others follow it over the points it passed.
-    #[inline(always)]
-    fn special_from(&self, s: usize) -> usize {
-        let is = self.at(s);
-        if is.iter().any(|&i| self.special[i]) {
-            return s;
-        }
-        let lead = is[0];
-        let ahead = match self.up {
-            true => self.special[lead + 1..].iter().position(|&b| b),
-            false => self.special[..lead].iter().rev().position(|&b| b),
-        };
-        ahead.map_or(usize::MAX, |k| s + 1 + k)
-    }
-}
-
-/// [`RunLanes`] of a wavefront of eight wheels on one track ([`DeepPart`])
+/// [`RunLanes`] of a wavefront of eight wheels on one track ([`RunPart`] of two groups)
 /// in AVX-512 registers: each step lane by lane the operations of
 /// [`RunLanes::step`] ([`product::roll8_register`]), so the same bits, in
 /// about the instructions four lanes take there. Two tracks' wavefronts
@@ -1513,13 +1516,13 @@ macro_rules! lanes8_pd {
 }
 
 #[cfg(target_arch = "x86_64")]
-impl RunDeep {
+impl Registers<2> for RunDeep {
     /// The lanes of `part` about to take step `s`, as [`RunLanes::start`].
     ///
     /// # Safety
     /// The CPU must have AVX-512F.
     #[inline(always)]
-    unsafe fn start(ctx: &RollContext<'_>, part: &DeepPart<'_>, s: usize) -> Self {
+    unsafe fn start(ctx: &RollContext<'_>, part: &RunPart<'_, 2>, s: usize) -> Self {
         use std::arch::x86_64::*;
         let is = part.at(s);
         let rail_kg = &part.state.rail_mass_kg;
@@ -1569,7 +1572,7 @@ impl RunDeep {
         &mut self,
         ctx: &RollContext<'_>,
         params: &ProductParams,
-        part: &mut DeepPart<'_>,
+        part: &mut RunPart<'_, 2>,
     ) {
         use std::arch::x86_64::*;
         let revolution = _mm512_maskz_mov_pd(
@@ -1610,7 +1613,7 @@ impl RunDeep {
     /// # Safety
     /// The CPU must have AVX-512F.
     #[inline(always)]
-    unsafe fn advance(&mut self, part: &DeepPart<'_>) {
+    unsafe fn advance(&mut self, part: &RunPart<'_, 2>) {
         use std::arch::x86_64::*;
         self.lead = self.lead.wrapping_add(self.stride);
         let shifted = _mm512_permutexvar_pd(_mm512_setr_epi64(7, 0, 1, 2, 3, 4, 5, 6), self.left);
@@ -1627,7 +1630,7 @@ impl RunDeep {
     /// # Safety
     /// The CPU must have AVX-512F.
     #[inline(always)]
-    unsafe fn suspend(&self, part: &mut DeepPart<'_>) {
+    unsafe fn suspend(&self, part: &mut RunPart<'_, 2>) {
         let rail = store8_pd!(self.rail);
         for (&i, &m) in self.points().iter().zip(&rail).skip(1) {
             part.state.rail_mass_kg[i] = m;
@@ -1640,7 +1643,7 @@ impl RunDeep {
     /// # Safety
     /// The CPU must have AVX-512F.
     #[inline(always)]
-    unsafe fn finish(&self, part: &mut DeepPart<'_>) {
+    unsafe fn finish(&self, part: &mut RunPart<'_, 2>) {
         let left = store8_pd!(self.left);
         for (&i, &m) in self.points().iter().zip(&left).take(DEEP - 1) {
             part.state.rail_mass_kg[i] = m;
@@ -1648,6 +1651,14 @@ impl RunDeep {
         self.store_lanes(part);
     }
 
+    #[inline(always)]
+    unsafe fn seen(&self) -> [f64; DEEP] {
+        store8_pd!(std::arch::x86_64::_mm512_add_pd(self.wheel, self.rail))
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+impl RunDeep {
     /// The eight lanes' points (lane j follows lane 0 by j points).
     #[inline(always)]
     fn points(&self) -> [usize; DEEP] {
@@ -1662,7 +1673,7 @@ impl RunDeep {
     /// # Safety
     /// The CPU must have AVX-512F.
     #[inline(always)]
-    unsafe fn store_lanes(&self, part: &mut DeepPart<'_>) {
+    unsafe fn store_lanes(&self, part: &mut RunPart<'_, 2>) {
         let wheel = store8_pd!(self.wheel);
         let consumed = store8_pd!(self.consumed);
         let capped = store8_pd!(self.capped);
@@ -1994,16 +2005,15 @@ impl RollContext<'_> {
     /// tracks, if this kernel rolls them so ([`RollContext::rolls_deep`]).
     fn roll_deep_two(
         &self,
-        groups: [[&Group<'_>; 2]; 2],
-        tracks: [(&mut TrackState, &mut TrackWork); 2],
+        tracks: [([&Group<'_>; 2], &mut TrackState, &mut TrackWork); 2],
     ) -> bool {
         #[cfg(target_arch = "x86_64")]
         if self.rolls_deep() {
             // SAFETY: the CPU has AVX-512F, AVX2 and FMA (`deep`).
-            unsafe { self.roll_deep_with_two(groups, tracks) };
+            unsafe { self.roll_deep_with_two(tracks) };
             return true;
         }
-        let _ = (groups, tracks);
+        let _ = tracks;
         false
     }
 
@@ -2034,10 +2044,18 @@ impl RollContext<'_> {
         while g < groups[0].max(groups[1]) {
             // Two full groups of each track as wavefronts of eight wheels.
             if (g + 2) * LANES <= axles[0].len().min(axles[1].len()) {
-                let deep = [0, 1].map(|k| [g, g + 1].map(|g| group(k, g).expect("a full group")));
-                let [a, b] = &deep;
-                let tracks = [(&mut *state_a, &mut *work_a), (&mut *state_b, &mut *work_b)];
-                if self.roll_deep_two([[&a[0], &a[1]], [&b[0], &b[1]]], tracks) {
+                let full = |k: usize, g: usize| Group {
+                    record,
+                    track: tracks[k],
+                    axles: &axles[k][g * LANES..(g + 1) * LANES],
+                    first_row: g * LANES,
+                };
+                let [a, b] = [0, 1].map(|k| [full(k, g), full(k, g + 1)]);
+                let tracks = [
+                    ([&a[0], &a[1]], &mut *state_a, &mut *work_a),
+                    ([&b[0], &b[1]], &mut *state_b, &mut *work_b),
+                ];
+                if self.roll_deep_two(tracks) {
                     g += 2;
                     continue;
                 }
@@ -2146,23 +2164,25 @@ impl RollContext<'_> {
     #[inline(always)]
     unsafe fn runs_fma(&self, parts: &mut [RunPart<'_>], first: usize, end: usize) -> usize {
         if let Ok(one) = <&mut [RunPart<'_>; 1]>::try_from(&mut *parts) {
-            return self.run_fma(one, first, end);
+            return self.run_lanes::<RunLanes, 1, 1>(one, first, end);
         }
         if let Ok(two) = <&mut [RunPart<'_>; 2]>::try_from(&mut *parts) {
-            return self.run_fma(two, first, end);
+            return self.run_lanes::<RunLanes, 1, 2>(two, first, end);
         }
         first
     }
 
-    /// [`RollContext::runs_fma`] for `K` groups.
+    /// The steps of `K` wavefronts (on different tracks) from `first` until
+    /// before `end` in registers `R` ([`RunLanes`] of one group each,
+    /// [`RunDeep`] of two): [`RollContext::runs_fma`]'s steps.
     ///
     /// # Safety
-    /// The CPU must have AVX2 and FMA.
+    /// The CPU must have AVX2 and FMA, and AVX-512F for [`RunDeep`].
     #[cfg(target_arch = "x86_64")]
     #[inline(always)]
-    unsafe fn run_fma<const K: usize>(
+    unsafe fn run_lanes<R: Registers<G>, const G: usize, const K: usize>(
         &self,
-        parts: &mut [RunPart<'_>; K],
+        parts: &mut [RunPart<'_, G>; K],
         first: usize,
         end: usize,
     ) -> usize {
@@ -2174,7 +2194,7 @@ impl RollContext<'_> {
         // point, found when the run starts and after each such step rather
         // than by looking at the lanes' points at every step.
         let mut next: [usize; K] = std::array::from_fn(|k| parts[k].special_from(s));
-        let mut runs: [RunLanes; K] = std::array::from_fn(|k| RunLanes::start(self, &parts[k], s));
+        let mut runs: [R; K] = std::array::from_fn(|k| R::start(self, &parts[k], s));
         // A copy the loop's stores cannot reach: its reciprocals are taken
         // once, not at every step.
         let params = *self.product;
@@ -2205,110 +2225,8 @@ impl RollContext<'_> {
         s
     }
 
-    /// [`RollContext::run_fma`] of wavefronts of eight wheels ([`DeepPart`],
-    /// one or two tracks) in AVX-512 registers ([`RunDeep`]): the same
-    /// steps lane by lane, so the same bits. Returns the step it stopped at
-    /// (`end`).
-    ///
-    /// # Safety
-    /// The CPU must have AVX-512F, AVX2 and FMA.
-    #[cfg(target_arch = "x86_64")]
-    #[inline(always)]
-    unsafe fn run_deep<const K: usize>(
-        &self,
-        parts: &mut [DeepPart<'_>; K],
-        first: usize,
-        end: usize,
-    ) -> usize {
-        let mut s = first;
-        if s >= end {
-            return s;
-        }
-        let mut next: [usize; K] = std::array::from_fn(|k| parts[k].special_from(s));
-        let mut runs: [RunDeep; K] = std::array::from_fn(|k| RunDeep::start(self, &parts[k], s));
-        let params = *self.product;
-        loop {
-            if next.contains(&s) {
-                self.special_step_deep(&mut runs, parts, &next, &params, s);
-                for (n, part) in next.iter_mut().zip(parts.iter()) {
-                    if *n == s {
-                        *n = part.special_from(s + 1);
-                    }
-                }
-            } else {
-                for (run, part) in runs.iter_mut().zip(parts.iter_mut()) {
-                    run.step(self, &params, part);
-                }
-            }
-            s += 1;
-            if s >= end {
-                break;
-            }
-            for (run, part) in runs.iter_mut().zip(parts.iter()) {
-                run.advance(part);
-            }
-        }
-        for (run, part) in runs.iter().zip(parts.iter_mut()) {
-            run.finish(part);
-        }
-        s
-    }
-
-    /// [`RollContext::special_step`] of wavefronts of eight wheels.
-    ///
-    /// # Safety
-    /// The CPU must have AVX-512F, AVX2 and FMA.
-    #[cfg(target_arch = "x86_64")]
-    #[inline(always)]
-    unsafe fn special_step_deep<const K: usize>(
-        &self,
-        runs: &mut [RunDeep; K],
-        parts: &mut [DeepPart<'_>; K],
-        next: &[usize; K],
-        params: &ProductParams,
-        s: usize,
-    ) {
-        use std::arch::x86_64::_mm512_add_pd;
-        let mut at_s = [[f64::NAN; DEEP]; K];
-        let mut seen = [[0.0; DEEP]; K];
-        for k in (0..K).filter(|&k| next[k] == s) {
-            let part = &mut parts[k];
-            let is = part.at(s);
-            let acts = |j: usize| {
-                let t = part.lane(j).roller.time_at(self.d_m, is[j]);
-                self.acts_before(part.track, part.work, is[j], t)
-            };
-            if (0..DEEP).any(|j| part.special[is[j]] && acts(j)) {
-                runs[k].suspend(part);
-                for j in (0..DEEP).filter(|&j| part.special[is[j]]) {
-                    let (track, i) = (part.track, is[j]);
-                    let lane = &mut part.groups[j / LANES][j % LANES];
-                    at_s[k][j] = self.special_before(track, part.state, part.work, lane, i);
-                }
-                runs[k] = RunDeep::start(self, part, s);
-            } else {
-                for j in (0..DEEP).filter(|&j| part.special[is[j]]) {
-                    at_s[k][j] = part.lane(j).roller.time_at(self.d_m, is[j]);
-                }
-            }
-            seen[k] = store8_pd!(_mm512_add_pd(runs[k].wheel, runs[k].rail));
-        }
-        for (run, part) in runs.iter_mut().zip(parts.iter_mut()) {
-            run.step(self, params, part);
-        }
-        for k in (0..K).filter(|&k| next[k] == s) {
-            let part = &mut parts[k];
-            let is = part.at(s);
-            for j in (0..DEEP).filter(|&j| part.special[is[j]]) {
-                let (t, m) = (at_s[k][j], seen[k][j]);
-                let lane = &part.groups[j / LANES][j % LANES];
-                self.special_after(part.record, part.track, part.work, lane, is[j], t, m);
-            }
-        }
-    }
-
     /// Two consecutive full groups of each of `K` tracks (one or two) as
-    /// wavefronts of eight wheels ([`DeepPart`]): each track's second group
+    /// wavefronts of eight wheels ([`RunPart`] of two groups): each track's second group
     /// steps four steps behind its first, so every point still sees the
     /// wheels in their order, and each wave steps as in
     /// [`RollContext::roll_group_with`]; where every lane of every wave is
@@ -2320,56 +2238,49 @@ impl RollContext<'_> {
     #[inline(always)]
     unsafe fn roll_deep_with<const K: usize>(
         &self,
-        groups: [[&Group<'_>; 2]; K],
-        mut tracks: [(&mut TrackState, &mut TrackWork); K],
+        tracks: [([&Group<'_>; 2], &mut TrackState, &mut TrackWork); K],
         v: Vector<impl Exp4, impl Div4, impl Roll4, impl Run4>,
     ) {
-        let mut waves: [[Wave<'_>; 2]; K] = {
-            let mut k = 0;
-            std::array::from_fn(|_| {
-                let kept = &mut tracks[k].1.wave_lanes;
-                let pair = [
-                    self.wave(groups[k][0], true, kept, 0),
-                    self.wave(groups[k][1], true, kept, 1),
-                ];
-                k += 1;
-                pair
-            })
-        };
+        let mut tracks = tracks.map(|([first, second], state, work)| {
+            let kept = &mut work.wave_lanes;
+            let waves = [
+                self.wave(first, true, kept, 0),
+                self.wave(second, true, kept, 1),
+            ];
+            (waves, state, work)
+        });
         let end = self.d_m.len() - 1;
         // Every wave has LANES wheels: the same steps each.
-        let steps = self.wave_steps(&waves[0][0]);
+        let steps = self.d_m.len() + LANES - 1;
         let mut s = 0;
         while s < steps + LANES {
             let runs = s >= LANES
-                && waves
+                && tracks
                     .iter()
-                    .all(|[a, b]| self.runs_at(a, s) && self.runs_at(b, s - LANES));
+                    .all(|([a, b], ..)| self.runs_at(a, s) && self.runs_at(b, s - LANES));
             if runs {
-                let mut pairs = waves.iter_mut().zip(tracks.iter_mut());
-                let mut parts: [DeepPart<'_>; K] = std::array::from_fn(|_| {
-                    let ([a, b], (state, work)) = pairs.next().expect("K waves and tracks");
+                let mut parts = tracks.each_mut().map(|([a, b], state, work)| {
                     let mut factors = [(0.0, 0.0); DEEP];
                     factors[..LANES].copy_from_slice(&a.runs.unwrap_or_default());
                     factors[LANES..].copy_from_slice(&b.runs.unwrap_or_default());
-                    DeepPart {
+                    RunPart {
                         record: a.record,
                         track: a.track,
+                        special: &self.special[a.track],
+                        up: a.up,
                         groups: [&mut a.lanes, &mut b.lanes],
                         state,
                         work,
-                        special: &self.special[a.track],
-                        up: a.up,
                         factors,
                     }
                 });
-                let next = self.run_deep(&mut parts, s, end);
+                let next = self.run_lanes::<RunDeep, 2, K>(&mut parts, s, end);
                 if next > s {
                     s = next;
                     continue;
                 }
             }
-            for ([a, b], (state, work)) in waves.iter_mut().zip(tracks.iter_mut()) {
+            for ([a, b], state, work) in tracks.iter_mut() {
                 if s < steps {
                     self.wave_step(a, state, work, s, v);
                 }
@@ -2379,7 +2290,7 @@ impl RollContext<'_> {
             }
             s += 1;
         }
-        for ([a, b], (state, work)) in waves.into_iter().zip(tracks.iter_mut()) {
+        for ([a, b], state, work) in tracks {
             self.wave_end(a, state, work);
             self.wave_end(b, state, work);
         }
@@ -2398,7 +2309,7 @@ impl RollContext<'_> {
         state: &mut TrackState,
         work: &mut TrackWork,
     ) {
-        self.roll_deep_with([groups], [(state, work)], vector_fma!());
+        self.roll_deep_with([(groups, state, work)], vector_fma!());
     }
 
     /// [`RollContext::roll_deep_with`] of two tracks, compiled for
@@ -2410,10 +2321,9 @@ impl RollContext<'_> {
     #[target_feature(enable = "avx2,fma,avx512f")]
     unsafe fn roll_deep_with_two(
         &self,
-        groups: [[&Group<'_>; 2]; 2],
-        tracks: [(&mut TrackState, &mut TrackWork); 2],
+        tracks: [([&Group<'_>; 2], &mut TrackState, &mut TrackWork); 2],
     ) {
-        self.roll_deep_with(groups, tracks, vector_fma!());
+        self.roll_deep_with(tracks, vector_fma!());
     }
 
     /// Whether two consecutive groups of a track roll as one wavefront of
@@ -2424,49 +2334,49 @@ impl RollContext<'_> {
         self.deep && self.tangent_width == 0 && !self.keep_seen
     }
 
-    /// Step `s` of a run where a lane of a group is at a special point, in
-    /// [`RollContext::wave_step`]'s order: the events there before its
+    /// Step `s` of a run where a lane of a wavefront is at a special point,
+    /// in [`RollContext::wave_step`]'s order: the events there before its
     /// wheel (on the lanes back in memory, then taken up again), the step,
-    /// then its sites. The four lanes' points are distinct and each event
-    /// acts on its own point only.
+    /// then its sites. The lanes' points are distinct and each event acts
+    /// on its own point only.
     ///
     /// # Safety
-    /// The CPU must have AVX2 and FMA.
+    /// The CPU must have AVX2 and FMA, and AVX-512F for [`RunDeep`].
     #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2,fma")]
-    unsafe fn special_step<const K: usize>(
+    #[inline(always)]
+    unsafe fn special_step<R: Registers<G>, const G: usize, const K: usize>(
         &self,
-        runs: &mut [RunLanes; K],
-        parts: &mut [RunPart<'_>; K],
+        runs: &mut [R; K],
+        parts: &mut [RunPart<'_, G>; K],
         next: &[usize; K],
         params: &ProductParams,
         s: usize,
     ) {
-        use std::arch::x86_64::_mm256_add_pd;
-        let mut at_s = [[f64::NAN; LANES]; K];
-        let mut seen = [[0.0; LANES]; K];
+        let n = RunPart::<'_, G>::N;
+        let mut at_s = [[f64::NAN; DEEP]; K];
+        let mut seen = [[0.0; DEEP]; K];
         for k in (0..K).filter(|&k| next[k] == s) {
             let part = &mut parts[k];
             let is = part.at(s);
             // At a site alone only the wheel's time is wanted.
             let acts = |j: usize| {
-                let t = part.lanes[j].roller.time_at(self.d_m, is[j]);
+                let t = part.lane(j).roller.time_at(self.d_m, is[j]);
                 self.acts_before(part.track, part.work, is[j], t)
             };
-            if (0..LANES).any(|j| part.special[is[j]] && acts(j)) {
+            if (0..n).any(|j| part.special[is[j]] && acts(j)) {
                 runs[k].suspend(part);
-                for j in (0..LANES).filter(|&j| part.special[is[j]]) {
-                    let lane = &mut part.lanes[j];
-                    at_s[k][j] =
-                        self.special_before(part.track, part.state, part.work, lane, is[j]);
+                for j in (0..n).filter(|&j| part.special[is[j]]) {
+                    let track = part.track;
+                    let lane = &mut part.groups[j / LANES][j % LANES];
+                    at_s[k][j] = self.special_before(track, part.state, part.work, lane, is[j]);
                 }
-                runs[k] = RunLanes::start(self, part, s);
+                runs[k] = R::start(self, part, s);
             } else {
-                for j in (0..LANES).filter(|&j| part.special[is[j]]) {
-                    at_s[k][j] = part.lanes[j].roller.time_at(self.d_m, is[j]);
+                for j in (0..n).filter(|&j| part.special[is[j]]) {
+                    at_s[k][j] = part.lane(j).roller.time_at(self.d_m, is[j]);
                 }
             }
-            seen[k] = store_pd!(_mm256_add_pd(runs[k].wheel, runs[k].rail));
+            seen[k] = runs[k].seen();
         }
         for (run, part) in runs.iter_mut().zip(parts.iter_mut()) {
             run.step(self, params, part);
@@ -2474,9 +2384,9 @@ impl RollContext<'_> {
         for k in (0..K).filter(|&k| next[k] == s) {
             let part = &mut parts[k];
             let is = part.at(s);
-            for j in (0..LANES).filter(|&j| part.special[is[j]]) {
-                let lane = &part.lanes[j];
+            for j in (0..n).filter(|&j| part.special[is[j]]) {
                 let (t, m) = (at_s[k][j], seen[k][j]);
+                let lane = &part.groups[j / LANES][j % LANES];
                 self.special_after(part.record, part.track, part.work, lane, is[j], t, m);
             }
         }
@@ -2637,12 +2547,16 @@ impl RollContext<'_> {
         RunPart {
             record: wave.record,
             track: wave.track,
-            lanes: &mut wave.lanes,
+            groups: [&mut wave.lanes],
             state,
             work,
             special: &self.special[wave.track],
             up: wave.up,
-            factors: wave.runs.unwrap_or_default(),
+            factors: {
+                let mut factors = [(0.0, 0.0); DEEP];
+                factors[..LANES].copy_from_slice(&wave.runs.unwrap_or_default());
+                factors
+            },
         }
     }
 
