@@ -1983,8 +1983,12 @@ impl RollContext<'_> {
         work.axles = axles;
     }
 
-    /// [`RollContext::roll_deep_with`] of two full groups of one track, if
-    /// this kernel rolls them so ([`RollContext::rolls_deep`]).
+    /// Two full groups of one track, if this kernel may roll them as one
+    /// wavefront of eight ([`RollContext::rolls_deep`]): so where both
+    /// groups' lanes allow runs in registers, else one after the other as
+    /// wavefronts of four (the eight-lane code gains only in runs, and its
+    /// wavefront steps, compiled for AVX-512, took a quarter longer than
+    /// the four-lane code's in discover's replays with time effects).
     fn roll_deep_one(
         &self,
         groups: [&Group<'_>; 2],
@@ -1993,24 +1997,59 @@ impl RollContext<'_> {
     ) -> bool {
         #[cfg(target_arch = "x86_64")]
         if self.rolls_deep() {
-            // SAFETY: the CPU has AVX-512F, AVX2 and FMA (`deep`).
-            unsafe { self.roll_deep_with_one(groups, state, work) };
+            let kept = &mut work.wave_lanes;
+            let waves = [
+                self.wave(groups[0], true, kept, 0),
+                self.wave(groups[1], true, kept, 1),
+            ];
+            if waves.iter().all(|w| w.runs.is_some()) {
+                // SAFETY: the CPU has AVX-512F, AVX2 and FMA (`deep`).
+                unsafe { self.roll_deep_with_one(waves, state, work) };
+            } else {
+                for wave in waves {
+                    // SAFETY: as above.
+                    unsafe { self.roll_wave_fma(wave, state, work) };
+                }
+            }
             return true;
         }
         let _ = (groups, state, work);
         false
     }
 
-    /// [`RollContext::roll_deep_with`] of two full groups of each of two
-    /// tracks, if this kernel rolls them so ([`RollContext::rolls_deep`]).
+    /// Two full groups of each of two tracks, as [`RollContext::roll_deep_one`].
     fn roll_deep_two(
         &self,
         tracks: [([&Group<'_>; 2], &mut TrackState, &mut TrackWork); 2],
     ) -> bool {
         #[cfg(target_arch = "x86_64")]
         if self.rolls_deep() {
-            // SAFETY: the CPU has AVX-512F, AVX2 and FMA (`deep`).
-            unsafe { self.roll_deep_with_two(tracks) };
+            let [a, b] = tracks.map(|(groups, state, work)| {
+                let kept = &mut work.wave_lanes;
+                let waves = [
+                    self.wave(groups[0], true, kept, 0),
+                    self.wave(groups[1], true, kept, 1),
+                ];
+                (waves, state, work)
+            });
+            if [&a.0, &b.0]
+                .iter()
+                .all(|w| w.iter().all(|w| w.runs.is_some()))
+            {
+                // SAFETY: the CPU has AVX-512F, AVX2 and FMA (`deep`).
+                unsafe { self.roll_deep_with_two([a, b]) };
+            } else {
+                let ([a0, a1], state_a, work_a) = a;
+                let ([b0, b1], state_b, work_b) = b;
+                // SAFETY: as above.
+                unsafe {
+                    self.roll_waves_fma(
+                        [a0, b0],
+                        [(&mut *state_a, &mut *work_a), (&mut *state_b, &mut *work_b)],
+                    );
+                    self.roll_waves_fma([a1, b1], [(state_a, work_a), (state_b, work_b)]);
+                }
+            }
             return true;
         }
         let _ = tracks;
@@ -2145,6 +2184,20 @@ impl RollContext<'_> {
         self.roll_pair_with(groups, tracks, v);
     }
 
+    /// [`RollContext::roll_wave_with`] compiled for AVX2 and FMA.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    fn roll_wave_fma(&self, wave: Wave<'_>, state: &mut TrackState, work: &mut TrackWork) {
+        self.roll_wave_with(wave, state, work, vector_fma!());
+    }
+
+    /// [`RollContext::roll_waves_with`] compiled for AVX2 and FMA.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    fn roll_waves_fma(&self, waves: [Wave<'_>; 2], tracks: [(&mut TrackState, &mut TrackWork); 2]) {
+        self.roll_waves_with(waves, tracks, vector_fma!());
+    }
+
     /// The steps of one or two groups' lanes (on different tracks) from
     /// `first` until before `end`, in registers ([`RunLanes`]): each step is
     /// [`RollContext::contacts4`]'s with clock-free lanes, the same
@@ -2238,17 +2291,9 @@ impl RollContext<'_> {
     #[inline(always)]
     unsafe fn roll_deep_with<const K: usize>(
         &self,
-        tracks: [([&Group<'_>; 2], &mut TrackState, &mut TrackWork); K],
+        mut tracks: [([Wave<'_>; 2], &mut TrackState, &mut TrackWork); K],
         v: Vector<impl Exp4, impl Div4, impl Roll4, impl Run4>,
     ) {
-        let mut tracks = tracks.map(|([first, second], state, work)| {
-            let kept = &mut work.wave_lanes;
-            let waves = [
-                self.wave(first, true, kept, 0),
-                self.wave(second, true, kept, 1),
-            ];
-            (waves, state, work)
-        });
         let end = self.d_m.len() - 1;
         // Every wave has LANES wheels: the same steps each.
         let steps = self.d_m.len() + LANES - 1;
@@ -2305,11 +2350,11 @@ impl RollContext<'_> {
     #[target_feature(enable = "avx2,fma,avx512f")]
     unsafe fn roll_deep_with_one(
         &self,
-        groups: [&Group<'_>; 2],
+        waves: [Wave<'_>; 2],
         state: &mut TrackState,
         work: &mut TrackWork,
     ) {
-        self.roll_deep_with([(groups, state, work)], vector_fma!());
+        self.roll_deep_with([(waves, state, work)], vector_fma!());
     }
 
     /// [`RollContext::roll_deep_with`] of two tracks, compiled for
@@ -2321,7 +2366,7 @@ impl RollContext<'_> {
     #[target_feature(enable = "avx2,fma,avx512f")]
     unsafe fn roll_deep_with_two(
         &self,
-        tracks: [([&Group<'_>; 2], &mut TrackState, &mut TrackWork); 2],
+        tracks: [([Wave<'_>; 2], &mut TrackState, &mut TrackWork); 2],
     ) {
         self.roll_deep_with(tracks, vector_fma!());
     }
@@ -2400,7 +2445,19 @@ impl RollContext<'_> {
         work: &mut TrackWork,
         v: Vector<impl Exp4, impl Div4, impl Roll4, impl Run4>,
     ) {
-        let mut wave = self.wave(group, v.run.is_some(), &mut work.wave_lanes, 0);
+        let wave = self.wave(group, v.run.is_some(), &mut work.wave_lanes, 0);
+        self.roll_wave_with(wave, state, work, v);
+    }
+
+    /// [`RollContext::roll_group_with`] of a wavefront already made.
+    #[inline(always)]
+    fn roll_wave_with(
+        &self,
+        mut wave: Wave<'_>,
+        state: &mut TrackState,
+        work: &mut TrackWork,
+        v: Vector<impl Exp4, impl Div4, impl Roll4, impl Run4>,
+    ) {
         let end = self.d_m.len() - 1;
         let mut s = 0;
         while s < self.wave_steps(&wave) {
@@ -2431,8 +2488,19 @@ impl RollContext<'_> {
         [(state_a, work_a), (state_b, work_b)]: [(&mut TrackState, &mut TrackWork); 2],
         v: Vector<impl Exp4, impl Div4, impl Roll4, impl Run4>,
     ) {
-        let mut a = self.wave(groups[0], v.run.is_some(), &mut work_a.wave_lanes, 0);
-        let mut b = self.wave(groups[1], v.run.is_some(), &mut work_b.wave_lanes, 0);
+        let a = self.wave(groups[0], v.run.is_some(), &mut work_a.wave_lanes, 0);
+        let b = self.wave(groups[1], v.run.is_some(), &mut work_b.wave_lanes, 0);
+        self.roll_waves_with([a, b], [(state_a, work_a), (state_b, work_b)], v);
+    }
+
+    /// [`RollContext::roll_pair_with`] of two wavefronts already made.
+    #[inline(always)]
+    fn roll_waves_with(
+        &self,
+        [mut a, mut b]: [Wave<'_>; 2],
+        [(state_a, work_a), (state_b, work_b)]: [(&mut TrackState, &mut TrackWork); 2],
+        v: Vector<impl Exp4, impl Div4, impl Roll4, impl Run4>,
+    ) {
         let end = self.d_m.len() - 1;
         let steps = self.wave_steps(&a).max(self.wave_steps(&b));
         let mut s = 0;
