@@ -701,10 +701,11 @@ impl<F> Run4 for F where F: Fn(&RollContext<'_>, &mut [RunPart<'_>], usize, usiz
 const DEEP: usize = 2 * LANES;
 
 /// A wavefront's part in a run of steps ([`RollContext::run_lanes`]): `G`
-/// consecutive groups of one track (one, [`Run4`], or two, [`RunDeep`]) as
-/// one wavefront of `G` x [`LANES`] wheels, lane j at step s - j of its path
-/// (a second group four steps behind the first, so that its lane 0 reads
-/// what the first's lane 3 left, as lane j + 1 reads what lane j left).
+/// consecutive groups of one track (one in [`RunLanes`], two in
+/// [`RunDeep`]) as one wavefront of `G` x [`LANES`] wheels, lane j at step
+/// s - j of its path (a second group four steps behind the first, so that
+/// its lane 0 reads what the first's lane 3 left, as lane j + 1 reads what
+/// lane j left).
 struct RunPart<'s, const G: usize = 1> {
     record: &'s TrainRecord,
     track: usize,
