@@ -1226,7 +1226,7 @@ struct RunLanes {
     /// The rail masses the lanes read at this step, at the lanes' points.
     rail: std::arch::x86_64::__m256d,
     /// The point of lane 0 (which reads a new point at each step; lane j
-    /// is j points behind it, [`RunLanes::points`]), and how it changes
+    /// is j points behind it, [`Registers::points`]), and how it changes
     /// from one step to the next (+1 going up, -1 wrapped going down): an
     /// addition a step where the four points were worked out anew
     /// ([`RunPart::at`]).
@@ -1270,7 +1270,9 @@ macro_rules! store_pd {
 }
 
 /// Lanes in registers through a run of steps ([`RollContext::run_lanes`]):
-/// [`RunLanes`], a wavefront of one group, and [`RunDeep`], of two.
+/// [`RunLanes`], a wavefront of one group, and [`RunDeep`], of two. What
+/// does not depend on the registers' width (the lanes' points, their
+/// values back in memory) is said once here.
 #[cfg(target_arch = "x86_64")]
 trait Registers<const G: usize>: Sized {
     /// The lanes of `part` about to take step `s`.
@@ -1284,13 +1286,83 @@ trait Registers<const G: usize>: Sized {
     );
     /// To the step after the last.
     unsafe fn advance(&mut self, part: &RunPart<'_, G>);
-    /// The lanes back in memory before a step, for a special point's events.
-    unsafe fn suspend(&self, part: &mut RunPart<'_, G>);
-    /// The end of the run after a step.
-    unsafe fn finish(&self, part: &mut RunPart<'_, G>);
+    /// Lane 0's point, and how it changes from one step to the next.
+    fn lead(&self) -> (usize, usize);
+    /// The lanes' registers as arrays (the first `G` x [`LANES`] of each).
+    unsafe fn in_memory(&self) -> InMemory;
+
+    /// The lanes' points (lane j follows lane 0 by j points; the first `G`
+    /// x [`LANES`]).
+    #[inline(always)]
+    fn points(&self) -> [usize; DEEP] {
+        let (lead, stride) = self.lead();
+        std::array::from_fn(|j| lead.wrapping_add(stride.wrapping_mul(j).wrapping_neg()))
+    }
+
+    /// The lanes back in memory before step `s` (after
+    /// [`Registers::advance`] to it), for a special point's events to act
+    /// on: the rail masses lanes 1 and after are about to read (those the
+    /// lane before left at the step before) at their points, and the lanes'
+    /// masses and totals in their states. [`Registers::start`] takes them
+    /// up again.
+    #[inline(always)]
+    unsafe fn suspend(&self, part: &mut RunPart<'_, G>) {
+        let lanes = self.in_memory();
+        let is = self.points();
+        let n = RunPart::<'_, G>::N;
+        for (&i, &m) in is.iter().zip(&lanes.rail).take(n).skip(1) {
+            part.state.rail_mass_kg[i] = m;
+        }
+        lanes.store(part);
+    }
+
+    /// The end of the run after a step: the rail masses the lanes but the
+    /// last left (the last lane's is stored at every step), and the lanes'
+    /// masses and totals back in their states.
+    #[inline(always)]
+    unsafe fn finish(&self, part: &mut RunPart<'_, G>) {
+        let lanes = self.in_memory();
+        let is = self.points();
+        let n = RunPart::<'_, G>::N;
+        for (&i, &m) in is.iter().zip(&lanes.left).take(n - 1) {
+            part.state.rail_mass_kg[i] = m;
+        }
+        lanes.store(part);
+    }
+
     /// Each lane's wheel and rail mass before the step: the step-2 mass a
     /// site keeps (the first `G` x [`LANES`]).
-    unsafe fn seen(&self) -> [f64; DEEP];
+    #[inline(always)]
+    unsafe fn seen(&self) -> [f64; DEEP] {
+        let lanes = self.in_memory();
+        std::array::from_fn(|j| lanes.wheel[j] + lanes.rail[j])
+    }
+}
+
+/// [`Registers`]' lanes as arrays, lane 0 first.
+#[cfg(target_arch = "x86_64")]
+struct InMemory {
+    /// The rail masses the lanes read at this step.
+    rail: [f64; DEEP],
+    /// The rail masses the lanes left at the last step.
+    left: [f64; DEEP],
+    wheel: [f64; DEEP],
+    consumed: [f64; DEEP],
+    capped: [f64; DEEP],
+}
+
+#[cfg(target_arch = "x86_64")]
+impl InMemory {
+    /// The lanes' masses and loss totals back in their states.
+    #[inline(always)]
+    fn store<const G: usize>(&self, part: &mut RunPart<'_, G>) {
+        for j in 0..RunPart::<'_, G>::N {
+            let st = &mut part.lane_mut(j).st;
+            st.wheel_kg = self.wheel[j];
+            st.consumed_kg = self.consumed[j];
+            st.capped_kg = self.capped[j];
+        }
+    }
 }
 
 #[cfg(target_arch = "x86_64")]
@@ -1406,70 +1478,24 @@ impl Registers<1> for RunLanes {
         self.revolution_at = _mm256_add_epi64(self.revolution_at, self.revolution_step);
     }
 
-    /// The lanes back in memory before step `s` (after [`RunLanes::advance`]
-    /// to it), for a special point's events to act on: the rail masses
-    /// lanes 1 to 3 are about to read (those lanes 0 to 2 left at the step
-    /// before) at their points, and the lanes' masses and totals in their
-    /// states. [`RunLanes::start`] takes them up again.
-    ///
-    /// # Safety
-    /// The CPU must have AVX.
     #[inline(always)]
-    unsafe fn suspend(&self, part: &mut RunPart<'_>) {
-        let rail = store_pd!(self.rail);
-        for (&i, &m) in self.points().iter().zip(&rail).skip(1) {
-            part.state.rail_mass_kg[i] = m;
-        }
-        self.store_lanes(part);
-    }
-
-    /// The end of the run after a step: the rail masses the other lanes
-    /// left, and the lanes' masses and totals back in their states.
-    ///
-    /// # Safety
-    /// The CPU must have AVX.
-    #[inline(always)]
-    unsafe fn finish(&self, part: &mut RunPart<'_>) {
-        let left = store_pd!(self.left);
-        for (&i, &m) in self.points().iter().zip(&left).take(LANES - 1) {
-            part.state.rail_mass_kg[i] = m;
-        }
-        self.store_lanes(part);
+    fn lead(&self) -> (usize, usize) {
+        (self.lead, self.stride)
     }
 
     #[inline(always)]
-    unsafe fn seen(&self) -> [f64; DEEP] {
-        let mut seen = [0.0; DEEP];
-        let m = store_pd!(std::arch::x86_64::_mm256_add_pd(self.wheel, self.rail));
-        seen[..LANES].copy_from_slice(&m);
-        seen
-    }
-}
-
-#[cfg(target_arch = "x86_64")]
-impl RunLanes {
-    /// The four lanes' points (lane j follows lane 0 by j points).
-    #[inline(always)]
-    fn points(&self) -> [usize; LANES] {
-        std::array::from_fn(|j| {
-            self.lead
-                .wrapping_add(self.stride.wrapping_mul(j).wrapping_neg())
-        })
-    }
-
-    /// The lanes' masses and loss totals back in their states.
-    ///
-    /// # Safety
-    /// The CPU must have AVX.
-    #[inline(always)]
-    unsafe fn store_lanes(&self, part: &mut RunPart<'_>) {
-        let wheel = store_pd!(self.wheel);
-        let consumed = store_pd!(self.consumed);
-        let capped = store_pd!(self.capped);
-        for (j, lane) in part.groups[0].iter_mut().enumerate() {
-            lane.st.wheel_kg = wheel[j];
-            lane.st.consumed_kg = consumed[j];
-            lane.st.capped_kg = capped[j];
+    unsafe fn in_memory(&self) -> InMemory {
+        let eight = |v| {
+            let mut a = [0.0; DEEP];
+            a[..LANES].copy_from_slice(&store_pd!(v));
+            a
+        };
+        InMemory {
+            rail: eight(self.rail),
+            left: eight(self.left),
+            wheel: eight(self.wheel),
+            consumed: eight(self.consumed),
+            capped: eight(self.capped),
         }
     }
 }
@@ -1626,63 +1652,19 @@ impl Registers<2> for RunDeep {
         self.revolution_at = _mm512_add_epi64(self.revolution_at, self.revolution_step);
     }
 
-    /// The lanes back in memory before step `s`, as [`RunLanes::suspend`].
-    ///
-    /// # Safety
-    /// The CPU must have AVX-512F.
     #[inline(always)]
-    unsafe fn suspend(&self, part: &mut RunPart<'_, 2>) {
-        let rail = store8_pd!(self.rail);
-        for (&i, &m) in self.points().iter().zip(&rail).skip(1) {
-            part.state.rail_mass_kg[i] = m;
-        }
-        self.store_lanes(part);
-    }
-
-    /// The end of the run after a step, as [`RunLanes::finish`].
-    ///
-    /// # Safety
-    /// The CPU must have AVX-512F.
-    #[inline(always)]
-    unsafe fn finish(&self, part: &mut RunPart<'_, 2>) {
-        let left = store8_pd!(self.left);
-        for (&i, &m) in self.points().iter().zip(&left).take(DEEP - 1) {
-            part.state.rail_mass_kg[i] = m;
-        }
-        self.store_lanes(part);
+    fn lead(&self) -> (usize, usize) {
+        (self.lead, self.stride)
     }
 
     #[inline(always)]
-    unsafe fn seen(&self) -> [f64; DEEP] {
-        store8_pd!(std::arch::x86_64::_mm512_add_pd(self.wheel, self.rail))
-    }
-}
-
-#[cfg(target_arch = "x86_64")]
-impl RunDeep {
-    /// The eight lanes' points (lane j follows lane 0 by j points).
-    #[inline(always)]
-    fn points(&self) -> [usize; DEEP] {
-        std::array::from_fn(|j| {
-            self.lead
-                .wrapping_add(self.stride.wrapping_mul(j).wrapping_neg())
-        })
-    }
-
-    /// The lanes' masses and loss totals back in their states.
-    ///
-    /// # Safety
-    /// The CPU must have AVX-512F.
-    #[inline(always)]
-    unsafe fn store_lanes(&self, part: &mut RunPart<'_, 2>) {
-        let wheel = store8_pd!(self.wheel);
-        let consumed = store8_pd!(self.consumed);
-        let capped = store8_pd!(self.capped);
-        for j in 0..DEEP {
-            let st = &mut part.lane_mut(j).st;
-            st.wheel_kg = wheel[j];
-            st.consumed_kg = consumed[j];
-            st.capped_kg = capped[j];
+    unsafe fn in_memory(&self) -> InMemory {
+        InMemory {
+            rail: store8_pd!(self.rail),
+            left: store8_pd!(self.left),
+            wheel: store8_pd!(self.wheel),
+            consumed: store8_pd!(self.consumed),
+            capped: store8_pd!(self.capped),
         }
     }
 }
