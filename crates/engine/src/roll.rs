@@ -930,6 +930,17 @@ pub(crate) struct TrackWork {
     /// point ([`RollContext::run_events_before`]); an event run otherwise
     /// leaves it earlier, which only costs the next wheel a look.
     next_at: Vec<f64>,
+    /// Per point, a chain of its events in the window's order: the first
+    /// not known to have run ([`NO_EVENT`] where none is), the last, and
+    /// per event the next at its point; whether the chain's times never
+    /// fall. A wheel due at a point follows that point's chain only, from
+    /// its first event still to run, and in time order stops at the first
+    /// not yet due: a point where pulses come between a train's wheels is
+    /// looked at once per pulse, not once per event of the window.
+    first_event: Vec<usize>,
+    last_event: Vec<usize>,
+    next_event: Vec<usize>,
+    in_time_order: Vec<bool>,
     /// What the last wheel (or every wheel) saw.
     pub(crate) observed: Observed,
     /// This train's axles whose wheel runs on this track, in order.
@@ -956,6 +967,9 @@ pub(crate) struct TrackWork {
     wave_lanes: WaveLanes,
 }
 
+/// The end of a point's chain of events in [`TrackWork`].
+const NO_EVENT: usize = usize::MAX;
+
 /// What two chosen axles of a train saw along a rail of a line
 /// ([`crate::sink::LineWheels`]).
 #[derive(Debug, Clone, Default)]
@@ -978,23 +992,46 @@ pub(crate) struct Reading {
 impl TrackWork {
     /// Adds a pulse or reading of the window.
     pub(crate) fn push_event(&mut self, event: PointEvent) {
-        let at = &mut self.next_at[event.point];
+        let i = event.point;
+        let at = &mut self.next_at[i];
         *at = at.min(event.time_s);
+        let k = self.events.len();
+        if self.first_event[i] == NO_EVENT {
+            self.first_event[i] = k;
+        }
+        let last = self.last_event[i];
+        if last != NO_EVENT {
+            self.next_event[last] = k;
+            if event.time_s < self.events[last].time_s {
+                self.in_time_order[i] = false;
+            }
+        }
+        self.last_event[i] = k;
+        self.next_event.push(NO_EVENT);
         self.events.push(event);
     }
 
     /// Forgets the window's events, for the next train's.
     pub(crate) fn clear_events(&mut self) {
         for event in &self.events {
-            self.next_at[event.point] = f64::INFINITY;
+            let i = event.point;
+            self.next_at[i] = f64::INFINITY;
+            self.first_event[i] = NO_EVENT;
+            self.last_event[i] = NO_EVENT;
+            self.in_time_order[i] = true;
         }
         self.events.clear();
+        self.next_event.clear();
     }
 
     pub(crate) fn new(points: usize) -> Self {
         Self {
             events: Vec::new(),
             next_at: vec![f64::INFINITY; points],
+            first_event: vec![NO_EVENT; points],
+            last_event: vec![NO_EVENT; points],
+            next_event: Vec::new(),
+            in_time_order: vec![true; points],
             observed: Observed::new(points),
             axles: Vec::new(),
             ledger: Vec::new(),
@@ -3103,15 +3140,28 @@ impl RollContext<'_> {
         if !due {
             return;
         }
+        // The events that have run at the head of the chain are left
+        // behind for good.
+        let mut link = work.first_event[i];
+        while link != NO_EVENT && work.events[link].done {
+            link = work.next_event[link];
+        }
+        work.first_event[i] = link;
         let mut next = f64::INFINITY;
-        for k in 0..work.events.len() {
+        while link != NO_EVENT {
+            let k = link;
+            link = work.next_event[k];
             let ev = work.events[k];
-            if ev.done || ev.point != i {
+            if ev.done {
                 continue;
             }
             let due = ev.time_s < t;
             if !due {
                 next = next.min(ev.time_s);
+                // In time order the rest come no earlier.
+                if work.in_time_order[i] {
+                    break;
+                }
                 continue;
             }
             let weather = *self.timeline.at(ev.time_s);
