@@ -1325,6 +1325,10 @@ trait Registers<const G: usize>: Sized {
     unsafe fn advance(&mut self, part: &RunPart<'_, G>);
     /// Lane 0's point, and how it changes from one step to the next.
     fn lead(&self) -> (usize, usize);
+    /// Lane `j` passes an applicator at this step: what [`Registers::start`]
+    /// makes of a lane whose `applicator_point` is its point (distance 0,
+    /// moving away, transferring), taken in place.
+    unsafe fn pass_applicator(&mut self, j: usize);
     /// The lanes' registers as arrays (the first `G` x [`LANES`] of each).
     unsafe fn in_memory(&self) -> InMemory;
 
@@ -1515,6 +1519,25 @@ impl Registers<1> for RunLanes {
         self.revolution_at = _mm256_add_epi64(self.revolution_at, self.revolution_step);
     }
 
+    /// # Safety
+    /// The CPU must have AVX.
+    #[inline(always)]
+    unsafe fn pass_applicator(&mut self, j: usize) {
+        use std::arch::x86_64::*;
+        let mut at = [0i64; LANES];
+        let mut step = [0i64; LANES];
+        let mut transfers = [0.0; LANES];
+        _mm256_storeu_si256(at.as_mut_ptr().cast(), self.revolution_at);
+        _mm256_storeu_si256(step.as_mut_ptr().cast(), self.revolution_step);
+        _mm256_storeu_pd(transfers.as_mut_ptr(), self.transfers);
+        at[j] = 0;
+        step[j] = 1;
+        transfers[j] = f64::from_bits(u64::MAX);
+        self.revolution_at = _mm256_loadu_si256(at.as_ptr().cast());
+        self.revolution_step = _mm256_loadu_si256(step.as_ptr().cast());
+        self.transfers = _mm256_loadu_pd(transfers.as_ptr());
+    }
+
     #[inline(always)]
     fn lead(&self) -> (usize, usize) {
         (self.lead, self.stride)
@@ -1687,6 +1710,17 @@ impl Registers<2> for RunDeep {
             _mm512_set1_pd(part.state.rail_mass_kg[self.lead]),
         );
         self.revolution_at = _mm512_add_epi64(self.revolution_at, self.revolution_step);
+    }
+
+    /// # Safety
+    /// The CPU must have AVX-512F.
+    #[inline(always)]
+    unsafe fn pass_applicator(&mut self, j: usize) {
+        use std::arch::x86_64::*;
+        let lane = 1u8 << j;
+        self.revolution_at = _mm512_mask_set1_epi64(self.revolution_at, lane, 0);
+        self.revolution_step = _mm512_mask_set1_epi64(self.revolution_step, lane, 1);
+        self.transfers |= lane;
     }
 
     #[inline(always)]
@@ -2423,12 +2457,16 @@ impl RollContext<'_> {
         for k in (0..K).filter(|&k| next[k] == s) {
             let part = &mut parts[k];
             let is = part.at(s);
-            // At a site alone only the wheel's time is wanted.
-            let acts = |j: usize| {
+            // Pulses or readings due before a lane's wheel act on the
+            // masses in memory: the lanes go back there. Passing an
+            // applicator alone changes only the lane's count of
+            // revolutions, which the registers take in place; at a site
+            // alone only the wheel's time is wanted.
+            let due = |j: usize| {
                 let t = part.lane(j).roller.time_at(self.d_m, is[j]);
-                self.acts_before(part.track, part.work, is[j], t)
+                self.events_due(part.work, is[j], t)
             };
-            if (0..n).any(|j| part.special[is[j]] && acts(j)) {
+            if (0..n).any(|j| part.special[is[j]] && due(j)) {
                 runs[k].suspend(part);
                 for j in (0..n).filter(|&j| part.special[is[j]]) {
                     let track = part.track;
@@ -2438,7 +2476,12 @@ impl RollContext<'_> {
                 runs[k] = R::start(self, part, s);
             } else {
                 for j in (0..n).filter(|&j| part.special[is[j]]) {
-                    at_s[k][j] = part.lane(j).roller.time_at(self.d_m, is[j]);
+                    let lane = &mut part.groups[j / LANES][j % LANES];
+                    at_s[k][j] = lane.roller.time_at(self.d_m, is[j]);
+                    if self.applicator_at[part.track][is[j]] != NO_APPLICATOR {
+                        lane.st.applicator_point = Some(is[j]);
+                        runs[k].pass_applicator(j);
+                    }
                 }
             }
             seen[k] = runs[k].seen();
@@ -3051,12 +3094,10 @@ impl RollContext<'_> {
         m_kg
     }
 
-    /// Whether [`RollContext::special_before`] at point `i`, for a wheel
-    /// there at `t`, can change more than it returns (a pulse or reading
-    /// there before `t` still to run, or an applicator the wheel passes);
-    /// where not, it is the wheel's time.
-    fn acts_before(&self, track: usize, work: &TrackWork, i: usize, t: f64) -> bool {
-        work.next_at[i] < t || self.applicator_at[track][i] != NO_APPLICATOR
+    /// Whether a pulse or reading at point `i` may still have to run before
+    /// a wheel there at `t` ([`RollContext::run_events_before`]).
+    fn events_due(&self, work: &TrackWork, i: usize, t: f64) -> bool {
+        work.next_at[i] < t
     }
 
     /// What comes before `lane`'s contact at the special point `i`: the
