@@ -75,10 +75,11 @@ pub(super) fn write_rrd(path: &Path, data: &Dataset, d: &Discovery, md: &str) ->
     })?;
     // Declared after `file`: dropped first on an error, the stream closes
     // the temporary file before `file` deletes it.
-    let rec = RecordingStreamBuilder::new(application_id.clone())
+    let builder = RecordingStreamBuilder::new(application_id.clone())
         .recording_name("discover residuals")
-        .enabled(true)
-        .save(file.temp_path())
+        .enabled(true);
+    let rec = file
+        .open_with(|temp| builder.save(temp))
         .map_err(sdk("starting the recording"))?;
     rec.set_log_time_enabled(false);
     rec.set_log_tick_enabled(false);

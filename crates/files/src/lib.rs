@@ -481,6 +481,19 @@ impl PartialFile {
         file.sync_data()
     }
 
+    /// Runs `open` on [`PartialFile::temp_path`] while no signal's sweep
+    /// can run ([`clean_up_on_signals`] takes [`LIVE`], held here): a writer
+    /// that creates or truncates the file by its path does so before a
+    /// sweep deletes it (and writes on to a file without a name), never
+    /// after, when it would make the file anew and leave it behind. Seen
+    /// once in `sigint_and_sigterm_leave_nothing_behind`: a SIGTERM between
+    /// this file's creation and the rerun writer's `File::create` of it
+    /// left `.out.rrd.partial-XXXXXX` after the process had exited.
+    pub fn open_with<T>(&self, open: impl FnOnce(&Path) -> T) -> T {
+        let _sweep_waits = live();
+        open(self.temp_path())
+    }
+
     /// Where to write: the temporary file, or the final path once committed.
     pub fn temp_path(&self) -> &Path {
         self.temp.as_deref().unwrap_or(&self.final_path)

@@ -90,7 +90,7 @@ pub fn split_by_day(input: &Path, folder: &Path) -> Result<Vec<Day>, ConvertErro
 /// recording at `out`; returns the messages written.
 pub fn merge(inputs: &[PathBuf], out: &Path) -> Result<u64, ConvertError> {
     let mut temp = tortwin_files::PartialFile::beside(out)?;
-    let mut o = Output::create(temp.temp_path().to_path_buf(), 0, String::new())?;
+    let mut o = temp.open_with(|path| Output::create(path.to_path_buf(), 0, String::new()))?;
     let mut first: Option<(PathBuf, SectionMsg, Option<LineMsg>)> = None;
     for input in inputs {
         let mut raw = RawMessages::open(input)?;

@@ -366,11 +366,13 @@ impl McapFile {
         behind: bool,
     ) -> Result<McapFile, McapError> {
         let temp = PartialFile::beside(path)?;
-        let file = File::create(temp.temp_path()).map_err(|source| McapError::Io {
-            path: path.to_path_buf(),
-            what: "opening",
-            source,
-        })?;
+        let file = temp
+            .open_with(|path| File::create(path))
+            .map_err(|source| McapError::Io {
+                path: path.to_path_buf(),
+                what: "opening",
+                source,
+            })?;
         let mcap_error = |what: &str| {
             let what = what.to_owned();
             move |source| McapError::Mcap {

@@ -112,7 +112,7 @@ impl RerunSink {
         let application_id = checked_id(path, &options.application_id)?;
         // `enabled(true)`: the user asked for this file, so the `RERUN=off`
         // environment switch must not silently drop it.
-        let rec = RecordingStreamBuilder::new(application_id.clone())
+        let builder = RecordingStreamBuilder::new(application_id.clone())
             .recording_name(recording_name)
             .enabled(true)
             .batcher_config(ChunkBatcherConfig {
@@ -121,8 +121,10 @@ impl RerunSink {
                 flush_num_rows: SERIES_CHUNK_ROWS as u64,
                 max_bytes_in_flight: MAX_BYTES_IN_FLIGHT,
                 ..ChunkBatcherConfig::DEFAULT
-            })
-            .save(file.temp_path())
+            });
+        // rerun's file sink creates the file by its path, at once.
+        let rec = file
+            .open_with(|temp| builder.save(temp))
             .map_err(sdk_error(path, || "starting the recording".to_owned()))?;
         rec.set_log_time_enabled(false);
         rec.set_log_tick_enabled(false);

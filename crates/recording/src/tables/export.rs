@@ -42,11 +42,13 @@ impl Out {
     fn create(dir: &Path, name: &str, header: &[String]) -> Result<Self, ConvertError> {
         let path = dir.join(name);
         let temp = tortwin_files::PartialFile::beside(&path)?;
-        let file = std::fs::File::create(temp.temp_path()).map_err(|source| ConvertError::Io {
-            what: "opening",
-            path: temp.temp_path().to_path_buf(),
-            source,
-        })?;
+        let file = temp
+            .open_with(|path| std::fs::File::create(path))
+            .map_err(|source| ConvertError::Io {
+                what: "opening",
+                path: temp.temp_path().to_path_buf(),
+                source,
+            })?;
         let csv = csv::Writer::from_writer(std::io::BufWriter::new(file));
         let mut out_header = vec![TIME_UTC.to_string()];
         out_header.extend(header.iter().cloned());

@@ -128,7 +128,9 @@ fn write(
         move |source| ConvertError::Io { what, path, source }
     };
     let mut temp = tortwin_files::PartialFile::beside(out)?;
-    let temp_file = File::create(temp.temp_path()).map_err(io("opening", temp.temp_path()))?;
+    let temp_file = temp
+        .open_with(|path| File::create(path))
+        .map_err(io("opening", temp.temp_path()))?;
     let write_error = |source| ConvertError::Write {
         path: out.to_path_buf(),
         source,
