@@ -3177,8 +3177,7 @@ impl RollContext<'_> {
     ) {
         // Most wheels find nothing due: the window's events at the point
         // come after them (the next train's), or ran before them.
-        let due = work.next_at[i] < t;
-        if !due {
+        if !self.events_due(work, i, t) {
             return;
         }
         // The events that have run at the head of the chain are left
