@@ -2458,31 +2458,29 @@ impl RollContext<'_> {
             let part = &mut parts[k];
             let is = part.at(s);
             // Pulses or readings due before a lane's wheel act on the
-            // masses in memory: the lanes go back there. Passing an
-            // applicator alone changes only the lane's count of
-            // revolutions, which the registers take in place; at a site
-            // alone only the wheel's time is wanted.
+            // masses in memory: the lanes go back there, and the run takes
+            // them up again. Without, `special_before` changes at most a
+            // lane's count of revolutions (an applicator it passes), which
+            // the registers take in place; at a site alone only the wheel's
+            // time is wanted.
             let due = |j: usize| {
                 let t = part.lane(j).roller.time_at(self.d_m, is[j]);
                 self.events_due(part.work, is[j], t)
             };
-            if (0..n).any(|j| part.special[is[j]] && due(j)) {
+            let in_memory = (0..n).any(|j| part.special[is[j]] && due(j));
+            if in_memory {
                 runs[k].suspend(part);
-                for j in (0..n).filter(|&j| part.special[is[j]]) {
-                    let track = part.track;
-                    let lane = &mut part.groups[j / LANES][j % LANES];
-                    at_s[k][j] = self.special_before(track, part.state, part.work, lane, is[j]);
+            }
+            for j in (0..n).filter(|&j| part.special[is[j]]) {
+                let track = part.track;
+                let lane = &mut part.groups[j / LANES][j % LANES];
+                at_s[k][j] = self.special_before(track, part.state, part.work, lane, is[j]);
+                if !in_memory && self.applicator_at[track][is[j]] != NO_APPLICATOR {
+                    runs[k].pass_applicator(j);
                 }
+            }
+            if in_memory {
                 runs[k] = R::start(self, part, s);
-            } else {
-                for j in (0..n).filter(|&j| part.special[is[j]]) {
-                    let lane = &mut part.groups[j / LANES][j % LANES];
-                    at_s[k][j] = lane.roller.time_at(self.d_m, is[j]);
-                    if self.applicator_at[part.track][is[j]] != NO_APPLICATOR {
-                        lane.st.applicator_point = Some(is[j]);
-                        runs[k].pass_applicator(j);
-                    }
-                }
             }
             seen[k] = runs[k].seen();
         }
