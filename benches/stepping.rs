@@ -1,8 +1,10 @@
 //! Throughput of the stepping core: the paper's Figure 13 scenario scaled up
 //! to 1000 wheel passes over a 3 km section (10 trains of 100 axles, 0.1 g
 //! applied before every wheel, 100 kN, 1 % creepage), through the one
-//! engine, with no output sink. Reported as contacts (wheel x grid point)
-//! per second.
+//! engine, with no output sink; and the same on a curve's two rails with a
+//! pulse before every tenth axle, the rails rolled in parallel and side by
+//! side on one thread (a replay's way beside its output threads). Reported
+//! as contacts (wheel x grid point) per second.
 //!
 //! `cargo bench --bench stepping`
 
@@ -42,8 +44,9 @@ fn section(rails: usize) -> Section {
     }
 }
 
-/// Trains of AXLES axles; a pulse lands just before each axle reaches d = 0.
-fn events(rails: usize) -> Vec<Event> {
+/// Trains of AXLES axles; a pulse lands just before every `pulse_every`-th
+/// axle reaches d = 0.
+fn events(rails: usize, pulse_every: usize) -> Vec<Event> {
     let mut events = Vec::new();
     let train_s = (LENGTH_M + AXLES as f64 * AXLE_SPACING_M) / SPEED_MPS;
     for k in 0..TRAINS {
@@ -87,6 +90,9 @@ fn events(rails: usize) -> Vec<Event> {
             if a == 1 {
                 events.push(passage.clone());
             }
+            if a % pulse_every != 0 {
+                continue;
+            }
             for rail in 0..rails {
                 events.push(Event {
                     log_time_ns,
@@ -103,8 +109,8 @@ fn events(rails: usize) -> Vec<Event> {
     events
 }
 
-fn run(section: &Section, cfg: &ModelConfig, events: &[Event]) -> u64 {
-    let mut engine = Engine::new(section.clone(), cfg.clone(), EngineOptions::default(), 0);
+fn run(section: &Section, cfg: &ModelConfig, opts: EngineOptions, events: &[Event]) -> u64 {
+    let mut engine = Engine::new(section.clone(), cfg.clone(), opts, 0);
     let mut sink = Discard;
     for e in events {
         engine
@@ -117,21 +123,35 @@ fn run(section: &Section, cfg: &ModelConfig, events: &[Event]) -> u64 {
 fn stepping(c: &mut Criterion) {
     let mut group = c.benchmark_group("stepping");
     group.sample_size(20);
-    for (name, config) in [
-        ("paper_model", ""),
+    // A curve's two rails with a pulse before every tenth axle, the
+    // replays' common case (the wheels pass the applicator in the
+    // registers between pulses): the rails in parallel (no output files),
+    // and side by side on one thread, as a replay beside its output
+    // files' threads rolls them (`EngineOptions::beside_output_threads`).
+    let beside = EngineOptions {
+        beside_output_threads: true,
+        ..EngineOptions::default()
+    };
+    for (name, config, rails, pulse_every, opts) in [
+        ("paper_model", "", 1, 1, EngineOptions::default()),
+        ("paper_model_two_rails", "", 2, 10, EngineOptions::default()),
+        ("paper_model_two_rails_side_by_side", "", 2, 10, beside),
         (
             "all_effects",
             "[effects.rail_ageing]\ntau_s = 7200\n[effects.rain_washoff]\nk_per_mm = 0.5\n\
              [effects.temperature_consumption]\nbeta_per_k = 0.02\n[effects.speed_transfer]\nn = 1\n\
              [effects.wheel_edge_reservoir]\nalpha = 0.1\nr = 0.05\n",
+            1,
+            1,
+            EngineOptions::default(),
         ),
     ] {
         let cfg = ModelConfig::from_overlay_str(config, "bench").expect("valid bench config");
-        let section = section(1);
-        let events = events(1);
-        let contacts = run(&section, &cfg, &events);
+        let section = section(rails);
+        let events = events(rails, pulse_every);
+        let contacts = run(&section, &cfg, opts, &events);
         group.throughput(Throughput::Elements(contacts));
-        group.bench_function(format!("{name}_1000_passes_3km"), |b| b.iter(|| run(&section, &cfg, &events)));
+        group.bench_function(format!("{name}_1000_passes_3km"), |b| b.iter(|| run(&section, &cfg, opts, &events)));
     }
     group.finish();
 }
