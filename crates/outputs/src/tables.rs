@@ -187,10 +187,12 @@ impl Table {
             .collect();
         let open = |file: &str| -> Result<(PartialFile, BufWriter<File>), TableError> {
             let partial = PartialFile::beside(&dir.join(file))?;
-            let out = File::create(partial.temp_path()).map_err(|source| FileError::Write {
-                path: partial.final_path().to_path_buf(),
-                source,
-            })?;
+            let out = partial
+                .open_with(|path| File::create(path))
+                .map_err(|source| FileError::Write {
+                    path: partial.final_path().to_path_buf(),
+                    source,
+                })?;
             Ok((partial, BufWriter::new(out)))
         };
         let parquet = if formats.parquet {

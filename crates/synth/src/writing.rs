@@ -33,11 +33,13 @@ pub(super) struct SynthFile {
 impl SynthFile {
     pub(super) fn create(path: &Path, p: &SynthParams) -> Result<Self> {
         let temp = PartialFile::beside(path)?;
-        let file = File::create(temp.temp_path()).map_err(|source| Error::Io {
-            what: "creating",
-            path: temp.temp_path().to_path_buf(),
-            source,
-        })?;
+        let file = temp
+            .open_with(|path| File::create(path))
+            .map_err(|source| Error::Io {
+                what: "creating",
+                path: temp.temp_path().to_path_buf(),
+                source,
+            })?;
         let version = env!("CARGO_PKG_VERSION");
         let options = mcap::WriteOptions::new()
             .compression(Some(mcap::Compression::Zstd))
