@@ -21,8 +21,13 @@ use tortwin_study::Progress;
 
 fn main() -> ExitCode {
     let command = Cli::parse().command;
-    if let Command::Replay(_) = command {
+    if let Command::Replay(args) = &command {
         keep_freed_memory();
+        let short =
+            std::fs::metadata(&args.recording).is_ok_and(|m| m.len() < SHORT_RECORDING_BYTES);
+        if short {
+            one_heap_in_huge_pages();
+        }
     }
     tortwin_jobs::join_rayon_pool();
     // Ctrl-C or a SIGTERM deletes the run's temporary files before exiting
@@ -44,20 +49,45 @@ fn main() -> ExitCode {
     }
 }
 
-/// Memory for a replay: freed memory stays with the process for its next
-/// allocations, and the heap the threads share is grown once, ahead, and
-/// backed by pages of 2 MiB.
+/// Memory freed during a run stays with the process for its next
+/// allocations rather than going back to the system at once: glibc serves
+/// blocks of up to 4 MiB from its heaps (by default each block from
+/// 128 KiB up is a mapping of its own, unmapped when freed, the threshold
+/// then moving up) and trims a heap's top once 4 MiB are free there (by
+/// default 128 KiB). Each page the system hands out costs a fault and a
+/// zeroed page: 1.3-1.5 µs on the project's 2-core machine (a VM), where a
+/// replay of the 3-day curve took about 5 800 of them in 80 ms (4 900-5 400
+/// with these settings). The price is memory held between peaks: the
+/// year's replay peaks at 67-72 MB instead of 60-63 (32 MiB and 128 MiB
+/// gave 89 MB for no fewer faults). For `replay` alone: discover's
+/// parallel replays ran about 9 % slower with it (the clogged nozzle: 11.5
+/// against 10.6 s).
+fn keep_freed_memory() {
+    #[cfg(all(target_os = "linux", target_env = "gnu"))]
+    // SAFETY: mallopt takes two integers and changes the allocator's
+    // settings; called in main before any other thread exists.
+    unsafe {
+        libc::mallopt(libc::M_MMAP_THRESHOLD, 4 << 20);
+        libc::mallopt(libc::M_TRIM_THRESHOLD, 4 << 20);
+    }
+}
+
+/// Recordings under this size (a few days of a section: the 3-day curve's
+/// is 1.8 MB) are replayed with [`one_heap_in_huge_pages`].
+const SHORT_RECORDING_BYTES: u64 = 4 << 20;
+
+/// For a short replay, whose fresh memory is a large part of its work:
+/// one heap for every thread, grown once, ahead, and backed by pages of
+/// 2 MiB.
 ///
-/// Each page the system hands out costs a fault and a zeroed page:
-/// 1.3-1.5 µs a 4 KiB page on the project's 2-core machine (a VM), where a
-/// replay of the 3-day curve took about 5 300 of them, 8 % of its CPU
-/// (`perf`). A transparent huge page costs about as much as 30-60 such
-/// pages and holds 512 (a C loop touching 8 MiB: 0.15-0.4 µs per 4 KiB).
+/// The 3-day curve's replay still took about 5 300 page faults after
+/// [`keep_freed_memory`], 8 % of its CPU (`perf`): memory is fresh to a
+/// process once, so this cost does not grow with the recording. A
+/// transparent huge page costs about as much as 30-60 pages of 4 KiB and
+/// holds 512 (a C loop touching 8 MiB: 0.15-0.4 µs per 4 KiB).
 ///
-/// - glibc serves blocks of up to 4 MiB from its heaps (by default each
-///   block from 128 KiB up is a mapping of its own, unmapped when freed).
-/// - One arena for every thread (`M_ARENA_MAX`): the reader's, the layout
-///   pass's, the output threads' and rayon's blocks come from the main
+/// - One arena for every thread (`M_ARENA_MAX`): the layout pass's, the
+///   reader's, the output threads' and rayon's blocks come from the main
 ///   heap, where by default glibc gives threads arenas of their own
 ///   (mappings grown a few pages at a time, out of reach of the advice
 ///   below). Small blocks still come from each thread's cache without a
@@ -68,16 +98,16 @@ fn main() -> ExitCode {
 ///   `always`), so that its pages come 2 MiB at a time as they are first
 ///   touched. Untouched, it costs address space only. glibc trims the
 ///   heap's top only once twice that is free there (`M_TRIM_THRESHOLD`),
-///   so the advised heap stays; beyond it the heap grows as before, in
-///   pages of 4 KiB.
+///   so the advised heap stays; beyond it the heap grows in pages of 4 KiB.
 ///
-/// The 3-day curve: 5 300 faults -> 700-1 000, its CPU 4-7 % less; the
-/// year's peak memory 55 MB instead of 68-72 (one arena, not one per
-/// thread); the same output. For `replay` alone: discover's parallel
-/// replays ran about 9 % slower with only the thresholds (11.5 against
-/// 10.6 s on the clogged nozzle), so the command line is parsed first and
-/// the settings made before any thread exists.
-fn keep_freed_memory() {
+/// The 3-day curve: 5 300 faults -> 700-1 000, CPU 5-7 % less, the replay
+/// 2-4 % faster (median pair ratios of 40-60 interleaved runs, 2026-12-06),
+/// the same output. Not for longer recordings: one arena's lock is shared
+/// by threads that allocate all along (a day of the example line with two
+/// tracks in parallel, 6.3 MB: 1.8-2.1 % slower, though with 1.7 % less
+/// CPU; the year on the 1.5 km curve within the noise, 14.6 against 14.4
+/// s in the mean of five, peak memory 52-54 MB instead of 66-70).
+fn one_heap_in_huge_pages() {
     #[cfg(all(target_os = "linux", target_env = "gnu"))]
     // SAFETY: mallopt takes two integers and changes the allocator's
     // settings, called in main before any other thread exists. The block
@@ -87,7 +117,6 @@ fn keep_freed_memory() {
     // own), and MADV_HUGEPAGE changes how they are backed, not their
     // contents.
     unsafe {
-        libc::mallopt(libc::M_MMAP_THRESHOLD, 4 << 20);
         libc::mallopt(
             libc::M_TRIM_THRESHOLD,
             2 * HEAP_IN_HUGE_PAGES as libc::c_int,
@@ -112,9 +141,9 @@ fn keep_freed_memory() {
     }
 }
 
-/// How far the heap is grown ahead for a replay ([`keep_freed_memory`]):
-/// more than the 3-day curve's 30 MB and the year's 55-70 MB of peak
-/// memory.
+/// How far the heap is grown ahead for a short replay
+/// ([`one_heap_in_huge_pages`]): several times the 3-day curve's 20 MB of
+/// heap.
 #[cfg(all(target_os = "linux", target_env = "gnu"))]
 const HEAP_IN_HUGE_PAGES: usize = 128 << 20;
 
