@@ -105,8 +105,9 @@ const SHORT_RECORDING_BYTES: u64 = 4 << 20;
 /// the same output. Not for longer recordings: one arena's lock is shared
 /// by threads that allocate all along (a day of the example line with two
 /// tracks in parallel, 6.3 MB: 1.8-2.1 % slower, though with 1.7 % less
-/// CPU; the year on the 1.5 km curve within the noise, 14.6 against 14.4
-/// s in the mean of five, peak memory 52-54 MB instead of 66-70).
+/// CPU; the year on the 1.5 km curve within the noise with it, 14.6
+/// against 14.4 s in the mean of five, though its peak memory was 52-54 MB
+/// instead of 66-70).
 fn one_heap_in_huge_pages() {
     #[cfg(all(target_os = "linux", target_env = "gnu"))]
     // SAFETY: mallopt takes two integers and changes the allocator's
