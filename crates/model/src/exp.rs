@@ -159,10 +159,12 @@ pub fn exp8_is_available() -> bool {
 #[cfg(target_arch = "x86_64")]
 /// [`exp4_register`] on eight lanes (an AVX-512 register): each lane's
 /// operations those of a lane there, in the same order, so the same bits.
-/// The table's tails and bits are read by two gathers (a 16-byte load a
-/// lane, as there, took 1.3 % longer in the 3-day replay with two tracks'
-/// chains: medians of 30 interleaved runs on an Intel Xeon of the
-/// project's).
+/// Each lane's (tail, bits) pair of the table is one 16-byte load, as
+/// there, and unpacks sort the eight pairs; two gathers (`vgatherqpd`,
+/// `vpgatherqq`) instead took 1.3 % longer in the 3-day replay on an Intel
+/// Xeon of the project's (medians of 30 interleaved runs) but 3-6 %
+/// longer on the AMD EPYC (Zen 4) CI machine, whose gathers are slow and
+/// on the chain from one contact's masses to the next (issue 32).
 ///
 /// # Safety
 /// The CPU must have AVX-512F, AVX2 and FMA.
@@ -174,13 +176,19 @@ pub unsafe fn exp8_register(xv: std::arch::x86_64::__m512d) -> std::arch::x86_64
     let kd = _mm512_sub_pd(kd, _mm512_set1_pd(SHIFT));
     let r = _mm512_fmadd_pd(kd, _mm512_set1_pd(NEG_LN2_HI_N), xv);
     let r = _mm512_fmadd_pd(kd, _mm512_set1_pd(NEG_LN2_LO_N), r);
-    // Each lane's pair of the table: k mod 128 times two, its tail and
-    // its bits read by two gathers.
-    let at = _mm512_slli_epi64::<1>(_mm512_and_si512(ki, _mm512_set1_epi64(127)));
-    let base: *const f64 = TABLE.as_ptr().cast();
-    let tail = _mm512_i64gather_pd::<8>(at, base);
+    // The table pair of k mod 128 a lane, as in exp4_register; the
+    // exponent k / 128 goes to the top.
+    let mut k = [0u64; 8];
+    _mm512_storeu_si512(k.as_mut_ptr().cast(), ki);
+    let pair = |j: usize| _mm_loadu_si128(TABLE.as_ptr().add(2 * (k[j] as usize & 127)).cast());
+    let two =
+        |a: usize, b: usize| _mm256_inserti128_si256::<1>(_mm256_castsi128_si256(pair(a)), pair(b));
+    // [tail0, bits0 | tail2, bits2 | ... | tail6, bits6] and the odd lanes'.
+    let even = _mm512_inserti64x4::<1>(_mm512_castsi256_si512(two(0, 2)), two(4, 6));
+    let odd = _mm512_inserti64x4::<1>(_mm512_castsi256_si512(two(1, 3)), two(5, 7));
     let top = _mm512_slli_epi64::<45>(ki);
-    let sbits = _mm512_add_epi64(_mm512_i64gather_epi64::<8>(at, base.add(1).cast()), top);
+    let tail = _mm512_castsi512_pd(_mm512_unpacklo_epi64(even, odd));
+    let sbits = _mm512_add_epi64(_mm512_unpackhi_epi64(even, odd), top);
     let r2 = _mm512_mul_pd(r, r);
     let p23 = _mm512_fmadd_pd(r, _mm512_set1_pd(C3), _mm512_set1_pd(C2));
     let p45 = _mm512_fmadd_pd(r, _mm512_set1_pd(C5), _mm512_set1_pd(C4));
