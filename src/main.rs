@@ -28,8 +28,10 @@ fn main() -> ExitCode {
         if short {
             one_heap_in_huge_pages();
         }
+        tortwin_jobs::join_rayon_pool_when_wanted();
+    } else {
+        tortwin_jobs::join_rayon_pool();
     }
-    tortwin_jobs::join_rayon_pool();
     // Ctrl-C or a SIGTERM deletes the run's temporary files before exiting
     // (130, 143): nothing half-written is left behind.
     if let Err(err) = tortwin_files::clean_up_on_signals() {

@@ -1822,12 +1822,15 @@ impl Engine {
             let (ctx, states, works) = self.split();
             let record_ref: &TrainRecord = record;
             let parallel = states.len() > 1
-                && rayon::current_num_threads() > 1
                 && works
                     .iter()
                     .filter(|w| w.axles.len() * points >= min_contacts)
                     .count()
-                    > 1;
+                    > 1
+                && {
+                    tortwin_handover::pool::before_pool_use();
+                    rayon::current_num_threads() > 1
+                };
             if parallel {
                 use rayon::prelude::*;
                 states

@@ -11,6 +11,11 @@
 //! ([`Batch::clear`]) and the sending side fills it again: the steady state
 //! allocates nothing. Either side may stop: the other sees it at its next
 //! hand-over ([`Gone`]) or when the batches end.
+//!
+//! Beside it, [`pool`]: the command line's thread pool, joined where a
+//! replay first wants it.
+
+pub mod pool;
 
 use std::sync::mpsc::{sync_channel, Receiver, SyncSender};
 

@@ -102,6 +102,15 @@ pub fn join_rayon_pool() {
         .build_global();
 }
 
+/// [`join_rayon_pool`] where the calling thread first wants the pool
+/// ([`tortwin_handover::pool::before_pool_use`]) rather than now: what
+/// `tortwin replay` does, whose tracks roll in parallel only for long
+/// trains, and whose layout pass uses the pool only for a recording laid
+/// out before the replay ([`tortwin_handover::pool`] says what it saves).
+pub fn join_rayon_pool_when_wanted() {
+    tortwin_handover::pool::defer_pool_start(join_rayon_pool);
+}
+
 /// Loads the model configuration: the defaults, overlaid by `source`.
 pub(crate) fn load_config(source: Option<&ConfigSource>) -> Result<ModelConfig, ConfigError> {
     Ok(match source {

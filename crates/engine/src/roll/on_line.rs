@@ -70,8 +70,10 @@ impl Engine {
             ctx.watch = watch;
             ctx.observers = observers;
             let record_ref: &TrainRecord = record;
-            let parallel =
-                rails > 1 && rayon::current_num_threads() > 1 && axles * points >= min_contacts;
+            let parallel = rails > 1 && axles * points >= min_contacts && {
+                tortwin_handover::pool::before_pool_use();
+                rayon::current_num_threads() > 1
+            };
             if parallel {
                 use rayon::prelude::*;
                 states

@@ -415,6 +415,7 @@ impl PendingChunks {
             return self.settle_oldest(path, layout);
         }
         let done = self.done.0.clone();
+        tortwin_handover::pool::before_pool_use();
         rayon::spawn(move || {
             let scan = std::panic::catch_unwind(|| read_chunk(&record, keep));
             // The layout pass may have failed and gone: nobody to tell.
