@@ -89,7 +89,8 @@ pub enum Command {
 }
 
 /// Makes the calling thread one of the threads of rayon's global pool (if
-/// no pool has been made yet), as the command line does first thing. The
+/// no pool has been made yet), as the command line does first thing (a
+/// replay where it first wants the pool: [`join_rayon_pool_when_wanted`]). The
 /// engine runs on the calling thread and hands a train's tracks to rayon:
 /// as one of the pool's threads it rolls a track itself and takes the
 /// other too when no worker is free (both cores busy with the outputs),

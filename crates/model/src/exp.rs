@@ -160,11 +160,12 @@ pub fn exp8_is_available() -> bool {
 /// [`exp4_register`] on eight lanes (an AVX-512 register): each lane's
 /// operations those of a lane there, in the same order, so the same bits.
 /// Each lane's (tail, bits) pair of the table is one 16-byte load, as
-/// there, and unpacks sort the eight pairs; two gathers (`vgatherqpd`,
-/// `vpgatherqq`) instead took 1.3 % longer in the 3-day replay on an Intel
-/// Xeon of the project's (medians of 30 interleaved runs) but 3-6 %
-/// longer on the AMD EPYC (Zen 4) CI machine, whose gathers are slow and
-/// on the chain from one contact's masses to the next (issue 32).
+/// there, and unpacks sort the eight pairs. On an Intel Xeon of the
+/// project's these loads made the 3-day replay 1.3 % slower than two
+/// gathers (`vgatherqpd`, `vpgatherqq`; medians of 30 interleaved runs);
+/// on the AMD EPYC (Zen 4) that runs CI the gathers made it 2-6 % slower
+/// (pair ratios 0.939, 0.966, 0.983 in rounds of 30, 30 and 60): there
+/// they are slow, and on the chain from one contact's masses to the next.
 ///
 /// # Safety
 /// The CPU must have AVX-512F, AVX2 and FMA.
