@@ -908,6 +908,14 @@ const PARALLEL_MIN_CONTACTS: usize = 4096;
 /// second core ([`crate::EngineOptions::beside_output_threads`]).
 const PARALLEL_MIN_CONTACTS_BESIDE_OUTPUTS: usize = 1 << 17;
 
+/// Whether rayon's pool has a thread besides this one for a train's
+/// tracks, the command line's pool joined first where a replay deferred
+/// it ([`tortwin_handover::pool`]).
+pub(crate) fn pool_has_threads() -> bool {
+    tortwin_handover::pool::before_pool_use();
+    rayon::current_num_threads() > 1
+}
+
 /// The contacts a track must have in a train for the tracks to roll in
 /// parallel.
 fn parallel_min_contacts(opts: &crate::EngineOptions) -> usize {
@@ -1827,10 +1835,7 @@ impl Engine {
                     .filter(|w| w.axles.len() * points >= min_contacts)
                     .count()
                     > 1
-                && {
-                    tortwin_handover::pool::before_pool_use();
-                    rayon::current_num_threads() > 1
-                };
+                && pool_has_threads();
             if parallel {
                 use rayon::prelude::*;
                 states

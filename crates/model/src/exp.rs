@@ -99,7 +99,7 @@ pub unsafe fn exp4_register(xv: std::arch::x86_64::__m256d) -> std::arch::x86_64
     // sort the four pairs into tails and bits (no gather: AMD's are slow).
     let mut k = [0u64; 4];
     _mm256_storeu_si256(k.as_mut_ptr().cast(), ki);
-    let pair = |j: usize| _mm_loadu_si128(TABLE.as_ptr().add(2 * (k[j] as usize & 127)).cast());
+    let pair = |j: usize| table_pair(k[j]);
     // [tail0, bits0 | tail2, bits2] and [tail1, bits1 | tail3, bits3].
     let even = _mm256_inserti128_si256::<1>(_mm256_castsi128_si256(pair(0)), pair(2));
     let odd = _mm256_inserti128_si256::<1>(_mm256_castsi128_si256(pair(1)), pair(3));
@@ -142,6 +142,18 @@ pub unsafe fn exp4_register(xv: std::arch::x86_64::__m256d) -> std::arch::x86_64
     _mm256_loadu_pd(out.as_ptr())
 }
 
+#[cfg(target_arch = "x86_64")]
+/// The table's (tail, bits) pair of `k` mod 128 as one 16-byte load: how
+/// [`exp4_register`] and [`exp8_register`] read it, a lane at a time.
+///
+/// # Safety
+/// The CPU must have SSE2 (every x86-64 CPU).
+#[inline(always)]
+unsafe fn table_pair(k: u64) -> std::arch::x86_64::__m128i {
+    // In bounds: 2 (k mod 128) + 1 < 256.
+    std::arch::x86_64::_mm_loadu_si128(TABLE.as_ptr().add(2 * (k as usize & 127)).cast())
+}
+
 /// Whether [`exp8_register`] and the other eight-lane code can run here:
 /// AVX-512F beside AVX2 and FMA.
 #[inline]
@@ -181,7 +193,7 @@ pub unsafe fn exp8_register(xv: std::arch::x86_64::__m512d) -> std::arch::x86_64
     // exponent k / 128 goes to the top.
     let mut k = [0u64; 8];
     _mm512_storeu_si512(k.as_mut_ptr().cast(), ki);
-    let pair = |j: usize| _mm_loadu_si128(TABLE.as_ptr().add(2 * (k[j] as usize & 127)).cast());
+    let pair = |j: usize| table_pair(k[j]);
     let two =
         |a: usize, b: usize| _mm256_inserti128_si256::<1>(_mm256_castsi128_si256(pair(a)), pair(b));
     // [tail0, bits0 | tail2, bits2 | ... | tail6, bits6] and the odd lanes'.

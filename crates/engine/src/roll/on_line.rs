@@ -11,9 +11,9 @@
 #[cfg(target_arch = "x86_64")]
 use super::exp4_is_vectorised;
 use super::{
-    clock_free, lane_points, parallel_min_contacts, point_of, wheel_time_s, Clocks, Div4, Engine,
-    EngineError, Exp4, Lane, NoRun, Roll4, RollContext, SiteValue, TrackState, TrackWork,
-    TrainRecord, Vector, LANES, NO_APPLICATOR, NO_AXLE,
+    clock_free, lane_points, parallel_min_contacts, point_of, pool_has_threads, wheel_time_s,
+    Clocks, Div4, Engine, EngineError, Exp4, Lane, NoRun, Roll4, RollContext, SiteValue,
+    TrackState, TrackWork, TrainRecord, Vector, LANES, NO_APPLICATOR, NO_AXLE,
 };
 use crate::line::{LineLayout, RAIL_BANDS};
 use crate::sink::Sink;
@@ -70,10 +70,7 @@ impl Engine {
             ctx.watch = watch;
             ctx.observers = observers;
             let record_ref: &TrainRecord = record;
-            let parallel = rails > 1 && axles * points >= min_contacts && {
-                tortwin_handover::pool::before_pool_use();
-                rayon::current_num_threads() > 1
-            };
+            let parallel = rails > 1 && axles * points >= min_contacts && pool_has_threads();
             if parallel {
                 use rayon::prelude::*;
                 states
